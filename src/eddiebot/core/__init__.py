@@ -1,0 +1,107 @@
+"""The runtime: nodes, topics, services, actions, parameters, time, TF and executors.
+
+Names mirror rclpy (``Node``, ``create_publisher``, ``create_subscription``,
+``create_timer``, ``create_service``, ``create_client``, ``declare_parameter``,
+``get_clock``, ``get_logger``) so a ROS 2 user reads this code without a manual. Time is
+integer nanoseconds from an injected clock; a ``SingleThreadedExecutor`` on a simulated
+clock jumps straight to the next due timer, so simulated runs are deterministic and as
+fast as the CPU allows.
+"""
+
+from eddiebot.core.context import Context, get_default_context, init, shutdown
+from eddiebot.core.errors import (
+    InvalidParameterTypeError,
+    InvalidParameterValueError,
+    ParameterError,
+    ParameterFileError,
+    ParameterNotDeclaredError,
+    ServiceCallTimeoutError,
+    ServiceUnavailableError,
+    TopicTypeMismatchError,
+)
+from eddiebot.core.executors import (
+    Executor,
+    MultiThreadedExecutor,
+    SingleThreadedExecutor,
+    spin,
+    spin_once,
+    spin_until_future_complete,
+)
+from eddiebot.core.node import (
+    CallbackGroup,
+    Client,
+    MutuallyExclusiveCallbackGroup,
+    Node,
+    Publisher,
+    ReentrantCallbackGroup,
+    Service,
+    Subscription,
+    Timer,
+)
+from eddiebot.core.parameters import (
+    Parameter,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from eddiebot.core.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_latched,
+    qos_profile_sensor_data,
+    qos_profile_system_default,
+)
+from eddiebot.core.task import Future, Task
+from eddiebot.core.time import Clock, ClockType, Duration, SimClock, Time, ns_to_stamp, stamp_to_ns
+
+__all__ = [
+    "CallbackGroup",
+    "Client",
+    "Clock",
+    "ClockType",
+    "Context",
+    "DurabilityPolicy",
+    "Duration",
+    "Executor",
+    "Future",
+    "HistoryPolicy",
+    "InvalidParameterTypeError",
+    "InvalidParameterValueError",
+    "MultiThreadedExecutor",
+    "MutuallyExclusiveCallbackGroup",
+    "Node",
+    "Parameter",
+    "ParameterDescriptor",
+    "ParameterError",
+    "ParameterFileError",
+    "ParameterNotDeclaredError",
+    "ParameterType",
+    "Publisher",
+    "QoSProfile",
+    "ReentrantCallbackGroup",
+    "ReliabilityPolicy",
+    "Service",
+    "ServiceCallTimeoutError",
+    "ServiceUnavailableError",
+    "SetParametersResult",
+    "SimClock",
+    "SingleThreadedExecutor",
+    "Subscription",
+    "Task",
+    "Time",
+    "Timer",
+    "TopicTypeMismatchError",
+    "get_default_context",
+    "init",
+    "ns_to_stamp",
+    "qos_profile_latched",
+    "qos_profile_sensor_data",
+    "qos_profile_system_default",
+    "shutdown",
+    "spin",
+    "spin_once",
+    "spin_until_future_complete",
+    "stamp_to_ns",
+]

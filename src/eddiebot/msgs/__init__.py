@@ -1,0 +1,46 @@
+"""ROS 2 message, service and action types, and their CDR encoding.
+
+One type store holds the ROS 2 Jazzy standard messages (from rosbags) and the
+interfaces this package ships (``eddiebot_msgs``, ``std_srvs``, ``nav2_msgs``,
+``slam_toolbox``, ``rcl_interfaces`` services, ``lifecycle_msgs`` services, ...).
+Import classes per package, as in ROS 2: ``from eddiebot.msgs.geometry_msgs import Twist``.
+Every field has a default, arrays are numpy arrays, and the same objects go to the
+bus, to the CDR serializer and to rosbag2 files.
+"""
+
+from eddiebot.msgs._store import (
+    ACTIONS,
+    SERVICES,
+    TYPESTORE,
+    ActionType,
+    ServiceType,
+    deserialize,
+    get_action,
+    get_message,
+    get_service,
+    message_definition,
+    normalize_type_name,
+    serialize,
+    type_hash,
+    type_name,
+)
+from eddiebot.msgs.errors import MessageError, UnknownTypeError
+
+__all__ = [
+    "ACTIONS",
+    "SERVICES",
+    "TYPESTORE",
+    "ActionType",
+    "MessageError",
+    "ServiceType",
+    "UnknownTypeError",
+    "deserialize",
+    "get_action",
+    "get_message",
+    "get_service",
+    "message_definition",
+    "normalize_type_name",
+    "serialize",
+    "type_hash",
+    "type_name",
+]

@@ -1,0 +1,335 @@
+"""The one type store: ROS 2 Jazzy messages from rosbags plus the interfaces shipped here.
+
+Services and actions are split into plain messages as rosidl does, so that every
+request, response, goal, result and feedback serializes exactly as in ROS 2:
+
+- ``pkg/srv/X`` → ``pkg/srv/X_Request`` and ``pkg/srv/X_Response``;
+- ``pkg/action/X`` → ``X_Goal``, ``X_Result``, ``X_Feedback``, ``X_SendGoal_Request``,
+  ``X_SendGoal_Response``, ``X_GetResult_Request``, ``X_GetResult_Response`` and
+  ``X_FeedbackMessage``.
+
+Every generated class is given defaults for every field (zero numbers, empty strings,
+zero-filled fixed arrays, empty sequences, default nested messages), so ``Twist()`` or
+``Odometry(child_frame_id="base_footprint")`` is a complete message.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+from importlib import resources
+from typing import Any
+
+import numpy as np
+from rosbags.interfaces import Nodetype
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
+
+from eddiebot.msgs.errors import UnknownTypeError
+
+# "byte" is int8 because that is what the rosbags CDR codec decodes it to (numpy "byte").
+_NUMPY_DTYPES = {
+    "bool": np.bool_,
+    "byte": np.int8,
+    "char": np.uint8,
+    "int8": np.int8,
+    "uint8": np.uint8,
+    "int16": np.int16,
+    "uint16": np.uint16,
+    "int32": np.int32,
+    "uint32": np.uint32,
+    "int64": np.int64,
+    "uint64": np.uint64,
+    "float32": np.float32,
+    "float64": np.float64,
+}
+_PY_DEFAULTS: dict[str, Any] = {"bool": False, "string": "", "wstring": ""}
+
+
+@dataclass(frozen=True)
+class ServiceType:
+    """A service interface: ``name`` is ``pkg/srv/X``; ``Request``/``Response`` are classes."""
+
+    name: str
+    Request: Any
+    Response: Any
+
+    def __repr__(self) -> str:
+        return f"ServiceType({self.name})"
+
+
+@dataclass(frozen=True)
+class ActionType:
+    """An action interface with rosidl's generated sub-types."""
+
+    name: str
+    Goal: Any
+    Result: Any
+    Feedback: Any
+    SendGoal: ServiceType
+    GetResult: ServiceType
+    FeedbackMessage: Any
+
+    def __repr__(self) -> str:
+        return f"ActionType({self.name})"
+
+
+def _split_srv(text: str) -> tuple[str, str]:
+    parts = _sections(text)
+    if len(parts) != 2:
+        raise ValueError(f"a .srv needs exactly one '---' separator, found {len(parts) - 1}")
+    return parts[0], parts[1]
+
+
+def _sections(text: str) -> list[str]:
+    out: list[list[str]] = [[]]
+    for line in text.splitlines():
+        if line.strip() == "---":
+            out.append([])
+        else:
+            out[-1].append(line)
+    return ["\n".join(lines) + "\n" for lines in out]
+
+
+def _interface_files() -> list[tuple[str, str, str, str]]:
+    """(package, kind, name, text) of every shipped interface file."""
+    root = resources.files("eddiebot.msgs") / "interfaces"
+    found = []
+    for pkg in sorted(root.iterdir(), key=lambda p: p.name):
+        if not pkg.is_dir():
+            continue
+        for kind in ("msg", "srv", "action"):
+            folder = pkg / kind
+            if not folder.is_dir():
+                continue
+            for f in sorted(folder.iterdir(), key=lambda p: p.name):
+                if f.name.endswith(f".{kind}"):
+                    found.append((pkg.name, kind, f.name[: -len(kind) - 1], f.read_text()))
+    return found
+
+
+def _build() -> tuple[Typestore, dict[str, ServiceType], dict[str, ActionType]]:
+    store = get_typestore(Stores.ROS2_JAZZY)
+    files = _interface_files()
+    typs: dict[str, Any] = {}
+    srv_names: list[str] = []
+    action_names: list[str] = []
+    for pkg, kind, name, text in files:
+        full = f"{pkg}/{kind}/{name}"
+        if kind == "msg":
+            typs.update(get_types_from_msg(text, full))
+        elif kind == "srv":
+            req, res = _split_srv(text)
+            typs.update(get_types_from_msg(req, f"{full}_Request"))
+            typs.update(get_types_from_msg(res, f"{full}_Response"))
+            srv_names.append(full)
+        else:
+            sections = _sections(text)
+            if len(sections) != 3:
+                raise ValueError(f"{full}.action needs two '---' separators")
+            goal, result, feedback = sections
+            typs.update(get_types_from_msg(goal, f"{full}_Goal"))
+            typs.update(get_types_from_msg(result, f"{full}_Result"))
+            typs.update(get_types_from_msg(feedback, f"{full}_Feedback"))
+            uuid = "unique_identifier_msgs/UUID goal_id\n"
+            typs.update(
+                get_types_from_msg(uuid + f"{pkg}/{name}_Goal goal\n", f"{full}_SendGoal_Request")
+            )
+            typs.update(
+                get_types_from_msg(
+                    "bool accepted\nbuiltin_interfaces/Time stamp\n", f"{full}_SendGoal_Response"
+                )
+            )
+            typs.update(get_types_from_msg(uuid, f"{full}_GetResult_Request"))
+            typs.update(
+                get_types_from_msg(
+                    f"int8 status\n{pkg}/{name}_Result result\n", f"{full}_GetResult_Response"
+                )
+            )
+            typs.update(
+                get_types_from_msg(
+                    uuid + f"{pkg}/{name}_Feedback feedback\n", f"{full}_FeedbackMessage"
+                )
+            )
+            action_names.append(full)
+    # get_types_from_msg resolves "pkg/Name" references as pkg/msg/Name; action sub-types live
+    # under pkg/action/, so point those references at the right names.
+    # get_types_from_msg also files pkg/srv/X_Request under pkg/srv/msg/; undo that.
+    typs = {k.replace("/srv/msg/", "/srv/"): _fix_action_refs(v) for k, v in typs.items()}
+    store.register(typs)
+    for cls in store.types.values():
+        _add_defaults(store, cls)
+    services = {
+        n: ServiceType(n, store.types[f"{n}_Request"], store.types[f"{n}_Response"])
+        for n in srv_names
+    }
+    actions = {}
+    for n in action_names:
+        actions[n] = ActionType(
+            n,
+            store.types[f"{n}_Goal"],
+            store.types[f"{n}_Result"],
+            store.types[f"{n}_Feedback"],
+            ServiceType(
+                f"{n}_SendGoal",
+                store.types[f"{n}_SendGoal_Request"],
+                store.types[f"{n}_SendGoal_Response"],
+            ),
+            ServiceType(
+                f"{n}_GetResult",
+                store.types[f"{n}_GetResult_Request"],
+                store.types[f"{n}_GetResult_Response"],
+            ),
+            store.types[f"{n}_FeedbackMessage"],
+        )
+    return store, services, actions
+
+
+def _fix_action_refs(entry: Any) -> Any:
+    consts, fields = entry
+
+    def fix(desc: Any) -> Any:
+        kind, detail = desc
+        if kind == Nodetype.NAME:
+            # A bare "Name" inside pkg/srv/X or pkg/action/X comes back as pkg/srv/msg/Name or
+            # pkg/action/Name; rosidl resolves it as pkg/msg/Name.
+            head, _, name = detail.rpartition("/")
+            pkg = head.split("/", 1)[0]
+            if name.endswith(("_Goal", "_Result", "_Feedback")):
+                return (kind, f"{pkg}/action/{name}")
+            return (kind, f"{pkg}/msg/{name}")
+        if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+            inner, size = detail
+            return (kind, (fix(inner), size))
+        return desc
+
+    return (consts, [(fname, fix(desc)) for fname, desc in fields])
+
+
+def _default_factory(store: Typestore, desc: Any) -> Any:
+    kind, detail = desc
+    if kind == Nodetype.BASE:
+        typ = detail[0]
+        if typ in _PY_DEFAULTS:
+            value = _PY_DEFAULTS[typ]
+            return lambda: value
+        if typ.startswith("float"):
+            return float
+        return int
+    if kind == Nodetype.NAME:
+        return lambda: store.types[detail]()
+    inner, size = detail
+    inner_kind, inner_detail = inner
+    if inner_kind == Nodetype.BASE and inner_detail[0] in _NUMPY_DTYPES:
+        dtype = _NUMPY_DTYPES[inner_detail[0]]
+        n = size if kind == Nodetype.ARRAY else 0
+        return lambda: np.zeros(n, dtype=dtype)
+    if kind == Nodetype.ARRAY:
+        elem = _default_factory(store, inner)
+        return lambda: [elem() for _ in range(size)]
+    return list
+
+
+def _add_defaults(store: Typestore, cls: Any) -> None:
+    if getattr(cls, "_eddie_defaults", False):
+        return
+    name = cls.__msgtype__
+    _, fields = store.fielddefs[name]
+    names = [f[0] for f in fields]
+    factories = [_default_factory(store, f[1]) for f in fields]
+    original = cls.__init__
+    nfields = len(names)
+
+    @functools.wraps(original)
+    def __init__(self: Any, *args: Any, **kwargs: Any) -> None:
+        if len(args) + len(kwargs) < nfields:
+            for i in range(len(args), nfields):
+                if names[i] not in kwargs:
+                    kwargs[names[i]] = factories[i]()
+        original(self, *args, **kwargs)
+
+    cls.__init__ = __init__
+    cls._eddie_defaults = True
+
+
+TYPESTORE, SERVICES, ACTIONS = _build()
+
+
+def get_message(name: str) -> Any:
+    """The class of message type ``pkg/msg/Name`` (also accepts ``pkg/Name``)."""
+    full = normalize_type_name(name)
+    try:
+        return TYPESTORE.types[full]
+    except KeyError:
+        raise UnknownTypeError(name, "message") from None
+
+
+def get_service(name: str) -> ServiceType:
+    """The service type ``pkg/srv/Name`` (also ``pkg/Name``)."""
+    full = name if "/srv/" in name else name.replace("/", "/srv/", 1)
+    try:
+        return SERVICES[full]
+    except KeyError:
+        raise UnknownTypeError(name, "service") from None
+
+
+def get_action(name: str) -> ActionType:
+    """The action type ``pkg/action/Name`` (also ``pkg/Name``)."""
+    full = name if "/action/" in name else name.replace("/", "/action/", 1)
+    try:
+        return ACTIONS[full]
+    except KeyError:
+        raise UnknownTypeError(name, "action") from None
+
+
+def normalize_type_name(name: str) -> str:
+    """``pkg/Name`` → ``pkg/msg/Name``; full names are returned unchanged."""
+    if name.count("/") == 1:
+        pkg, base = name.split("/")
+        return f"{pkg}/msg/{base}"
+    return name
+
+
+def type_name(msg_or_cls: Any) -> str:
+    """The ROS 2 type name of a message instance or class, e.g. ``geometry_msgs/msg/Twist``."""
+    try:
+        return str(msg_or_cls.__msgtype__)
+    except AttributeError:
+        raise TypeError(f"{type(msg_or_cls).__name__} is not a ROS 2 message type") from None
+
+
+def serialize(msg: Any, typename: str | None = None) -> bytes:
+    """ROS 2 CDR (little-endian, with encapsulation header) of ``msg``."""
+    return bytes(TYPESTORE.serialize_cdr(msg, typename or type_name(msg)))
+
+
+def deserialize(data: bytes | memoryview, typename: str) -> Any:
+    """Decode ROS 2 CDR bytes as ``typename``."""
+    return TYPESTORE.deserialize_cdr(data, normalize_type_name(typename))
+
+
+def type_hash(typename: str) -> str:
+    """The RIHS01 type hash of a message type, as ROS 2 Iron+ and rmw_zenoh use it."""
+    return TYPESTORE.hash_rihs01(normalize_type_name(typename))
+
+
+def message_definition(typename: str) -> str:
+    """The full .msg text of a type with its dependencies, as rosbag2 stores it."""
+    text, _ = TYPESTORE.generate_msgdef(normalize_type_name(typename), ros_version=2)
+    return text
+
+
+def package_namespace(pkg: str) -> dict[str, Any]:
+    """Every message, service and action class of ``pkg`` under its short name."""
+    out: dict[str, Any] = {}
+    for full, cls in TYPESTORE.types.items():
+        p, kind, name = full.split("/", 2)
+        if p == pkg and kind == "msg":
+            out[name] = cls
+    for full, srv in SERVICES.items():
+        if full.startswith(f"{pkg}/"):
+            out[full.rsplit("/", 1)[1]] = srv
+    for full, act in ACTIONS.items():
+        if full.startswith(f"{pkg}/"):
+            out[full.rsplit("/", 1)[1]] = act
+    return out
