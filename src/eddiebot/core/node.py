@@ -284,6 +284,15 @@ class Service(Entity):
             raise TypeError(f"service {self.srv_name!r} callback returned None, not a response")
         return response
 
+    def handle_async(self, request: Any, done: Callable[[Any, BaseException | None], None]) -> None:
+        """Answer through ``done(response, error)``; a subclass may answer later (actions)."""
+        try:
+            response = self.handle(request)
+        except Exception as exc:
+            done(None, exc)
+            return
+        done(response, None)
+
     def enqueue(self, request: Any, done: Callable[[Any, BaseException | None], None]) -> None:
         """Queue a request; ``done(response, error)`` is called after the callback ran."""
         with self._lock:
@@ -350,10 +359,7 @@ class Client:
             executor = local.node.executor
             if executor is None or not executor.is_spinning() or executor.is_current_thread_spinning():
                 # Nobody else will run it (or we would deadlock waiting): answer inline.
-                try:
-                    done(local.handle(request), None)
-                except Exception as exc:
-                    done(None, exc)
+                local.handle_async(request, done)
             else:
                 local.enqueue(request, done)
             return future
@@ -444,11 +450,12 @@ class Node:
         *,
         namespace: str = "",
         context: Context | None = None,
-        parameter_overrides: Sequence[Parameter] | dict[str, Any] | None = None,
+        parameter_overrides: Sequence[Parameter | ParameterOverride] | dict[str, Any] | None = None,
         remappings: dict[str, str] | None = None,
         allow_undeclared_parameters: bool = False,
         automatically_declare_parameters_from_overrides: bool = False,
         use_global_arguments: bool = True,
+        start_parameter_services: bool = True,
     ) -> None:
         self.context = context or get_default_context()
         self._name = validate_node_name(node_name)
@@ -467,6 +474,7 @@ class Node:
         self._parameters: dict[str, Parameter] = {}
         self._descriptors: dict[str, ParameterDescriptor] = {}
         self._on_set: list[_ParamCallback] = []
+        self._post_set: list[Callable[[list[Parameter]], None]] = []
         self._overrides: dict[str, ParameterOverride] = {}
         self._logger = NodeLogger(self.fully_qualified_name.lstrip("/").replace("/", "."), self)
         self._rosout_pub: Publisher | None = None
@@ -481,15 +489,22 @@ class Node:
                 self._overrides[k] = ParameterOverride("/**", k, v, f"node {self.fully_qualified_name}")
         elif parameter_overrides:
             for p in parameter_overrides:
-                self._overrides[p.name] = ParameterOverride(
-                    "/**", p.name, p.value, f"node {self.fully_qualified_name}"
-                )
+                if isinstance(p, ParameterOverride):
+                    self._overrides[p.name] = p
+                else:
+                    self._overrides[p.name] = ParameterOverride(
+                        "/**", p.name, p.value, f"node {self.fully_qualified_name}"
+                    )
         self.context.add_node(self)
         self.declare_parameter("use_sim_time", self.context.use_sim_time)
         if automatically_declare_parameters_from_overrides:
             for name, o in list(self._overrides.items()):
                 if name not in self._parameters:
                     self.declare_parameter(name, o.value)
+        if start_parameter_services:
+            from eddiebot.core.param_services import ParameterService
+
+            self._parameter_service: ParameterService | None = ParameterService(self)
 
     # -- identity -----------------------------------------------------------------------
     def get_name(self) -> str:
@@ -759,6 +774,10 @@ class Node:
     def remove_on_set_parameters_callback(self, callback: _ParamCallback) -> None:
         self._on_set.remove(callback)
 
+    def add_post_set_parameters_callback(self, callback: Callable[[list[Parameter]], None]) -> None:
+        """Called with the parameters after a successful set (rclpy's post-set callback)."""
+        self._post_set.append(callback)
+
     def set_parameters(self, parameters: Sequence[Parameter]) -> list[SetParametersResult]:
         return [self.set_parameters_atomically([p]) for p in parameters]
 
@@ -788,6 +807,8 @@ class Node:
                 return result
         for p in checked:
             self._parameters[p.name] = p
+        for post in self._post_set:
+            post(checked)
         return SetParametersResult(True)
 
     def set_parameter(self, name: str, value: Any) -> SetParametersResult:

@@ -1,0 +1,133 @@
+"""Twist multiplexer (twist_mux's role): velocity sources by priority, with timeouts and locks.
+
+Parameters as twist_mux's YAML::
+
+    topics:
+      navigation: {topic: cmd_vel_safe,   timeout: 0.5, priority: 10}
+      teleop:     {topic: cmd_vel_teleop, timeout: 0.5, priority: 100}
+    locks:
+      e_stop:     {topic: e_stop, timeout: 0.0, priority: 255}   # std_msgs/Bool
+
+The highest-priority source whose last command is younger than its timeout drives
+``cmd_vel``; a lock that is set (Bool true, or silent longer than its timeout when the
+timeout is positive) mutes every source of lower or equal priority. Unlike twist_mux,
+when the selected source goes stale the mux publishes one zero Twist at once, so the robot
+stops without waiting for the base's own stale-command timeout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from eddiebot.core.node import Node
+from eddiebot.msgs.geometry_msgs import Twist
+from eddiebot.msgs.std_msgs import Bool
+
+__all__ = ["MuxInput", "TwistMux", "TwistMuxNode"]
+
+DEFAULT_TOPICS = {
+    "navigation": ("cmd_vel_safe", 0.5, 10),
+    "teleop": ("cmd_vel_teleop", 0.5, 100),
+}
+DEFAULT_LOCKS = {"e_stop": ("e_stop", 0.0, 255)}
+
+
+@dataclass
+class MuxInput:
+    name: str
+    topic: str
+    timeout_ns: int
+    priority: int
+    last_ns: int | None = None
+    value: Any = None  # last Twist, or the lock's bool
+
+
+class TwistMux:
+    """Selection logic (pure): who drives at time ``now_ns``."""
+
+    def __init__(self, sources: list[MuxInput], locks: list[MuxInput]) -> None:
+        self.sources = sorted(sources, key=lambda s: -s.priority)
+        self.locks = locks
+
+    def _lock_priority(self, now_ns: int) -> int:
+        top = -1
+        for lock in self.locks:
+            stale = (
+                lock.timeout_ns > 0
+                and (lock.last_ns is None or now_ns - lock.last_ns > lock.timeout_ns)
+            )
+            if stale or bool(lock.value):
+                top = max(top, lock.priority)
+        return top
+
+    def select(self, now_ns: int) -> MuxInput | None:
+        locked = self._lock_priority(now_ns)
+        for src in self.sources:
+            if src.priority <= locked:
+                return None
+            if src.last_ns is not None and now_ns - src.last_ns <= src.timeout_ns:
+                return src
+        return None
+
+
+class TwistMuxNode(Node):
+    default_node_name = "twist_mux"
+
+    def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        sources = self._inputs("topics", DEFAULT_TOPICS)
+        locks = self._inputs("locks", DEFAULT_LOCKS)
+        self.mux = TwistMux(sources, locks)
+        self.active: MuxInput | None = None
+        self.pub = self.create_publisher(Twist, "cmd_vel", 10)
+        for src in sources:
+            self.create_subscription(Twist, src.topic, self._make_cb(src), 10)
+        for lock in locks:
+            self.create_subscription(Bool, lock.topic, self._make_lock_cb(lock), 10)
+        period = float(self.declare_parameter("check_period", 0.05).value)
+        self.create_timer(period, self._check)
+
+    def _inputs(self, group: str, defaults: dict[str, tuple[str, float, int]]) -> list[MuxInput]:
+        names = sorted({o.name.split(".")[1] for o in self._overrides.values()
+                        if o.name.startswith(f"{group}.") and o.name.count(".") == 2})
+        table = {n: defaults.get(n, ("", 0.5, 0)) for n in names} if names else defaults
+        out = []
+        for name, (topic, timeout, priority) in table.items():
+            t = self.declare_parameter(f"{group}.{name}.topic", topic).value
+            to = float(self.declare_parameter(f"{group}.{name}.timeout", float(timeout)).value)
+            pr = int(self.declare_parameter(f"{group}.{name}.priority", int(priority)).value)
+            if not t:
+                raise ValueError(f"{self.fully_qualified_name}: {group}.{name}.topic is required")
+            out.append(MuxInput(name, t, round(to * 1e9), pr))
+        return out
+
+    def _make_cb(self, src: MuxInput) -> Any:
+        def cb(msg: Any) -> None:
+            src.last_ns = self.get_clock().now_ns()
+            src.value = msg
+            chosen = self.mux.select(src.last_ns)
+            self._switch(chosen)
+            if chosen is src:
+                self.pub.publish(msg)
+
+        return cb
+
+    def _make_lock_cb(self, lock: MuxInput) -> Any:
+        def cb(msg: Any) -> None:
+            lock.last_ns = self.get_clock().now_ns()
+            lock.value = bool(msg.data)
+            self._check()
+
+        return cb
+
+    def _switch(self, chosen: MuxInput | None) -> None:
+        if chosen is not self.active:
+            if self.active is not None and chosen is None:
+                self.pub.publish(Twist())  # the driving source went stale or a lock engaged
+            name = chosen.name if chosen else "none"
+            self.get_logger().info(f"velocity source: {name}")
+            self.active = chosen
+
+    def _check(self) -> None:
+        self._switch(self.mux.select(self.get_clock().now_ns()))
