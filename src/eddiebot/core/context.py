@@ -69,6 +69,9 @@ class Context:
         self._ok = True
         #: Parameter overrides from files and command lines, consulted by every new node.
         self.parameter_sources: list[Any] = []
+        #: Objects shared between nodes of this process by name (the simulator puts its
+        #: firmware emulator here as ``"emulator"`` for the board node's in-process link).
+        self.resources: dict[str, Any] = {}
 
     # -- life ---------------------------------------------------------------------------
     def ok(self) -> bool:

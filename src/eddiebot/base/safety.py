@@ -1,0 +1,91 @@
+"""Range-sensor safety: the forward-motion veto (pure core) and the ``emergency_status`` node.
+
+The veto forbids forward motion while any IR or PING range reads closer than
+``veto_distance`` (default 0.25 m); turning and reversing stay allowed so the robot can get
+itself out. The board node applies it last before GOSPD, so every command source is covered.
+A reading of ``inf`` (no echo, REP-117) or NaN never vetoes; a sensor that stops reporting
+keeps its last value until ``stale_after`` seconds pass.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from eddiebot.core.node import Node
+from eddiebot.msgs.eddiebot_msgs import GetStatus
+from eddiebot.msgs.sensor_msgs import Range
+from eddiebot.msgs.std_msgs import Bool
+
+__all__ = ["SafetyConfig", "SafetyNode", "VetoState", "forward_veto"]
+
+
+@dataclass(frozen=True)
+class SafetyConfig:
+    veto_distance: float = 0.25
+    enabled: bool = True
+
+
+@dataclass
+class VetoState:
+    """Latest range per sensor (m) and whether any of them is inside the veto distance."""
+
+    ranges: dict[str, float] = field(default_factory=dict)
+    veto_distance: float = 0.25
+
+    def update(self, ranges: dict[str, float]) -> None:
+        self.ranges.update(ranges)
+
+    @property
+    def vetoed(self) -> bool:
+        return bool(self.too_close())
+
+    def too_close(self, distance: float | None = None) -> list[str]:
+        d = self.veto_distance if distance is None else distance
+        return [n for n, r in self.ranges.items() if math.isfinite(r) and r < d]
+
+
+def forward_veto(linear: float, state: VetoState, config: SafetyConfig) -> float:
+    """``linear`` with forward motion removed while an obstacle is too close."""
+    if not config.enabled or linear <= 0.0:
+        return linear
+    return 0.0 if state.too_close(config.veto_distance) else linear
+
+
+class SafetyNode(Node):
+    """Watches the range topics; serves the original ``emergency_status`` (GetStatus) and
+    publishes ``/eddie/safety_veto`` (Bool) whenever the answer changes."""
+
+    default_node_name = "eddie_safety"
+    TOPICS = ("/eddie/ir/left", "/eddie/ir/center", "/eddie/ir/right",
+              "/eddie/ping/left", "/eddie/ping/right")
+
+    def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        self.config = SafetyConfig(
+            veto_distance=float(self.declare_parameter("veto_distance", 0.25).value),
+            enabled=bool(self.declare_parameter("veto_enabled", True).value),
+        )
+        self.state = VetoState(veto_distance=self.config.veto_distance)
+        self._last: bool | None = None
+        self.pub = self.create_publisher(Bool, "/eddie/safety_veto", 10)
+        for topic in self.TOPICS:
+            self.create_subscription(Range, topic, self._make_cb(topic.rsplit("/", 2)[-2:]), 10)
+        self.create_service(GetStatus, "emergency_status", self._status)
+
+    def _make_cb(self, parts: list[str]) -> Any:
+        name = "_".join(parts)
+
+        def cb(msg: Any) -> None:
+            self.state.update({name: float(msg.range)})
+            vetoed = self.config.enabled and self.state.vetoed
+            if vetoed != self._last:
+                self._last = vetoed
+                self.pub.publish(Bool(data=vetoed))
+
+        return cb
+
+    def _status(self, req: Any, res: Any) -> Any:
+        res.okay = not (self.config.enabled and self.state.vetoed)
+        return res

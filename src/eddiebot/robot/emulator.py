@@ -1,0 +1,644 @@
+"""Byte-for-byte emulator of the Eddie control board firmware (1.1 and 1.3).
+
+:class:`FirmwareEmulator` consumes the bytes a host sends and returns the bytes the board
+would answer, following the FW 1.1 source (``Main``/``Parse``/``NextParameter``/``ParseHex``):
+
+* input is collected in a 255-byte buffer that includes the terminator; the byte that fills
+  it (a 254th character, or a CR after 253) raises ``Overflow``, after which everything up to
+  the next CR (or NUL) is discarded and ``ERROR[ - Overflow]`` is sent;
+* command letters are upper-cased; space and tab separate parameters; BS deletes the
+  previous character; control characters 0x01-0x07, 0x0A-0x0C, 0x0E-0x1F and bytes ≥ 0x7F
+  are ignored (as the command-set documents specify; the FW 1.1 source actually leaves them
+  in the buffer, so on that build a stray LF makes the command invalid);
+* an empty line gets no reply; a line of only blanks is an invalid command;
+* parameters are up to 8 hex digits (more → ``Invalid parameter``), parsed in order, so the
+  first fault found decides the reason; ``VERB 1`` appends `` - <reason>`` to ``ERROR``;
+* a NUL terminates a line in checksum mode: two checksum bytes follow (big-endian sum of
+  the line's bytes including the NUL); the reply is followed by NUL and its own checksum;
+* ``PING`` keeps the FW 1.1 trailing space after the last value.
+
+Profile differences (:data:`~eddiebot.robot.constants.FIRMWARE_1_1` default,
+:data:`~eddiebot.robot.constants.FIRMWARE_1_3`): ``TRVL``/``TURN`` speed 1..7F vs 1..FF,
+``ACC`` 0..1FF vs 1..7FF, ``WATCH`` absent (ERROR) vs present and on at power-on (motors off
+after 1 s without serial data), ``BLNK``/``BLINK`` spelling, ``VER`` 0070 vs 000D.
+
+Motion runs on a :class:`~eddiebot.robot.plant.DrivePlant`; range sensors come from a
+pluggable :class:`SensorSource` (standalone: :class:`FixedSensors`).  Time is advanced by
+the caller (:meth:`FirmwareEmulator.advance_to_ns`), in real time by the pty server or on a
+simulation clock.  :class:`PtyServer` serves the emulator on a pseudo-terminal.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+import re
+import select
+import threading
+import time
+import tty
+from dataclasses import dataclass
+from typing import Protocol
+
+from eddiebot.robot.constants import (
+    ADC_CHANNELS,
+    BATTERY_ADC_INDEX,
+    BATTERY_DIVIDER,
+    BUFFER_LENGTH,
+    FIRMWARE_1_1,
+    FirmwareProfile,
+    range_m_to_ping_units,
+    volts_to_adc_counts,
+)
+from eddiebot.robot.plant import ControlMode, DrivePlant, PlantConfig
+
+__all__ = ["FirmwareEmulator", "FixedSensors", "PtyServer", "SensorSource"]
+
+_CR = 0x0D
+_BS = 0x08
+_NUL = 0x00
+_IGNORED = frozenset([*range(0x01, 0x08), *range(0x0A, 0x0D), *range(0x0E, 0x20),
+                      *range(0x7F, 0x100)])
+_HEX = frozenset(b"0123456789ABCDEFabcdef")
+# A complete line of printable characters (no BS, NUL, ignored bytes) shorter than the buffer.
+_SIMPLE_LINE = re.compile(rb"[\x20-\x7e]{1,%d}\r" % (BUFFER_LENGTH - 2))
+_OUTPUTABLE = 0x0007FFFF
+_PINGABLE = 0x0000FFFF
+_INITIAL_GPIO = (1 << 16) | (1 << 17) | (1 << 18)
+_HARDWARE_VERSION = 0x0002
+
+
+class SensorSource(Protocol):
+    """Where the emulated board's range sensors and ADC read from.
+
+    Times are the emulator's, in seconds.  The simulator plugs in its world here.
+    """
+
+    def ping_range_m(self, pin: int, time_s: float) -> float:
+        """Range in metres seen by the PING))) sensor on I/O ``pin`` (``inf``: no echo)."""
+        ...
+
+    def adc_volts(self, channel: int, time_s: float) -> float:
+        """Voltage at ADC index ``channel`` (0..7) in volts."""
+        ...
+
+
+@dataclass
+class FixedSensors:
+    """Constant, plausible readings for the standalone emulator.
+
+    PING))) pins 1 and 2 see walls at ``ping_left_m``/``ping_right_m``; other pins see no
+    echo.  IR channels 0..2 read ``ir_volts`` (≈ 0.3 V: nothing within 80 cm); the battery
+    (index 7) reads ``battery_v`` through the 3.21 divider; other channels read 0 V.
+    """
+
+    ping_left_m: float = 1.5
+    ping_right_m: float = 2.0
+    ir_volts: tuple[float, float, float] = (0.3, 0.3, 0.3)
+    battery_v: float = 12.6
+
+    def ping_range_m(self, pin: int, time_s: float) -> float:
+        """Range on ``pin`` in metres."""
+        if pin == 1:
+            return self.ping_left_m
+        if pin == 2:
+            return self.ping_right_m
+        return math.inf
+
+    def adc_volts(self, channel: int, time_s: float) -> float:
+        """Volts on ADC ``channel``."""
+        if 0 <= channel < 3:
+            return self.ir_volts[channel]
+        if channel == BATTERY_ADC_INDEX:
+            return self.battery_v / BATTERY_DIVIDER
+        return 0.0
+
+
+class _Abort(Exception):
+    """A firmware ``abort @Reason``."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+_HEX_FORMATS = {n: (f"0{n}X", (1 << (4 * n)) - 1) for n in (3, 4, 8)}
+
+
+def _hex(value: int, digits: int) -> str:
+    fmt, mask = _HEX_FORMATS[digits]
+    return format(value & mask, fmt)
+
+
+def _sext(value: int, bits: int) -> int:
+    value &= (1 << bits) - 1
+    return value - (1 << bits) if value & (1 << (bits - 1)) else value
+
+
+def _tdiv(a: int, b: int) -> int:
+    """Spin's ``/``: integer division truncating towards zero."""
+    q = abs(a) // abs(b)
+    return q if (a >= 0) == (b >= 0) else -q
+
+
+def _tmod(a: int, b: int) -> int:
+    """Spin's ``//``: remainder with the sign of the dividend."""
+    return a - b * _tdiv(a, b)
+
+
+def _as_long(value: int) -> int:
+    """A 32-bit Spin long as a signed Python int."""
+    return _sext(value, 32)
+
+
+class _Params:
+    """Sequential parameter reader with the firmware's error order."""
+
+    __slots__ = ("_i", "_tokens")
+
+    def __init__(self, tokens: list[bytes]) -> None:
+        self._tokens = tokens
+        self._i = 0
+
+    def next(self) -> int:
+        if self._i >= len(self._tokens):
+            raise _Abort("Too few parameters")
+        token = self._tokens[self._i]
+        self._i += 1
+        if len(token) > 8 or any(c not in _HEX for c in token):
+            raise _Abort("Invalid parameter")
+        return int(token, 16)  # 1..8 hex digits: an unsigned 32-bit long
+
+    def last(self) -> None:
+        if self._i < len(self._tokens):
+            raise _Abort("Too many parameters")
+
+
+class FirmwareEmulator:
+    """The control board: serial line discipline, command set, plant and sensors.
+
+    ``feed(data)`` returns the reply bytes at the current emulator time.  Advance time with
+    :meth:`advance_to_ns` / :meth:`step`; the plant moves and the 1.3 watchdog trips only
+    as time advances.
+    """
+
+    def __init__(self, profile: FirmwareProfile = FIRMWARE_1_1, *, counts_per_rev: int = 36,
+                 sensors: SensorSource | None = None, plant_config: PlantConfig | None = None,
+                 start_ns: int = 0) -> None:
+        self.profile = profile
+        config = plant_config or PlantConfig(counts_per_rev=counts_per_rev)
+        config.acceleration = profile.default_acceleration
+        if plant_config is None and profile.no_load_rev_per_s:
+            config.max_speed_pos_s = profile.no_load_rev_per_s * config.counts_per_rev
+        self.plant = DrivePlant(config, start_ns=start_ns)
+        self.sensors: SensorSource = sensors if sensors is not None else FixedSensors()
+        self.encoder_running = True
+        """Whether the position-control loop runs; False makes motion commands fail with
+        ``Encoder error`` (and ``STOP`` latches the motors off, as on the board)."""
+        self.motors_latched_off = False
+        self.verbose = False
+        self.watch_enabled = profile.watch_default_on
+        self.watchdog_tripped = False
+        self._last_rx_ns = start_ns
+        self._buf = bytearray()
+        self._overflow = False
+        self._checksum_pending: bytearray | None = None
+        self._offset = [0, 0]
+        self._ping_mask = profile.power_on_ping_mask & _PINGABLE
+        self._gpio_mask = _INITIAL_GPIO & ~self._ping_mask
+        self._dira = 0
+        self._outa = 0
+        self._blink: tuple[int, int] | None = None
+        cmds = {
+            "HWVER": self._cmd_hwver, "VER": self._cmd_ver, "OUT": self._cmd_out,
+            "IN": self._cmd_in, "HIGH": self._cmd_high, "LOW": self._cmd_low,
+            "OUTS": self._cmd_outs, "INS": self._cmd_ins, "HIGHS": self._cmd_highs,
+            "LOWS": self._cmd_lows, "READ": self._cmd_read, "ADC": self._cmd_adc,
+            "PING": self._cmd_ping, "SGP": self._cmd_sgp, "SPNG": self._cmd_spng,
+            "TRVL": self._cmd_trvl, "GOSPD": self._cmd_gospd, "GO": self._cmd_go,
+            "STOP": self._cmd_stop, "TURN": self._cmd_turn, "ACC": self._cmd_acc,
+            "SPD": self._cmd_spd, "HEAD": self._cmd_head, "DIST": self._cmd_dist,
+            "RST": self._cmd_rst, "VERB": self._cmd_verb,
+        }
+        for name in profile.blink_names:
+            cmds[name] = self._cmd_blink
+        if profile.has_watch:
+            cmds["WATCH"] = self._cmd_watch
+        self._commands = {k.encode(): v for k, v in cmds.items()}
+
+    # --- time ------------------------------------------------------------------------------
+
+    @property
+    def time_ns(self) -> int:
+        """Emulator time in nanoseconds."""
+        return self.plant.time_ns
+
+    @property
+    def time_s(self) -> float:
+        """Emulator time in seconds."""
+        return self.plant.time_ns / 1e9
+
+    def advance_to_ns(self, t_ns: int) -> None:
+        """Run the plant up to ``t_ns`` (no-op if in the past), tripping the watchdog on time."""
+        if self.watch_enabled and not self.watchdog_tripped:
+            trip = self._last_rx_ns + round(self.profile.watchdog_timeout_s * 1e9)
+            if trip <= t_ns:
+                self.plant.advance_to_ns(trip)
+                self.watchdog_tripped = True
+                self.plant.disable()
+        self.plant.advance_to_ns(t_ns)
+
+    def advance_to(self, t_s: float) -> None:
+        """Run the plant up to ``t_s`` seconds."""
+        self.advance_to_ns(round(t_s * 1e9))
+
+    def step(self, dt_s: float) -> None:
+        """Run the plant for ``dt_s`` seconds."""
+        self.advance_to_ns(self.plant.time_ns + round(dt_s * 1e9))
+
+    # --- serial line -----------------------------------------------------------------------
+
+    def feed(self, data: bytes) -> bytes:
+        """Process bytes received from the host; return the bytes the board sends back."""
+        if not data:
+            return b""
+        self._last_rx_ns = self.plant.time_ns
+        self.watchdog_tripped = False
+        if (not self._buf and not self._overflow and self._checksum_pending is None
+                and _SIMPLE_LINE.fullmatch(data)):
+            # Fast path for the common case: one plain command line, nothing pending.
+            return self._execute(data[:-1]) + b"\r"
+        out = bytearray()
+        buf = self._buf
+        for b in data:
+            pending = self._checksum_pending
+            if pending is not None:
+                pending.append(b)
+                if len(pending) == 2:
+                    out += self._finish_checksum_line(int.from_bytes(pending, "big"))
+                continue
+            if self._overflow:
+                if b == _CR:
+                    out += self._error_text("Overflow") + b"\r"
+                    self._reset_line()
+                elif b == _NUL:
+                    out += self._with_checksum(self._error_text("Overflow"))
+                    self._reset_line()
+                continue
+            if b in _IGNORED:
+                continue
+            buf.append(b)
+            if len(buf) == BUFFER_LENGTH:
+                self._overflow = True
+                continue
+            if b == _CR:
+                if len(buf) > 1:
+                    out += self._execute(bytes(buf[:-1])) + b"\r"
+                buf.clear()
+            elif b == _BS:
+                buf.pop()
+                if buf:
+                    buf.pop()
+            elif b == _NUL:
+                if len(buf) > 1:
+                    self._checksum_pending = bytearray()
+                else:
+                    buf.clear()
+        return bytes(out)
+
+    def _reset_line(self) -> None:
+        self._buf.clear()
+        self._overflow = False
+        self._checksum_pending = None
+
+    def _finish_checksum_line(self, remote: int) -> bytes:
+        line = bytes(self._buf)  # ends with the NUL
+        self._reset_line()
+        if sum(line) & 0xFFFF != remote:
+            return self._with_checksum(self._error_text("Bad checksum"))
+        return self._with_checksum(self._execute(line[:-1]))
+
+    @staticmethod
+    def _with_checksum(text: bytes) -> bytes:
+        total = sum(text) & 0xFFFF
+        return text + b"\x00" + total.to_bytes(2, "big")
+
+    def _error_text(self, reason: str) -> bytes:
+        return b"ERROR - " + reason.encode() if self.verbose else b"ERROR"
+
+    def _execute(self, line: bytes) -> bytes:
+        """Parse and run one command line (without terminator); return the reply text."""
+        # The command name ends at the first blank; only it is upper-cased here (parameters
+        # are hex and accepted in either case).
+        cut = len(line)
+        for i, c in enumerate(line):
+            if c in (0x20, 0x09):
+                cut = i
+                break
+        name = line[:cut].upper()
+        tokens = line[cut:].replace(b"\t", b" ").split()
+        handler = self._commands.get(name)
+        try:
+            if handler is None:
+                raise _Abort("Invalid command")
+            return handler(_Params(tokens)).encode()
+        except _Abort as abort:
+            return self._error_text(abort.reason)
+
+    # --- commands --------------------------------------------------------------------------
+
+    def _require_loop(self) -> None:
+        if not self.encoder_running:
+            raise _Abort("Encoder error")
+
+    def _motion_allowed(self) -> bool:
+        return not self.motors_latched_off
+
+    def _cmd_hwver(self, p: _Params) -> str:
+        p.last()
+        return _hex(_HARDWARE_VERSION, 4)
+
+    def _cmd_ver(self, p: _Params) -> str:
+        p.last()
+        return _hex(self.profile.version_word, 4)
+
+    def _cmd_out(self, p: _Params) -> str:
+        mask = p.next()
+        p.last()
+        self._dira |= mask & self._gpio_mask
+        return ""
+
+    def _cmd_in(self, p: _Params) -> str:
+        mask = p.next()
+        p.last()
+        self._dira &= ~(mask & self._gpio_mask)
+        return ""
+
+    def _cmd_high(self, p: _Params) -> str:
+        mask = p.next()
+        p.last()
+        self._outa |= mask & self._gpio_mask
+        return ""
+
+    def _cmd_low(self, p: _Params) -> str:
+        mask = p.next()
+        p.last()
+        self._outa &= ~(mask & self._gpio_mask)
+        return ""
+
+    def _cmd_outs(self, p: _Params) -> str:
+        p.last()
+        return _hex(self._dira & self._gpio_mask, 8)
+
+    def _cmd_ins(self, p: _Params) -> str:
+        p.last()
+        return _hex(~self._dira & self._gpio_mask, 8)
+
+    def _cmd_highs(self, p: _Params) -> str:
+        p.last()
+        return _hex(self._outa & self._gpio_mask, 8)
+
+    def _cmd_lows(self, p: _Params) -> str:
+        p.last()
+        return _hex(~self._outa & self._gpio_mask, 8)
+
+    def _cmd_read(self, p: _Params) -> str:
+        p.last()
+        ina = self._outa & self._dira  # nothing external drives the inputs
+        return _hex(ina & self._gpio_mask, 8)
+
+    def _cmd_adc(self, p: _Params) -> str:
+        p.last()
+        t = self.time_s
+        # MCP3008 (10-bit) read as 12-bit: the two LSBs carry no information.
+        values = [volts_to_adc_counts(self.sensors.adc_volts(i, t)) & ~0x3
+                  for i in range(ADC_CHANNELS)]
+        return " ".join(_hex(v, 3) for v in values)
+
+    def _cmd_ping(self, p: _Params) -> str:
+        p.last()
+        if not self._ping_mask:
+            return ""
+        t = self.time_s
+        parts = [_hex(range_m_to_ping_units(self.sensors.ping_range_m(pin, t)), 3) + " "
+                 for pin in range(32) if self._ping_mask >> pin & 1]
+        return "".join(parts)  # the FW 1.1 source leaves the trailing space in place
+
+    def _cmd_sgp(self, p: _Params) -> str:
+        mask = p.next() & _OUTPUTABLE
+        p.last()
+        if mask & self._ping_mask:
+            self._ping_mask &= ~mask
+        self._gpio_mask = mask
+        return ""
+
+    def _cmd_spng(self, p: _Params) -> str:
+        mask = p.next() & _PINGABLE
+        p.last()
+        self._gpio_mask &= ~mask
+        self._outa &= ~mask
+        self._dira &= ~mask
+        self._ping_mask = mask
+        return ""
+
+    def _cmd_trvl(self, p: _Params) -> str:
+        distance = p.next()
+        speed = p.next()
+        p.last()
+        self._require_loop()
+        if not self.profile.move_speed_min <= _as_long(speed) <= self.profile.move_speed_max:
+            raise _Abort("Invalid parameter")
+        if self._motion_allowed():
+            d = _sext(distance, 16)
+            self.plant.move(d, d, _as_long(speed))
+        return ""
+
+    def _cmd_turn(self, p: _Params) -> str:
+        angle = p.next()
+        speed = p.next()
+        p.last()
+        self._require_loop()
+        if not self.profile.move_speed_min <= _as_long(speed) <= self.profile.move_speed_max:
+            raise _Abort("Invalid parameter")
+        if self._motion_allowed():
+            a = _sext(angle, 16)
+            half = self.plant.positions_per_spin // 2
+            delta = _tdiv(a * half, 360)
+            self.plant.move(delta, -delta, _as_long(speed))
+        return ""
+
+    def _cmd_gospd(self, p: _Params) -> str:
+        left = p.next()
+        right = p.next()
+        p.last()
+        self._require_loop()
+        if self._motion_allowed():
+            self.plant.set_velocity(_sext(left, 16), _sext(right, 16))
+        return ""
+
+    def _cmd_go(self, p: _Params) -> str:
+        left = p.next()
+        right = p.next()
+        p.last()
+        self._require_loop()
+        if self._motion_allowed():
+            self.plant.set_power(_sext(left, 8), _sext(right, 8))
+        return ""
+
+    def _cmd_stop(self, p: _Params) -> str:
+        distance = p.next()
+        p.last()
+        if not self.encoder_running:
+            self.motors_latched_off = True
+            self.plant.disable()
+            raise _Abort("Encoder error")
+        if self._motion_allowed():
+            self.plant.stop(_as_long(distance))
+        return ""
+
+    def _cmd_acc(self, p: _Params) -> str:
+        rate = _as_long(p.next())
+        p.last()
+        if not self.profile.acc_min <= rate <= self.profile.acc_max:
+            raise _Abort("Invalid parameter")
+        self.plant.set_acceleration(rate)
+        return ""
+
+    def _cmd_spd(self, p: _Params) -> str:
+        p.last()
+        self._require_loop()
+        left, right = self.plant.speed_report
+        return f"{_hex(left, 4)} {_hex(right, 4)}"
+
+    def _positions(self) -> tuple[int, int]:
+        left, right = self.plant.counts
+        return left + self._offset[0], right + self._offset[1]
+
+    def _cmd_head(self, p: _Params) -> str:
+        p.last()
+        self._require_loop()
+        left, right = self._positions()
+        spin = self.plant.positions_per_spin
+        # ((L - R) // 186) * 360 / 186 with Spin's truncating operators: may be negative.
+        deg = _tdiv(_tmod(_as_long(left - right), spin) * 360, spin)
+        return _hex(deg, 3)
+
+    def _cmd_dist(self, p: _Params) -> str:
+        p.last()
+        self._require_loop()
+        left, right = self._positions()
+        return f"{_hex(left, 8)} {_hex(right, 8)}"
+
+    def _cmd_rst(self, p: _Params) -> str:
+        p.last()
+        left, right = self.plant.counts
+        self._offset = [-left, -right]
+        return ""
+
+    def _cmd_blink(self, p: _Params) -> str:
+        pin = p.next()
+        rate = p.next()
+        p.last()
+        bit = 1 << (pin & 31)
+        if bit & _OUTPUTABLE:
+            if rate:
+                self._ping_mask &= ~bit
+                self._gpio_mask &= ~bit
+                self._outa &= ~bit
+                self._dira |= bit
+                self._blink = (pin, rate)
+            else:
+                self._blink = None
+        return ""
+
+    def _cmd_verb(self, p: _Params) -> str:
+        mode = _as_long(p.next())
+        p.last()
+        if mode not in (0, 1):
+            raise _Abort("Invalid parameter")
+        self.verbose = bool(mode)
+        return ""
+
+    def _cmd_watch(self, p: _Params) -> str:
+        mode = _as_long(p.next())
+        p.last()
+        if mode not in (0, 1):
+            raise _Abort("Invalid parameter")
+        self.watch_enabled = bool(mode)
+        return ""
+
+    # --- introspection for tests and the simulator ----------------------------------------
+
+    @property
+    def ping_mask(self) -> int:
+        """Pins currently running PING))) sensors."""
+        return self._ping_mask
+
+    @property
+    def control_mode(self) -> ControlMode:
+        """The plant's control mode."""
+        return self.plant.mode
+
+
+class PtyServer:
+    """Serve a :class:`FirmwareEmulator` on a pseudo-terminal, advancing it in real time.
+
+    ``device_path`` is the slave side (``/dev/pts/N``) a serial client opens.  The server
+    keeps the slave open itself so clients may come and go.
+    """
+
+    def __init__(self, emulator: FirmwareEmulator, *, poll_s: float = 0.01) -> None:
+        self.emulator = emulator
+        self.poll_s = poll_s
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        tty.setraw(self._master)
+        os.set_blocking(self._master, False)
+        self.device_path = os.ttyname(self._slave)
+        self._stop = threading.Event()
+        self._wake_r, self._wake_w = os.pipe()
+        self._t0_ns = time.monotonic_ns() - emulator.time_ns
+
+    def stop(self) -> None:
+        """Ask :meth:`serve_forever` to return (thread- and signal-safe)."""
+        self._stop.set()
+        with contextlib.suppress(OSError):
+            os.write(self._wake_w, b"x")
+
+    def serve_forever(self) -> None:
+        """Serve until :meth:`stop`; then close the pty."""
+        try:
+            while not self._stop.is_set():
+                ready, _, _ = select.select([self._master, self._wake_r], [], [], self.poll_s)
+                now = time.monotonic_ns() - self._t0_ns
+                self.emulator.advance_to_ns(now)
+                if self._master in ready:
+                    try:
+                        data = os.read(self._master, 4096)
+                    except (BlockingIOError, InterruptedError):
+                        continue
+                    except OSError:
+                        break
+                    reply = self.emulator.feed(data)
+                    if reply:
+                        self._write_all(reply)
+        finally:
+            self.close()
+
+    def _write_all(self, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            try:
+                n = os.write(self._master, view)
+            except BlockingIOError:
+                select.select([], [self._master], [], self.poll_s)
+                continue
+            view = view[n:]
+
+    def close(self) -> None:
+        """Close the pty (idempotent)."""
+        for fd in (self._master, self._slave, self._wake_r, self._wake_w):
+            with contextlib.suppress(OSError):
+                os.close(fd)
+        self._master = self._slave = self._wake_r = self._wake_w = -1
