@@ -35,6 +35,10 @@ class OdometryConfig:
 
     wheel_separation: float = TRACK_M
     wheel_radius: float = WHEEL_RADIUS_M
+    #: calibration factors (UMBmark), as diff_drive_controller's
+    wheel_separation_multiplier: float = 1.0
+    left_wheel_radius_multiplier: float = 1.0
+    right_wheel_radius_multiplier: float = 1.0
     #: encoder positions per wheel revolution (for the quantisation noise model)
     counts_per_rev: int = POSITIONS_PER_REV
     velocity_rolling_window_size: int = 10
@@ -46,8 +50,16 @@ class OdometryConfig:
     def __post_init__(self) -> None:
         if self.wheel_separation <= 0 or self.wheel_radius <= 0:
             raise ValueError("wheel_separation and wheel_radius must be positive")
+        if min(self.wheel_separation_multiplier, self.left_wheel_radius_multiplier,
+               self.right_wheel_radius_multiplier) <= 0:
+            raise ValueError("calibration multipliers must be positive")
         if self.velocity_rolling_window_size < 1:
             raise ValueError("velocity_rolling_window_size must be >= 1")
+
+    @property
+    def separation(self) -> float:
+        """The effective wheel separation (m) after calibration."""
+        return self.wheel_separation * self.wheel_separation_multiplier
 
     @property
     def metres_per_count(self) -> float:
@@ -118,8 +130,8 @@ class DiffDriveOdometry:
         if stamp_ns <= last_t:
             return None  # repeated or out-of-order sample
         dt = (stamp_ns - last_t) * 1e-9
-        d_left = (left_rad - last_l) * cfg.wheel_radius
-        d_right = (right_rad - last_r) * cfg.wheel_radius
+        d_left = (left_rad - last_l) * cfg.wheel_radius * cfg.left_wheel_radius_multiplier
+        d_right = (right_rad - last_r) * cfg.wheel_radius * cfg.right_wheel_radius_multiplier
         self._last = (left_rad, right_rad, stamp_ns)
         limit = cfg.max_plausible_wheel_speed * dt + 2 * cfg.metres_per_count
         if abs(d_left) > limit or abs(d_right) > limit:
@@ -129,16 +141,16 @@ class DiffDriveOdometry:
             return None
         theta0 = self.theta
         self.x, self.y, self.theta = integrate_arc(
-            self.x, self.y, self.theta, d_left, d_right, cfg.wheel_separation
+            self.x, self.y, self.theta, d_left, d_right, cfg.separation
         )
         self._propagate_covariance(theta0, d_left, d_right)
-        self._window.append((0.5 * (d_left + d_right), (d_right - d_left) / cfg.wheel_separation, dt))
+        self._window.append((0.5 * (d_left + d_right), (d_right - d_left) / cfg.separation, dt))
         self._state = self._make_state(stamp_ns)
         return self._state
 
     def _propagate_covariance(self, theta: float, d_left: float, d_right: float) -> None:
         cfg = self.config
-        b = cfg.wheel_separation
+        b = cfg.separation
         ds = 0.5 * (d_left + d_right)
         dth = (d_right - d_left) / b
         mid = theta + 0.5 * dth
@@ -170,7 +182,7 @@ class DiffDriveOdometry:
         angular = sum(w[1] for w in self._window) / total_dt
         # a rolling mean over the window's span: quantisation of ±1 count at both ends
         sv = cfg.metres_per_count / math.sqrt(6.0) / total_dt
-        sw = 2.0 * sv / cfg.wheel_separation
+        sw = 2.0 * sv / cfg.separation
         return OdometryState(
             stamp_ns,
             self.x,

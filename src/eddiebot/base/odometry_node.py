@@ -67,6 +67,9 @@ class OdometryNode(Node):
             wheel_separation=self.declare_parameter("wheel_separation", cfg.wheel_separation).value,
             wheel_radius=self.declare_parameter("wheel_radius", cfg.wheel_radius).value,
             counts_per_rev=self.declare_parameter("counts_per_rev", cfg.counts_per_rev).value,
+            wheel_separation_multiplier=self.declare_parameter("wheel_separation_multiplier", 1.0).value,
+            left_wheel_radius_multiplier=self.declare_parameter("left_wheel_radius_multiplier", 1.0).value,
+            right_wheel_radius_multiplier=self.declare_parameter("right_wheel_radius_multiplier", 1.0).value,
             velocity_rolling_window_size=self.declare_parameter(
                 "velocity_rolling_window_size", cfg.velocity_rolling_window_size
             ).value,

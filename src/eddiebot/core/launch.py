@@ -212,7 +212,10 @@ def _parse_node(body: dict[str, Any], args: Mapping[str, str], where: str, path:
     spec.namespace = _substitute(str(body.get("namespace", "")), args, where)
     for entry in body.get("param", []) or []:
         if "from" in entry:
-            spec.param_files.append(Path(_substitute(str(entry["from"]), args, where)))
+            file = Path(_substitute(str(entry["from"]), args, where)).expanduser()
+            if entry.get("optional") and not file.exists():
+                continue
+            spec.param_files.append(file)
         elif "name" in entry:
             spec.params[entry["name"]] = _subst_value(entry.get("value"), args, where)
         else:

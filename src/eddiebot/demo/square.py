@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -50,13 +51,19 @@ class SquareResult:
 
 
 class SquareDriver(Node):
-    """Publishes ``/cmd_vel`` to drive a square of ``side`` metres, counter-clockwise."""
+    """Publishes ``/cmd_vel`` to drive a square of ``side`` metres, closed-loop on ``/odom``:
+    counter-clockwise for ``direction`` +1, clockwise for −1. ``truth`` (optional) gives the
+    true pose recorded at each corner (the emulator's, in simulation)."""
 
-    def __init__(self, emulator: FirmwareEmulator, *, side: float = 1.0, speed: float = 0.2,
-                 turn_speed: float = 0.6, **kwargs: Any) -> None:
+    def __init__(self, truth: Callable[[], tuple[float, float, float]] | None = None, *,
+                 side: float = 1.0, speed: float = 0.2, turn_speed: float = 0.6,
+                 direction: int = 1, **kwargs: Any) -> None:
         super().__init__("square_driver", **kwargs)
-        self.emulator = emulator
+        self.truth = truth
+        self.direction = 1 if direction >= 0 else -1
         self.side, self.speed, self.turn_speed = side, speed, turn_speed
+        self.velocity = (0.0, 0.0)
+        self._still_since: int | None = None
         self.pub = self.create_publisher(Twist, "/cmd_vel", 10)
         self.pose: tuple[float, float, float] | None = None
         self.create_subscription(Odometry, "/odom", self._on_odom, 10)
@@ -71,6 +78,17 @@ class SquareDriver(Node):
         p = msg.pose.pose
         q = p.orientation
         self.pose = (p.position.x, p.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))
+        self.velocity = (msg.twist.twist.linear.x, msg.twist.twist.angular.z)
+
+    def _settled(self) -> bool:
+        """Standing still (odometry twist ≈ 0) for 0.3 s."""
+        now = self.get_clock().now_ns()
+        if abs(self.velocity[0]) > 0.003 or abs(self.velocity[1]) > 0.01:
+            self._still_since = None
+            return False
+        if self._still_since is None:
+            self._still_since = now
+        return now - self._still_since >= 300_000_000
 
     def _send(self, v: float, w: float) -> None:
         t = Twist()
@@ -92,8 +110,9 @@ class SquareDriver(Node):
             self.phase, self.start = "settle_corner", self.pose
         elif self.phase == "settle_corner":
             self._send(0.0, 0.0)
-            if abs(self.emulator.plant.wheel_velocities[0]) < 1e-6:
-                self.corners.append(Corner(len(self.corners) + 1, self.pose, self.emulator.plant.true_pose))
+            if self._settled():
+                truth = self.truth() if self.truth is not None else self.pose
+                self.corners.append(Corner(len(self.corners) + 1, self.pose, truth))
                 self.leg += 1
                 if self.leg == 4:
                     self.done.set()
@@ -103,13 +122,13 @@ class SquareDriver(Node):
             turned = abs(float(wrap_angle(th - self.start[2])))
             remaining = math.pi / 2 - turned
             if remaining > math.radians(1.0):
-                self._send(0.0, min(self.turn_speed, max(0.15, 2.0 * remaining)))
+                self._send(0.0, self.direction * min(self.turn_speed, max(0.15, 2.0 * remaining)))
                 return
             self._send(0.0, 0.0)
             self.phase, self.start = "settle_turn", self.pose
         elif self.phase == "settle_turn":
             self._send(0.0, 0.0)
-            if abs(self.emulator.plant.wheel_velocities[0]) < 1e-6:
+            if self._settled():
                 self.phase, self.start = "straight", self.pose
 
 
@@ -128,7 +147,7 @@ def run_square(out_dir: Path, *, side: float = 1.0, firmware: str = "1.1",
     try:
         desc = parse_launch_file(find_launch_file("bringup"), {"port": server.device_path})
         nodes = build_nodes(desc, context, NODES)
-        driver = SquareDriver(emulator, side=side, context=context)
+        driver = SquareDriver(lambda: emulator.plant.true_pose, side=side, context=context)
         nodes.append(driver)
         recorder = None
         if record:
