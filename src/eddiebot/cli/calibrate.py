@@ -75,11 +75,11 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.errors:
             data = yaml.safe_load(args.errors.read_text())
-            cw = [tuple(map(float, e)) for e in data["cw"]]
-            ccw = [tuple(map(float, e)) for e in data["ccw"]]
+            cw = [(float(e[0]), float(e[1])) for e in data["cw"]]
+            ccw = [(float(e[0]), float(e[1])) for e in data["ccw"]]
         else:
             cw, ccw = _drive_runs(args)
-        result = umbmark(cw, ccw, args.side, TRACK_M)  # type: ignore[arg-type]
+        result = umbmark(cw, ccw, args.side, TRACK_M)
     except (KeyError, ValueError, OSError, RuntimeError) as exc:
         print(f"eddie calibrate: {exc}", file=sys.stderr)
         return 2
