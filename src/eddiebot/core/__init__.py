@@ -8,6 +8,7 @@ clock jumps straight to the next due timer, so simulated runs are deterministic 
 fast as the CPU allows.
 """
 
+from eddiebot.core.action import ActionClient, ActionServer, CancelResponse, GoalResponse
 from eddiebot.core.context import Context, get_default_context, init, shutdown
 from eddiebot.core.errors import (
     InvalidParameterTypeError,
@@ -27,6 +28,7 @@ from eddiebot.core.executors import (
     spin_once,
     spin_until_future_complete,
 )
+from eddiebot.core.lifecycle import LifecycleNode, TransitionCallbackReturn
 from eddiebot.core.node import (
     CallbackGroup,
     Client,
@@ -54,10 +56,20 @@ from eddiebot.core.qos import (
     qos_profile_system_default,
 )
 from eddiebot.core.task import Future, Task
+from eddiebot.core.tf import (
+    Buffer,
+    StaticTransformBroadcaster,
+    TransformBroadcaster,
+    TransformListener,
+)
 from eddiebot.core.time import Clock, ClockType, Duration, SimClock, Time, ns_to_stamp, stamp_to_ns
 
 __all__ = [
+    "ActionClient",
+    "ActionServer",
+    "Buffer",
     "CallbackGroup",
+    "CancelResponse",
     "Client",
     "Clock",
     "ClockType",
@@ -66,9 +78,11 @@ __all__ = [
     "Duration",
     "Executor",
     "Future",
+    "GoalResponse",
     "HistoryPolicy",
     "InvalidParameterTypeError",
     "InvalidParameterValueError",
+    "LifecycleNode",
     "MultiThreadedExecutor",
     "MutuallyExclusiveCallbackGroup",
     "Node",
@@ -88,11 +102,15 @@ __all__ = [
     "SetParametersResult",
     "SimClock",
     "SingleThreadedExecutor",
+    "StaticTransformBroadcaster",
     "Subscription",
     "Task",
     "Time",
     "Timer",
     "TopicTypeMismatchError",
+    "TransformBroadcaster",
+    "TransformListener",
+    "TransitionCallbackReturn",
     "get_default_context",
     "init",
     "ns_to_stamp",

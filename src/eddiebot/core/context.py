@@ -72,6 +72,8 @@ class Context:
         #: Objects shared between nodes of this process by name (the simulator puts its
         #: firmware emulator here as ``"emulator"`` for the board node's in-process link).
         self.resources: dict[str, Any] = {}
+        #: Called with (node, level, text) for every log line (``/rosout``; see clock_node).
+        self.rosout_hook: Callable[[Any, int, str], None] | None = None
 
     # -- life ---------------------------------------------------------------------------
     def ok(self) -> bool:

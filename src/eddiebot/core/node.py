@@ -501,10 +501,11 @@ class Node:
             for name, o in list(self._overrides.items()):
                 if name not in self._parameters:
                     self.declare_parameter(name, o.value)
-        if start_parameter_services:
-            from eddiebot.core.param_services import ParameterService
+        from eddiebot.core.param_services import ParameterService
 
-            self._parameter_service: ParameterService | None = ParameterService(self)
+        self._parameter_service: ParameterService | None = (
+            ParameterService(self) if start_parameter_services else None
+        )
 
     # -- identity -----------------------------------------------------------------------
     def get_name(self) -> str:

@@ -211,19 +211,32 @@ class ProtocolCore:
             self._episodes.recovered("garbled", f"firmware {command}")
             return result
 
+    def _take_frame(self, command: str) -> str | None:
+        end = self._rx.find(b"\r")
+        if end < 0:
+            return None
+        frame = bytes(self._rx[:end])
+        if len(self._rx) > end + 1:
+            self._dirty = True  # more than one reply: resync before the next request
+        self._rx.clear()
+        return self._decode_frame(command, frame)
+
     def _read_reply(self, command: str, timeout_s: float) -> str:
+        if self.link.synchronous:
+            # The reply (if any) was produced inside the write.
+            self._rx += self.link.read(0.0)
+            frame = self._take_frame(command)
+            if frame is None:
+                raise BoardTimeout(command, timeout_s)
+            return frame
         start = self.clock()
         deadline = start + round(timeout_s * 1e9)
         stalled = 0
         last_now = start
         while True:
-            end = self._rx.find(b"\r")
-            if end >= 0:
-                frame = bytes(self._rx[:end])
-                if len(self._rx) > end + 1:
-                    self._dirty = True  # more than one reply: resync before the next request
-                self._rx.clear()
-                return self._decode_frame(command, frame)
+            frame = self._take_frame(command)
+            if frame is not None:
+                return frame
             now = self.clock()
             if now >= deadline:
                 raise BoardTimeout(command, timeout_s)
@@ -235,8 +248,6 @@ class ProtocolCore:
                     raise ReplyFormatError(command, self._rx[:64].decode("latin-1"),
                                            "a CR within 4096 bytes")
                 continue
-            if self.link.synchronous:
-                raise BoardTimeout(command, timeout_s)
             # Guard against a clock that does not move (never hang).
             stalled = stalled + 1 if now == last_now else 0
             last_now = now

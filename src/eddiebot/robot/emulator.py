@@ -61,6 +61,7 @@ _NUL = 0x00
 _IGNORED = frozenset([*range(0x01, 0x08), *range(0x0A, 0x0D), *range(0x0E, 0x20),
                       *range(0x7F, 0x100)])
 _HEX = frozenset(b"0123456789ABCDEFabcdef")
+_BLANK = re.compile(rb"[ \t]")
 # A complete line of printable characters (no BS, NUL, ignored bytes) shorter than the buffer.
 _SIMPLE_LINE = re.compile(rb"[\x20-\x7e]{1,%d}\r" % (BUFFER_LENGTH - 2))
 _OUTPUTABLE = 0x0007FFFF
@@ -331,13 +332,10 @@ class FirmwareEmulator:
         """Parse and run one command line (without terminator); return the reply text."""
         # The command name ends at the first blank; only it is upper-cased here (parameters
         # are hex and accepted in either case).
-        cut = len(line)
-        for i, c in enumerate(line):
-            if c in (0x20, 0x09):
-                cut = i
-                break
+        blank = _BLANK.search(line)
+        cut = blank.start() if blank else len(line)
         name = line[:cut].upper()
-        tokens = line[cut:].replace(b"\t", b" ").split()
+        tokens = line[cut:].split() if blank else []
         handler = self._commands.get(name)
         try:
             if handler is None:

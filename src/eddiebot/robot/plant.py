@@ -254,16 +254,21 @@ class DrivePlant:
 
     def advance_to_ns(self, t_ns: int) -> None:
         """Advance to absolute time ``t_ns`` nanoseconds (no-op if in the past)."""
-        while True:
-            next_tick = self._tick_index * TICK_NS
-            if next_tick > t_ns:
-                break
-            self._integrate((next_tick - self._t_ns) / 1e9)
-            self._t_ns = next_tick
+        t = self._t_ns
+        if t_ns <= t:
+            return
+        k = self._tick_index
+        next_tick = k * TICK_NS
+        while next_tick <= t_ns:
+            if next_tick > t:
+                self._integrate((next_tick - t) * 1e-9)
+            t = self._t_ns = next_tick
             self._tick()
-            self._tick_index += 1
-        if t_ns > self._t_ns:
-            self._integrate((t_ns - self._t_ns) / 1e9)
+            k += 1
+            next_tick += TICK_NS
+        self._tick_index = k
+        if t_ns > t:
+            self._integrate((t_ns - t) * 1e-9)
             self._t_ns = t_ns
 
     # --- internals -------------------------------------------------------------------------
