@@ -183,7 +183,7 @@ def parse_launch_file(path: str | Path, cli_args: Mapping[str, str] | None = Non
             desc.nodes.append(_parse_node(body, args, where, p))
         elif kind == "include":
             file = _substitute(str(body.get("file", "")), args, where)
-            inc_args = dict(args)
+            inc_args: dict[str, str] = {}
             for a in body.get("arg", []) or []:
                 inc_args[a["name"]] = _substitute(str(a["value"]), args, where)
             included = parse_launch_file(find_launch_file(file), inc_args)
