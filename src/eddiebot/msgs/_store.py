@@ -273,7 +273,7 @@ def _add_defaults(store: Typestore, cls: Any) -> None:
         f"def __init__(self, {', '.join(params)}):\n"
         f"    _orig(self, {', '.join(args)})\n"
     )
-    exec(code, namespace)  # noqa: S102 - generated from the type store's field names
+    exec(code, namespace)
     init = namespace["__init__"]
     init.__qualname__ = f"{cls.__name__}.__init__"
     init.__doc__ = cls.__init__.__doc__
