@@ -86,7 +86,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser, subparsers = build_parser()
     args_list = list(sys.argv[1:] if argv is None else argv)
     # Only the chosen command's module is imported to add its arguments.
-    chosen = next((a for a in args_list if not a.startswith("-")), None)
+    chosen = None
+    skip = False
+    for a in args_list:
+        if skip:
+            skip = False
+        elif a == "--log-level":
+            skip = True  # its value is not the command
+        elif not a.startswith("-"):
+            chosen = a
+            break
     if chosen in subparsers:
         module = importlib.import_module(subparsers[chosen].get_default("_module"))
         module.add_arguments(subparsers[chosen])

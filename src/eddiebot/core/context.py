@@ -104,6 +104,11 @@ class Context:
                     transport.on_subscription_added(sub)
             for srv in self.services.values():
                 transport.on_service_added(srv)
+            announce = getattr(transport, "on_client_added", None)
+            if announce is not None:
+                for node in self.nodes:
+                    for client in node.clients:
+                        announce(client)
 
     # -- registry -----------------------------------------------------------------------
     def _entry(self, topic: str, type_name: str) -> TopicEntry:

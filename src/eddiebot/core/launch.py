@@ -329,20 +329,38 @@ def spin_nodes(
     real_time_factor: float | None = None,
     duration_s: float | None = None,
     multithreaded: bool = False,
+    owns_sim_clock: bool | None = None,
 ) -> int:
     """Spin ``nodes`` until SIGINT/SIGTERM (or ``duration_s`` of node-clock time); then
-    destroy them in reverse order so drivers stop their motors."""
+    destroy them in reverse order (so drivers stop their motors) and shut the context down.
+
+    On sim time, the process that runs the simulator owns the clock (drives it and publishes
+    ``/clock``); any other follows ``/clock`` from the transport.
+    """
     import signal
     import threading
 
+    from eddiebot.core.clock_node import ClockFollower, ClockPublisher
     from eddiebot.core.executors import MultiThreadedExecutor, SingleThreadedExecutor
 
+    if owns_sim_clock is None:
+        owns_sim_clock = "simulator" in context.resources
+    drive = context.use_sim_time and owns_sim_clock
     executor = (
-        MultiThreadedExecutor(context=context)
+        MultiThreadedExecutor(context=context, drive_sim_time=drive)
         if multithreaded
-        else SingleThreadedExecutor(context=context, real_time_factor=real_time_factor)
+        else SingleThreadedExecutor(context=context, real_time_factor=real_time_factor,
+                                    drive_sim_time=drive)
     )
-    for n in nodes:
+    helpers: list[Node] = []
+    if context.use_sim_time:
+        clock_node = Node("sim_clock" if drive else "clock_follower", context=context)
+        helpers.append(clock_node)
+        if drive:
+            ClockPublisher(clock_node, executor)
+        else:
+            ClockFollower(clock_node)
+    for n in [*nodes, *helpers]:
         executor.add_node(n)
     stop = threading.Event()
 
@@ -362,6 +380,7 @@ def spin_nodes(
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)
-        for n in reversed(nodes):
+        for n in reversed([*nodes, *helpers]):
             n.destroy_node()
+        context.shutdown()
     return 0

@@ -468,7 +468,7 @@ class Node:
         self.timers: list[Timer] = []
         self.services: list[Service] = []
         self.clients: list[Client] = []
-        self._pending: list[Any] = []
+        self._unscheduled: list[Any] = []
         self._lock = threading.RLock()
         self.allow_undeclared_parameters = allow_undeclared_parameters
         self._parameters: dict[str, Parameter] = {}
@@ -612,6 +612,10 @@ class Node:
         client = Client(self, srv_type, self.resolve_service_name(srv_name),
                         callback_group or self._default_group)
         self.clients.append(client)
+        for t in self.context.transports:
+            announce = getattr(t, "on_client_added", None)
+            if announce is not None:
+                announce(client)
         return client
 
     def destroy_publisher(self, pub: Publisher) -> None:
@@ -635,6 +639,10 @@ class Node:
     def destroy_client(self, client: Client) -> None:
         if client in self.clients:
             self.clients.remove(client)
+            for t in self.context.transports:
+                forget = getattr(t, "on_client_removed", None)
+                if forget is not None:
+                    forget(client)
 
     def destroy_node(self) -> None:
         if self._destroyed:
@@ -657,13 +665,13 @@ class Node:
         executor = self.executor
         if executor is None:
             with self._lock:
-                self._pending.append(entity)
+                self._unscheduled.append(entity)
         else:
             executor.enqueue(entity)
 
     def _take_pending(self) -> list[Any]:
         with self._lock:
-            pending, self._pending = self._pending, []
+            pending, self._unscheduled = self._unscheduled, []
         return pending
 
     def _timers_changed(self) -> None:

@@ -1,0 +1,20 @@
+"""Typed failures of the map io package."""
+
+from __future__ import annotations
+
+__all__ = ["MapError", "MapFormatError", "MapWriteError"]
+
+
+class MapError(Exception):
+    """Base class of every map io failure."""
+
+
+class MapFormatError(MapError, ValueError):
+    """A map YAML or image is missing, unreadable or has an invalid key.
+
+    The message names the file and, where one is at fault, the key.
+    """
+
+
+class MapWriteError(MapError, OSError):
+    """A map could not be written; any previous map at the target path is intact."""

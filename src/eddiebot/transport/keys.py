@@ -1,0 +1,269 @@
+"""The Zenoh key space, laid out as ROS 2's own Zenoh middleware (rmw_zenoh) lays it out.
+
+Everything that names a key lives here, so the layout is one module away from rmw_zenoh's:
+
+- data and service keys: ``<domain>/<name without leading slash>/<dds type>/<type hash>``,
+  e.g. ``0/chatter/std_msgs::msg::dds_::String_/RIHS01_df66...``;
+- liveliness tokens: ``@ros2_lv/<domain>/<zid>/<node id>/<entity id>/<kind>/<enclave>/
+  <namespace>/<node>[/<topic>/<dds type>/<type hash>/<qos>]`` with ``/`` in names mangled
+  to ``%`` and kinds ``NN`` (node), ``MP``/``MS`` (publisher/subscription), ``SS``/``SC``
+  (service server/client);
+- the per-sample attachment: sequence number (int64 LE), source timestamp (int64 ns LE),
+  GID length (one byte, 16) and the 16-byte GID.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import struct
+from dataclasses import dataclass
+from typing import Any
+
+from eddiebot.core.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from eddiebot.msgs import TYPESTORE, normalize_type_name, type_hash
+
+__all__ = [
+    "ADMIN_SPACE",
+    "ATTACHMENT",
+    "GraphEntity",
+    "dds_type_name",
+    "decode_attachment",
+    "encode_attachment",
+    "entity_gid",
+    "liveliness_key",
+    "liveliness_prefix",
+    "mangle",
+    "node_liveliness_key",
+    "parse_liveliness_key",
+    "qos_from_keyexpr",
+    "qos_to_keyexpr",
+    "ros_type_name",
+    "service_hash_from",
+    "service_type_hash",
+    "topic_key",
+    "topic_wildcard_key",
+    "unmangle",
+]
+
+ADMIN_SPACE = "@ros2_lv"
+#: int64 sequence, int64 timestamp (ns since the epoch), uint8 GID length, 16-byte GID.
+ATTACHMENT = struct.Struct("<qqB16s")
+
+# rmw_zenoh's defaults: a field equal to its default is left empty in the QoS key.
+_DEFAULT_RELIABILITY = int(ReliabilityPolicy.RELIABLE)
+_DEFAULT_DURABILITY = int(DurabilityPolicy.VOLATILE)
+_DEFAULT_HISTORY = int(HistoryPolicy.KEEP_LAST)
+_DEFAULT_DEPTH = 42
+
+
+def mangle(name: str) -> str:
+    """``/`` → ``%`` (liveliness tokens carry names as one key chunk)."""
+    return name.replace("/", "%") if name else "%"
+
+
+def unmangle(chunk: str) -> str:
+    return chunk.replace("%", "/")
+
+
+def dds_type_name(ros_type: str) -> str:
+    """``std_msgs/msg/String`` → ``std_msgs::msg::dds_::String_``."""
+    pkg, kind, name = normalize_type_name(ros_type).split("/", 2)
+    return f"{pkg}::{kind}::dds_::{name}_"
+
+
+def ros_type_name(dds_type: str) -> str:
+    """``std_msgs::msg::dds_::String_`` → ``std_msgs/msg/String`` (other forms unchanged)."""
+    parts = dds_type.split("::")
+    if len(parts) == 4 and parts[2] == "dds_" and parts[3].endswith("_"):
+        return f"{parts[0]}/{parts[1]}/{parts[3][:-1]}"
+    return dds_type
+
+
+@functools.cache
+def service_type_hash(srv_type: str) -> str:
+    """RIHS01 hash of a service (or action sub-service) type, built as REP-2016 describes.
+
+    The description holds ``request_message``, ``response_message`` and ``event_message``
+    (``service_msgs/ServiceEventInfo info``, ``Request[<=1] request``, ``Response[<=1]
+    response``); it equals rosidl's (checked on example_interfaces/srv/AddTwoInts).
+    """
+    return service_hash_from(TYPESTORE.fielddefs, srv_type)
+
+
+def service_hash_from(fielddefs: Any, srv_type: str) -> str:
+    """:func:`service_type_hash` over the given field definitions (``pkg/srv/X_Request`` ...)."""
+    from rosbags.interfaces import Nodetype
+    from rosbags.typesys.store import Typestore
+
+    req, res, event = f"{srv_type}_Request", f"{srv_type}_Response", f"{srv_type}_Event"
+    store = Typestore()
+    store.fielddefs.update(fielddefs)
+    # rosidl describes ServiceEventInfo's ``char[16] client_gid`` as uint8[16]
+    info = "service_msgs/msg/ServiceEventInfo"
+    if info in store.fielddefs:
+        consts, fields = store.fielddefs[info]
+        store.fielddefs[info] = (consts, [
+            (n, (Nodetype.ARRAY, ((Nodetype.BASE, ("uint8", 0)), 16)))
+            if n == "client_gid" else (n, d) for n, d in fields
+        ])
+    store.fielddefs[event] = ([], [
+        ("info", (Nodetype.NAME, info)),
+        ("request", (Nodetype.SEQUENCE, ((Nodetype.NAME, req), 1))),
+        ("response", (Nodetype.SEQUENCE, ((Nodetype.NAME, res), 1))),
+    ])
+    store.fielddefs[srv_type] = ([], [
+        ("request_message", (Nodetype.NAME, req)),
+        ("response_message", (Nodetype.NAME, res)),
+        ("event_message", (Nodetype.NAME, event)),
+    ])
+    try:
+        return str(store.hash_rihs01(srv_type))
+    except Exception:  # a type the store cannot describe: still a stable key
+        return "RIHS01_" + hashlib.sha256(srv_type.encode()).hexdigest()
+
+
+@functools.cache
+def _msg_hash(ros_type: str) -> str:
+    try:
+        return type_hash(ros_type)
+    except Exception:
+        return "TypeHashNotSupported"
+
+
+def topic_key(domain: int, name: str, ros_type: str, *, service: bool = False) -> str:
+    """The data key of a topic, or the queryable key of a service."""
+    h = service_type_hash(ros_type) if service else _msg_hash(ros_type)
+    return f"{domain}/{name.strip('/')}/{dds_type_name(ros_type)}/{h}"
+
+
+def topic_wildcard_key(domain: int, name: str) -> str:
+    """Every type published on ``name`` (so a mismatched type is seen and reported)."""
+    return f"{domain}/{name.strip('/')}/*/*"
+
+
+def qos_to_keyexpr(qos: QoSProfile) -> str:
+    """rmw_zenoh's compact QoS chunk, e.g. ``::,10:,:,:,,`` (empty = rmw_zenoh default)."""
+    rel = "" if int(qos.reliability) in (0, _DEFAULT_RELIABILITY) else str(int(qos.reliability))
+    dur = "" if int(qos.durability) in (0, _DEFAULT_DURABILITY) else str(int(qos.durability))
+    hist = "" if int(qos.history) in (0, _DEFAULT_HISTORY) else str(int(qos.history))
+    depth = "" if qos.depth == _DEFAULT_DEPTH else str(qos.depth)
+    return f"{rel}:{dur}:{hist},{depth}:,:,:,,"
+
+
+def qos_from_keyexpr(text: str) -> QoSProfile:
+    """Inverse of :func:`qos_to_keyexpr` (deadline, lifespan and liveliness ignored)."""
+    try:
+        parts = text.split(":")
+        hist, depth = parts[2].split(",")[:2]
+        history = HistoryPolicy(int(hist)) if hist else HistoryPolicy.KEEP_LAST
+        return QoSProfile(
+            depth=int(depth) if depth else _DEFAULT_DEPTH,
+            reliability=ReliabilityPolicy(int(parts[0])) if parts[0] else ReliabilityPolicy.RELIABLE,
+            durability=DurabilityPolicy(int(parts[1])) if parts[1] else DurabilityPolicy.VOLATILE,
+            history=history,
+        )
+    except (ValueError, IndexError):
+        return QoSProfile()
+
+
+def liveliness_prefix(domain: int) -> str:
+    return f"{ADMIN_SPACE}/{domain}/**"
+
+
+def node_liveliness_key(domain: int, zid: str, node_id: int, namespace: str, name: str) -> str:
+    return f"{ADMIN_SPACE}/{domain}/{zid}/{node_id}/{node_id}/NN/%/{mangle(namespace)}/{name}"
+
+
+def liveliness_key(
+    domain: int,
+    zid: str,
+    node_id: int,
+    entity_id: int,
+    kind: str,
+    namespace: str,
+    node_name: str,
+    name: str,
+    ros_type: str,
+    qos: QoSProfile | None = None,
+) -> str:
+    """Token of a publisher (MP), subscription (MS), service (SS) or client (SC)."""
+    service = kind in ("SS", "SC")
+    h = service_type_hash(ros_type) if service else _msg_hash(ros_type)
+    return (
+        f"{ADMIN_SPACE}/{domain}/{zid}/{node_id}/{entity_id}/{kind}/%/{mangle(namespace)}/"
+        f"{node_name}/{mangle(name)}/{dds_type_name(ros_type)}/{h}/"
+        f"{qos_to_keyexpr(qos or QoSProfile())}"
+    )
+
+
+@dataclass(frozen=True)
+class GraphEntity:
+    """One entity announced by a liveliness token."""
+
+    key: str
+    domain: int
+    zid: str
+    node_id: str
+    entity_id: str
+    kind: str  # NN, MP, MS, SS, SC
+    namespace: str
+    node_name: str
+    name: str = ""  # topic or service (fully qualified)
+    type_name: str = ""  # ROS form, e.g. std_msgs/msg/String
+    type_hash: str = ""
+    qos: str = ""
+
+    @property
+    def node(self) -> str:
+        """Fully qualified node name."""
+        return f"{self.namespace.rstrip('/')}/{self.node_name}"
+
+    @property
+    def gid(self) -> bytes:
+        return entity_gid(self.key)
+
+
+def parse_liveliness_key(key: str) -> GraphEntity | None:
+    """The entity a token announces, or None when the key is not one of ours/rmw_zenoh's."""
+    parts = key.split("/")
+    if len(parts) < 9 or parts[0] != ADMIN_SPACE:
+        return None
+    try:
+        domain = int(parts[1])
+    except ValueError:
+        return None
+    kind = parts[5]
+    base: dict[str, Any] = {
+        "key": key, "domain": domain, "zid": parts[2], "node_id": parts[3],
+        "entity_id": parts[4], "kind": kind, "namespace": unmangle(parts[7]) or "/",
+        "node_name": parts[8],
+    }
+    if kind == "NN":
+        return GraphEntity(**base)
+    if kind not in ("MP", "MS", "SS", "SC") or len(parts) < 12:
+        return None
+    return GraphEntity(
+        **base,
+        name=unmangle(parts[9]),
+        type_name=ros_type_name(parts[10]),
+        type_hash=parts[11],
+        qos=parts[12] if len(parts) > 12 else "",
+    )
+
+
+def entity_gid(key: str) -> bytes:
+    """A 16-byte GID derived from the entity's liveliness key (stable, unique per entity)."""
+    return hashlib.blake2b(key.encode(), digest_size=16).digest()
+
+
+def encode_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
+    return ATTACHMENT.pack(sequence, timestamp_ns, 16, gid)
+
+
+def decode_attachment(data: bytes) -> tuple[int, int, bytes] | None:
+    """(sequence, source timestamp ns, GID) or None if the attachment is not in that form."""
+    if len(data) < ATTACHMENT.size:
+        return None
+    seq, ts, n, gid = ATTACHMENT.unpack_from(data)
+    return seq, ts, gid[:n]
