@@ -3,7 +3,8 @@
 The veto forbids forward motion while any IR or PING range reads closer than
 ``veto_distance`` (default 0.25 m); turning and reversing stay allowed so the robot can get
 itself out. The board node applies it last before GOSPD, so every command source is covered.
-A reading of ``inf`` (no echo, REP-117) or NaN never vetoes; a sensor that stops reporting
+A reading of ``+inf`` (nothing in range, REP-117) or NaN never vetoes, ``-inf`` (closer than
+the sensor can measure) always does; a sensor that stops reporting
 keeps its last value until ``stale_after`` seconds pass.
 """
 
@@ -43,7 +44,8 @@ class VetoState:
 
     def too_close(self, distance: float | None = None) -> list[str]:
         d = self.veto_distance if distance is None else distance
-        return [n for n, r in self.ranges.items() if math.isfinite(r) and r < d]
+        # -inf is REP-117's "too close to measure": the most urgent reading of all
+        return [n for n, r in self.ranges.items() if r == -math.inf or (math.isfinite(r) and r < d)]
 
 
 def forward_veto(linear: float, state: VetoState, config: SafetyConfig) -> float:

@@ -1,0 +1,132 @@
+"""A scripted operator: drives the simulated robot along a route of world-frame waypoints.
+
+It steers on the simulator's ground truth (``/ground_truth/odom``), as a person with a
+remote control watching the robot would, and publishes ``/cmd_vel_teleop`` — the same topic
+``eddie teleop`` uses — so the whole base stack (mux, controller, board driver, emulator)
+carries every command. A waypoint may ask for a spin in place, which is how a 57° Kinect
+sees a room.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass
+from typing import Any
+
+from eddiebot.core.node import Node
+from eddiebot.geometry import quaternion_to_yaw, wrap_angle
+from eddiebot.msgs.geometry_msgs import Twist
+from eddiebot.msgs.nav_msgs import Odometry
+
+__all__ = ["OFFICE_ROUTE", "RouteDriver", "Waypoint"]
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """Reach (x, y) in the world frame; then turn ``spin`` radians in place (0: none)."""
+
+    x: float
+    y: float
+    spin: float = 0.0
+
+
+#: Down the office corridor and back, looking into rooms through open doors, closing the
+#: loop at the start: about 45 m and five spins.
+OFFICE_ROUTE: tuple[Waypoint, ...] = (
+    Waypoint(3.4, 7.5, spin=2 * math.pi),
+    Waypoint(7.5, 7.5),
+    Waypoint(10.45, 7.5, spin=2 * math.pi),
+    Waypoint(10.45, 10.2, spin=2 * math.pi),
+    Waypoint(10.45, 7.5),
+    Waypoint(14.5, 7.5),
+    Waypoint(18.5, 7.5, spin=2 * math.pi),
+    Waypoint(12.5, 7.6),
+    Waypoint(7.45, 7.5),
+    Waypoint(7.45, 5.0, spin=2 * math.pi),
+    Waypoint(7.45, 7.5),
+    Waypoint(3.0, 7.5),
+    Waypoint(1.5, 7.5, spin=math.pi),
+)
+
+
+class RouteDriver(Node):
+    """Follows ``route``; ``done`` is set at the end (or ``failed`` after ``timeout_s``)."""
+
+    def __init__(self, route: tuple[Waypoint, ...], *, speed: float = 0.35, turn_speed: float = 0.7,
+                 lookahead: float = 0.4, timeout_s: float = 1200.0, **kwargs: Any) -> None:
+        super().__init__("route_driver", **kwargs)
+        self.route = route
+        self.speed, self.turn_speed, self.lookahead = speed, turn_speed, lookahead
+        self.timeout_ns = round(timeout_s * 1e9)
+        self.index = 0
+        self.spin_left = 0.0
+        self.pose: tuple[float, float, float] | None = None
+        self._last_yaw: float | None = None
+        self.done = threading.Event()
+        self.failed = False
+        self.started_ns: int | None = None
+        self.distance = 0.0
+        self.pub = self.create_publisher(Twist, "/cmd_vel_teleop", 10)
+        self.create_subscription(Odometry, "/ground_truth/odom", self._on_truth, 10)
+        self.create_timer(0.05, self._tick)
+
+    def _on_truth(self, msg: Any) -> None:
+        p = msg.pose.pose
+        q = p.orientation
+        pose = (p.position.x, p.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))
+        if self.pose is not None:
+            self.distance += math.hypot(pose[0] - self.pose[0], pose[1] - self.pose[1])
+        self.pose = pose
+
+    def _send(self, v: float, w: float) -> None:
+        t = Twist()
+        t.linear.x, t.angular.z = v, w
+        self.pub.publish(t)
+
+    def _tick(self) -> None:
+        if self.done.is_set() or self.pose is None:
+            return
+        now = self.get_clock().now_ns()
+        if self.started_ns is None:
+            self.started_ns = now
+        if now - self.started_ns > self.timeout_ns:
+            self.failed = True
+            self._send(0.0, 0.0)
+            self.done.set()
+            return
+        x, y, th = self.pose
+        if self.spin_left > 0:
+            if self._last_yaw is not None:
+                self.spin_left -= abs(float(wrap_angle(th - self._last_yaw)))
+            self._last_yaw = th
+            self._send(0.0, self.turn_speed if self.spin_left > 0 else 0.0)
+            if self.spin_left <= 0:
+                self._advance()
+            return
+        if self.index >= len(self.route):
+            self._send(0.0, 0.0)
+            self.done.set()
+            return
+        wp = self.route[self.index]
+        dx, dy = wp.x - x, wp.y - y
+        dist = math.hypot(dx, dy)
+        if dist < 0.12:
+            if wp.spin > 0:
+                self.spin_left, self._last_yaw = wp.spin, th
+                self._send(0.0, 0.0)
+            else:
+                self._advance()
+            return
+        err = float(wrap_angle(math.atan2(dy, dx) - th))
+        if abs(err) > math.radians(35):
+            self._send(0.0, math.copysign(self.turn_speed, err))
+            return
+        curvature = 2.0 * math.sin(err) / max(self.lookahead, min(dist, 1.0))
+        v = min(self.speed, 0.6 * dist + 0.05)
+        self._send(v, max(-self.turn_speed, min(self.turn_speed, v * curvature)))
+
+    def _advance(self) -> None:
+        self.spin_left = 0.0
+        self._last_yaw = None
+        self.index += 1

@@ -1,0 +1,340 @@
+"""Nav2 collision monitor core (``nav2_collision_monitor``): stop / slowdown / limit / approach
+zones over obstacle points from scan, point-cloud and range sources.
+
+Points are 2-D in the robot base frame (m). :class:`CollisionMonitor.process` takes the
+incoming command and the current points of every source (``None`` = no valid recent data)
+and returns what to publish, following upstream's order of operations.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from eddiebot.nav.errors import ParameterError
+from eddiebot.nav.params import from_params, require
+from eddiebot.nav.types import Twist2D
+
+Points = npt.NDArray[np.float64]
+
+
+class ActionType(IntEnum):
+    """``nav2_msgs/CollisionMonitorState`` action types."""
+
+    DO_NOTHING = 0
+    STOP = 1
+    SLOWDOWN = 2
+    APPROACH = 3
+    LIMIT = 4
+
+
+_ACTIONS = {"stop": ActionType.STOP, "slowdown": ActionType.SLOWDOWN,
+            "approach": ActionType.APPROACH, "limit": ActionType.LIMIT,
+            "none": ActionType.DO_NOTHING}
+
+
+@dataclass(frozen=True)
+class CollisionMonitorConfig:
+    """Node parameters (Jazzy code defaults)."""
+
+    cmd_vel_in_topic: str = "cmd_vel_smoothed"
+    cmd_vel_out_topic: str = "cmd_vel"
+    state_topic: str = ""
+    base_frame_id: str = "base_footprint"
+    odom_frame_id: str = "odom"
+    transform_tolerance: float = 0.1
+    source_timeout: float = 2.0
+    base_shift_correction: bool = True
+    stop_pub_timeout: float = 1.0
+    polygons: tuple[str, ...] = ()
+    observation_sources: tuple[str, ...] = ()
+
+    def validate(self, server: str = "collision_monitor") -> None:
+        require(len(self.polygons) > 0, server, "polygons", list(self.polygons),
+                "needs at least one polygon")
+        require(len(self.observation_sources) > 0, server, "observation_sources",
+                list(self.observation_sources), "needs at least one source")
+
+
+@dataclass(frozen=True)
+class PolygonConfig:
+    """Per-polygon parameters (Jazzy code defaults). ``points`` as Nav2's string
+    ``"[[x, y], ...]"``; ``max_points`` (deprecated) N means ``min_points`` N + 1."""
+
+    type: str = "polygon"
+    action_type: str = ""
+    enabled: bool = True
+    points: str = ""
+    radius: float = 0.0
+    min_points: int = 4
+    max_points: int = -1
+    slowdown_ratio: float = 0.5
+    linear_limit: float = 0.5
+    angular_limit: float = 0.5
+    time_before_collision: float = 2.0
+    simulation_time_step: float = 0.1
+    visualize: bool = False
+    polygon_pub_topic: str = ""
+    footprint_topic: str = "local_costmap/published_footprint"
+    sources_names: tuple[str, ...] = ()
+
+    def validate(self, server: str = "collision_monitor") -> None:
+        require(self.type in ("polygon", "circle"), server, "type", self.type,
+                "must be polygon or circle (velocity_polygon not supported)")
+        require(self.action_type in _ACTIONS, server, "action_type", self.action_type,
+                f"must be one of {sorted(_ACTIONS)}")
+        require(0.0 <= self.slowdown_ratio <= 1.0, server, "slowdown_ratio", self.slowdown_ratio,
+                "must be in [0, 1]")
+        require(self.simulation_time_step > 0.0, server, "simulation_time_step",
+                self.simulation_time_step, "must be > 0")
+
+
+def _parse_points(text: str, server: str) -> Points:
+    try:
+        arr = np.asarray(ast.literal_eval(text), dtype=np.float64)
+    except (ValueError, SyntaxError) as exc:
+        raise ParameterError(server, "points", text, f"not a list of points: {exc}") from exc
+    if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] < 3:
+        raise ParameterError(server, "points", text, "needs at least 3 [x, y] points")
+    return arr
+
+
+def points_in_polygon(poly: Points, pts: Points) -> npt.NDArray[np.bool_]:
+    """Even-odd ray-crossing test as upstream's ``Polygon::isPointInside``."""
+    inside = np.zeros(pts.shape[0], dtype=bool)
+    n = poly.shape[0]
+    j = n - 1
+    x = pts[:, 0]
+    y = pts[:, 1]
+    for i in range(n):
+        xi, yi = poly[i]
+        xj, yj = poly[j]
+        crosses = (yi > y) != (yj > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xc = (xj - xi) * (y - yi) / (yj - yi) + xi
+        inside ^= crosses & (x < xc)
+        j = i
+    return inside
+
+
+class Zone:
+    """One polygon or circle with its action."""
+
+    def __init__(self, name: str, config: PolygonConfig, footprint: Points | None = None) -> None:
+        self.name = name
+        self.config = config
+        config.validate(f"collision_monitor.{name}")
+        self.action = _ACTIONS[config.action_type]
+        self.min_points = config.max_points + 1 if config.max_points >= 0 else config.min_points
+        self.poly: Points | None = None
+        if config.type == "polygon":
+            if config.points:
+                self.poly = _parse_points(config.points, f"collision_monitor.{name}")
+            elif footprint is not None:
+                self.poly = np.asarray(footprint, dtype=np.float64)
+            else:
+                raise ParameterError(f"collision_monitor.{name}", "points", config.points,
+                                     "polygon needs points (or a footprint for approach)")
+        elif config.radius <= 0.0:
+            raise ParameterError(f"collision_monitor.{name}", "radius", config.radius,
+                                 "circle needs radius > 0")
+
+    def count_inside(self, pts: Points) -> int:
+        if pts.shape[0] == 0:
+            return 0
+        if self.poly is None:
+            r = self.config.radius
+            return int(np.count_nonzero(pts[:, 0] ** 2 + pts[:, 1] ** 2 < r * r))
+        return int(np.count_nonzero(points_in_polygon(self.poly, pts)))
+
+    def collision_time(self, cmd: Twist2D, pts: Points) -> float:
+        """``getCollisionTime``: seconds until ``min_points`` enter the zone moving with
+        ``cmd``; 0 if already inside; -1 if none within ``time_before_collision``."""
+        if self.count_inside(pts) >= self.min_points:
+            return 0.0
+        dt = self.config.simulation_time_step
+        x = y = th = 0.0
+        vx, vy = cmd.vx, cmd.vy
+        t = 0.0
+        while t <= self.config.time_before_collision:
+            x += vx * dt
+            y += vy * dt
+            th += cmd.wz * dt
+            c, s = math.cos(cmd.wz * dt), math.sin(cmd.wz * dt)
+            vx, vy = vx * c - vy * s, vx * s + vy * c
+            ct, st = math.cos(th), math.sin(th)
+            dx = pts[:, 0] - x
+            dy = pts[:, 1] - y
+            local = np.stack([ct * dx + st * dy, -st * dx + ct * dy], axis=-1)
+            if self.count_inside(local) >= self.min_points:
+                return t
+            t += dt
+        return -1.0
+
+
+@dataclass
+class MonitorOutput:
+    """Result of one :meth:`CollisionMonitor.process` call."""
+
+    publish: Twist2D | None
+    action: ActionType
+    polygon_name: str
+    state_changed: bool
+    """True when the active polygon changed (publish CollisionMonitorState)."""
+
+
+@dataclass
+class _State:
+    last_name: str = ""
+    zero_since_ns: int | None = None
+    released: bool = True
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class CollisionMonitor:
+    def __init__(self, config: CollisionMonitorConfig, zones: list[Zone]) -> None:
+        config.validate()
+        self.config = config
+        self.zones = zones
+        for z in zones:
+            for s in z.config.sources_names:
+                if s not in config.observation_sources:
+                    raise ParameterError(f"collision_monitor.{z.name}", "sources_names",
+                                         list(z.config.sources_names), f"unknown source {s!r}")
+        self._state = _State()
+
+    def _points_for(self, zone: Zone, sources: dict[str, Points | None]) -> Points:
+        names = zone.config.sources_names or self.config.observation_sources
+        arrays = [sources[n] for n in names if sources.get(n) is not None]
+        if not arrays:
+            return np.zeros((0, 2))
+        return np.concatenate([np.asarray(a, dtype=np.float64).reshape(-1, 2) for a in arrays])
+
+    def process(self, cmd: Twist2D, sources: dict[str, Points | None], now_ns: int) -> MonitorOutput:
+        action = ActionType.DO_NOTHING
+        name = ""
+        request = cmd
+        invalid = [n for n in self.config.observation_sources
+                   if n in sources and sources[n] is None]
+        if invalid:
+            action, name, request = ActionType.STOP, "invalid source", Twist2D()
+        else:
+            for zone in self.zones:
+                if not zone.config.enabled:
+                    continue
+                pts = self._points_for(zone, sources)
+                if zone.action == ActionType.STOP:
+                    if zone.count_inside(pts) >= zone.min_points:
+                        action, name, request = ActionType.STOP, zone.name, Twist2D()
+                        break
+                    continue
+                candidate: Twist2D | None = None
+                if zone.action == ActionType.SLOWDOWN:
+                    if zone.count_inside(pts) >= zone.min_points:
+                        r = zone.config.slowdown_ratio
+                        candidate = Twist2D(cmd.vx * r, cmd.vy * r, cmd.wz * r)
+                elif zone.action == ActionType.LIMIT:
+                    if zone.count_inside(pts) >= zone.min_points:
+                        ratio = 1.0
+                        lin = math.hypot(cmd.vx, cmd.vy)
+                        if lin != 0.0:
+                            ratio = min(ratio, zone.config.linear_limit / lin)
+                        if cmd.wz != 0.0:
+                            ratio = min(ratio, zone.config.angular_limit / abs(cmd.wz))
+                        ratio = min(max(ratio, 0.0), 1.0)
+                        candidate = Twist2D(cmd.vx * ratio, cmd.vy * ratio, cmd.wz * ratio)
+                elif zone.action == ActionType.APPROACH:
+                    t = zone.collision_time(cmd, pts)
+                    if t >= 0.0:
+                        r = t / zone.config.time_before_collision
+                        candidate = Twist2D(cmd.vx * r, cmd.vy * r, cmd.wz * r)
+                if candidate is not None and (
+                    candidate.vx ** 2 + candidate.vy ** 2 + candidate.wz ** 2
+                    < request.vx ** 2 + request.vy ** 2 + request.wz ** 2
+                ):
+                    request, action, name = candidate, zone.action, zone.name
+        changed = name != self._state.last_name
+        self._state.last_name = name
+        publish: Twist2D | None = request
+        if request.is_zero():
+            if self._state.zero_since_ns is None:
+                self._state.zero_since_ns = now_ns
+            elif (now_ns - self._state.zero_since_ns) * 1e-9 > self.config.stop_pub_timeout:
+                publish = None
+        else:
+            self._state.zero_since_ns = None
+        return MonitorOutput(publish, action, name, changed)
+
+
+def build_collision_monitor(params: dict[str, Any], footprint: Points | None = None,
+                            server: str = "collision_monitor") -> CollisionMonitor:
+    """From the node's ``ros__parameters`` (polygons and sources as nested dicts)."""
+    flat = {k: v for k, v in params.items() if not isinstance(v, dict)}
+    cfg = from_params(CollisionMonitorConfig, flat, server=server)
+    zones = []
+    for name in cfg.polygons:
+        sub = dict(params.get(name, {}) or {})
+        if isinstance(sub.get("points"), list):
+            sub["points"] = str(sub["points"])
+        zones.append(Zone(name, from_params(PolygonConfig, sub, server=f"{server}.{name}",
+                                            validate=lambda c, s: None), footprint))
+    return CollisionMonitor(cfg, zones)
+
+
+# --- sources -------------------------------------------------------------------------------
+def scan_source_points(ranges: npt.ArrayLike, angle_min: float, angle_increment: float,
+                       range_min: float, range_max: float,
+                       sensor_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Points:
+    """LaserScan -> base-frame points (``Scan::getData``: finite ranges in [min, max])."""
+    r = np.asarray(ranges, dtype=np.float64)
+    a = angle_min + angle_increment * np.arange(r.shape[0])
+    ok = np.isfinite(r) & (r >= range_min) & (r <= range_max)
+    sx, sy, syaw = sensor_pose
+    xs = r[ok] * np.cos(a[ok] + syaw) + sx
+    ys = r[ok] * np.sin(a[ok] + syaw) + sy
+    return np.stack([xs, ys], axis=-1)
+
+
+def cloud_source_points(points_base: npt.ArrayLike, min_height: float = 0.05,
+                        max_height: float = 0.5) -> Points:
+    """PointCloud2 (already in the base frame, N x 3) -> points with z in [min_height, max_height]."""
+    p = np.asarray(points_base, dtype=np.float64).reshape(-1, 3)
+    ok = np.all(np.isfinite(p), axis=1) & (p[:, 2] >= min_height) & (p[:, 2] <= max_height)
+    return p[ok, :2].copy()
+
+
+def range_source_points(range_m: float, min_range: float, max_range: float,
+                        field_of_view: float, sensor_pose: tuple[float, float, float],
+                        obstacles_angle: float = math.pi / 180.0) -> Points:
+    """Range -> points on the arc at the measured distance, every ``obstacles_angle``
+    across the field of view (``Range::getData``); nothing outside [min_range, max_range)."""
+    if not math.isfinite(range_m) or range_m < min_range or range_m >= max_range:
+        return np.zeros((0, 2))
+    half = field_of_view / 2.0
+    angles = np.arange(-half, half, obstacles_angle)
+    angles = np.append(angles, half)
+    sx, sy, syaw = sensor_pose
+    xs = sx + range_m * np.cos(angles + syaw)
+    ys = sy + range_m * np.sin(angles + syaw)
+    return np.stack([xs, ys], axis=-1)
+
+
+__all__ = [
+    "ActionType",
+    "CollisionMonitor",
+    "CollisionMonitorConfig",
+    "MonitorOutput",
+    "PolygonConfig",
+    "Zone",
+    "build_collision_monitor",
+    "cloud_source_points",
+    "points_in_polygon",
+    "range_source_points",
+    "scan_source_points",
+]

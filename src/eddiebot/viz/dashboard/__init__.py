@@ -1,0 +1,40 @@
+"""Web dashboard: the live map, robot, sensors and plans in a browser, with goals and teleop.
+
+`start_dashboard(context, host, port)` serves one page (a plain ``<canvas>``, shipped here,
+no external resources) and one WebSocket from background threads; a `DashboardNode` in the
+given context subscribes to the map, costmaps, TF, scan, ranges, plans, images, odometry,
+battery, collisions and ``/rosout``, and publishes goals, initial poses, teleop and the
+e-stop lock. Occupancy grids travel as tiles and only changed tiles are re-sent. Loopback by
+default; other binds need a token (see `eddiebot.viz.dashboard.server`).
+"""
+
+from eddiebot.viz.dashboard.core import Command, GridMeta, TileCache, TokenBucket, parse_command
+from eddiebot.viz.dashboard.errors import CommandError, DashboardError, RateLimitedError
+from eddiebot.viz.dashboard.hub import Hub
+from eddiebot.viz.dashboard.node import DashboardNode, DashboardTopics
+from eddiebot.viz.dashboard.server import (
+    DashboardConfig,
+    DashboardHandle,
+    create_app,
+    is_loopback,
+    start_dashboard,
+)
+
+__all__ = [
+    "Command",
+    "CommandError",
+    "DashboardConfig",
+    "DashboardError",
+    "DashboardHandle",
+    "DashboardNode",
+    "DashboardTopics",
+    "GridMeta",
+    "Hub",
+    "RateLimitedError",
+    "TileCache",
+    "TokenBucket",
+    "create_app",
+    "is_loopback",
+    "parse_command",
+    "start_dashboard",
+]

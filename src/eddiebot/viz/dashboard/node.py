@@ -1,0 +1,554 @@
+"""The dashboard's node: subscribes to what the page shows, publishes what the page commands.
+
+Everything the browser draws is expressed in one *display frame*: ``map`` when TF links
+``map`` to ``base_footprint``, else ``odom``. Callbacks run on the dashboard's own executor
+thread and hand ready-made frames to the :class:`~eddiebot.viz.dashboard.hub.Hub`; commands
+arrive from the web server's thread and publish directly.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import threading
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from eddiebot.core.action import ActionClient
+from eddiebot.core.context import Context
+from eddiebot.core.errors import TopicTypeMismatchError
+from eddiebot.core.node import Node
+from eddiebot.core.qos import QoSProfile, qos_profile_latched, qos_profile_sensor_data
+from eddiebot.core.task import Future
+from eddiebot.core.tf import Buffer, TransformException
+from eddiebot.msgs import get_action, get_message, get_service
+from eddiebot.viz.dashboard.core import (
+    GridMeta,
+    TileCache,
+    binary_frame,
+    colorize_depth,
+    depth_to_metres,
+    encode_jpeg,
+    image_to_bgr,
+    text_frame,
+)
+from eddiebot.viz.dashboard.errors import CommandError
+from eddiebot.viz.dashboard.hub import Hub
+
+__all__ = ["FOOTPRINT_RADIUS", "GRID_LAYERS", "RANGE_TOPICS", "DashboardNode", "DashboardTopics"]
+
+#: Eddie's footprint (m), as in the nav2 parameters.
+FOOTPRINT_RADIUS = 0.2245
+RANGE_TOPICS = ("/eddie/ir/left", "/eddie/ir/center", "/eddie/ir/right",
+                "/eddie/ping/left", "/eddie/ping/right")
+#: layer name → topic
+GRID_LAYERS = {"map": "/map", "global_costmap": "/global_costmap/costmap",
+               "local_costmap": "/local_costmap/costmap"}
+_NS = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class DashboardTopics:
+    """Topic names the dashboard uses (ROS 2 defaults of the stack)."""
+
+    scan: str = "/scan"
+    odom: str = "/odom"
+    plan: str = "/plan"
+    local_plan: str = "/local_plan"
+    goal_pose: str = "/goal_pose"
+    initial_pose: str = "/initialpose"
+    image: str = "/image_raw"
+    depth: str = "/depth/image_raw"
+    battery: str = "/eddie/battery_level"
+    collisions: str = "/sim/collisions"
+    rosout: str = "/rosout"
+    cmd_vel: str = "/cmd_vel_teleop"
+    e_stop: str = "/e_stop"
+    base_frame: str = "base_footprint"
+    navigate_action: str = "navigate_to_pose"
+    map_saver: str = "/map_saver/save_map"
+    slam_saver: str = "/slam_toolbox/save_map"
+
+
+def _yaw(q: Any) -> float:
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def _compose(a: tuple[float, float, float], x: float, y: float, yaw: float) -> tuple[float, float, float]:
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (a[0] + c * x - s * y, a[1] + s * x + c * y, math.remainder(a[2] + yaw, 2 * math.pi))
+
+
+def _r(v: float, nd: int = 4) -> float:
+    return round(float(v), nd) if math.isfinite(v) else 0.0
+
+
+class _Rate:
+    """Receipt times of one topic (wall ns) for a rate over the last two seconds."""
+
+    __slots__ = ("last_ns", "times")
+
+    def __init__(self) -> None:
+        self.times: deque[int] = deque(maxlen=200)
+        self.last_ns: int | None = None
+
+    def tick(self, now_ns: int) -> None:
+        self.times.append(now_ns)
+        self.last_ns = now_ns
+
+    def hz(self, now_ns: int) -> float:
+        recent = [t for t in self.times if now_ns - t <= 2 * _NS]
+        if len(recent) < 2:
+            return 0.0
+        return (len(recent) - 1) * _NS / max(1, recent[-1] - recent[0])
+
+
+class DashboardNode(Node):
+    """Turns topics into dashboard frames and browser commands into topics, actions and calls."""
+
+    def __init__(self, hub: Hub, *, context: Context | None = None, name: str = "eddie_dashboard",
+                 topics: DashboardTopics | None = None, image_rate_hz: float = 5.0,
+                 pose_rate_hz: float = 50.0) -> None:
+        super().__init__(name, context=context, start_parameter_services=False)
+        self.hub = hub
+        self.topics = t = topics or DashboardTopics()
+        self._wall = self.context.system_clock
+        self._cmd_lock = threading.RLock()
+        self.tf = Buffer(cache_time=10.0)
+        self.display_frame = "odom"
+        self._rates: dict[str, _Rate] = {}
+        self._problems: dict[str, str] = {}
+        self._tiles = {layer: TileCache() for layer in GRID_LAYERS}
+        self._grid_meta: dict[str, GridMeta] = {}
+        self._grid_placed: dict[str, tuple[str, tuple[float, float, float]] | None] = {}
+        self._image_period_ns = round(_NS / image_rate_hz)
+        self._pose_period_ns = round(_NS / pose_rate_hz)
+        self._last_image_ns: dict[str, int] = {}
+        self._last_pose_ns = 0
+        self._last_range_ns: dict[str, int] = {}
+        self._status: dict[str, Any] = {"battery": None, "linear": None, "angular": None,
+                                        "collisions": None}
+        self._logs: deque[dict[str, Any]] = deque(maxlen=200)
+        self._logs_dirty = False
+        self._goal: dict[str, Any] | None = None
+        self._estop = False
+        self._teleop: tuple[float, float] | None = None
+        self._teleop_refresh_ns = 0
+        #: seconds a held teleop command lives without a refresh from the browser
+        self.teleop_timeout_s = 0.5
+
+        msg = get_message
+        self._twist_cls = msg("geometry_msgs/msg/Twist")
+        self._bool_cls = msg("std_msgs/msg/Bool")
+        self._pose_stamped_cls = msg("geometry_msgs/msg/PoseStamped")
+        self._pose_cov_cls = msg("geometry_msgs/msg/PoseWithCovarianceStamped")
+        self._cmd_pub = self.create_publisher(self._twist_cls, t.cmd_vel, 10)
+        self._estop_pub = self.create_publisher(self._bool_cls, t.e_stop, qos_profile_latched)
+        self._goal_pub = self.create_publisher(self._pose_stamped_cls, t.goal_pose, 10)
+        self._initial_pub = self.create_publisher(self._pose_cov_cls, t.initial_pose, 10)
+        self._nav = ActionClient(self, get_action("nav2_msgs/action/NavigateToPose"), t.navigate_action)
+        self._nav_handles: list[Any] = []
+        self._map_saver = self.create_client(get_service("nav2_msgs/srv/SaveMap"), t.map_saver)
+        self._slam_saver = self.create_client(get_service("slam_toolbox/srv/SaveMap"), t.slam_saver)
+
+        tf_msg = msg("tf2_msgs/msg/TFMessage")
+        grid = msg("nav_msgs/msg/OccupancyGrid")
+        self._sub(tf_msg, "/tf", self._on_tf, 100)
+        self._sub(tf_msg, "/tf_static", self._on_tf_static,
+                  QoSProfile(depth=100, durability=qos_profile_latched.durability))
+        for layer, topic in GRID_LAYERS.items():
+            self._sub(grid, topic, functools.partial(self._on_grid, layer), qos_profile_latched)
+        self._sub(msg("sensor_msgs/msg/LaserScan"), t.scan, self._on_scan, qos_profile_sensor_data)
+        for topic in RANGE_TOPICS:
+            self._sub(msg("sensor_msgs/msg/Range"), topic,
+                      functools.partial(self._on_range, topic), qos_profile_sensor_data)
+        path = msg("nav_msgs/msg/Path")
+        self._sub(path, t.plan, lambda m: self._on_path("plan", t.plan, m), 5)
+        self._sub(path, t.local_plan, lambda m: self._on_path("local_plan", t.local_plan, m), 5)
+        self._sub(self._pose_stamped_cls, t.goal_pose, self._on_goal_pose, 5)
+        image = msg("sensor_msgs/msg/Image")
+        self._sub(image, t.image, lambda m: self._on_image("camera", t.image, m), qos_profile_sensor_data)
+        self._sub(image, t.depth, lambda m: self._on_image("depth", t.depth, m), qos_profile_sensor_data)
+        self._sub(msg("eddiebot_msgs/msg/BatteryLevel"), t.battery, self._on_battery, 5)
+        self._sub(msg("nav_msgs/msg/Odometry"), t.odom, self._on_odom, 10)
+        self._sub(msg("std_msgs/msg/UInt32"), t.collisions, self._on_collisions, 5)
+        self._sub(msg("rcl_interfaces/msg/Log"), t.rosout, self._on_log, 100)
+        self._sub(self._bool_cls, t.e_stop, self._on_estop, qos_profile_latched)
+        self.create_timer(0.2, self._status_tick, clock=self._wall)
+        self.create_timer(0.1, self._teleop_tick, clock=self._wall)
+        self.hub.post("estop", text_frame("estop", locked=False))
+
+    # -- plumbing -------------------------------------------------------------------------
+    def _sub(self, cls: Any, topic: str, cb: Callable[[Any], None], qos: Any) -> None:
+        def counted(m: Any, topic: str = topic) -> None:
+            self._rates.setdefault(topic, _Rate()).tick(self._wall.now_ns())
+            cb(m)
+
+        try:
+            self.create_subscription(cls, topic, counted, qos)
+        except TopicTypeMismatchError as exc:
+            self._problems[topic] = str(exc)
+            self.get_logger().warning(f"dashboard cannot show {topic}: {exc}")
+
+    def _to_display(self, frame: str) -> tuple[float, float, float] | None:
+        """Pose of ``frame`` in the display frame at the latest time, or None."""
+        frame = frame.lstrip("/") or self.display_frame
+        if frame == self.display_frame:
+            return (0.0, 0.0, 0.0)
+        try:
+            return self.tf.lookup_pose2d(self.display_frame, frame)
+        except TransformException:
+            return None
+
+    def _choose_display_frame(self) -> None:
+        base = self.topics.base_frame
+        frame = "map" if self.tf.can_transform("map", base) else "odom"
+        if frame != self.display_frame:
+            self.display_frame = frame
+            self._place_grids()
+            self.hub.drop_prefix("path:")
+            self.hub.drop_prefix("range:")
+
+    # -- TF and pose ----------------------------------------------------------------------
+    def _on_tf(self, msg: Any) -> None:
+        for tr in msg.transforms:
+            self.tf.set_transform(tr, "dashboard")
+        now = self._wall.now_ns()
+        if now - self._last_pose_ns >= self._pose_period_ns:
+            self._last_pose_ns = now
+            self._post_pose()
+
+    def _on_tf_static(self, msg: Any) -> None:
+        for tr in msg.transforms:
+            self.tf.set_transform_static(tr, "dashboard")
+        self._post_pose()
+
+    def _post_pose(self) -> None:
+        self._choose_display_frame()
+        pose = self._to_display(self.topics.base_frame)
+        if pose is None:
+            return
+        self.hub.post("pose", text_frame(
+            "pose", frame=self.display_frame, x=_r(pose[0]), y=_r(pose[1]), yaw=_r(pose[2]),
+            wall_ns=self._wall.now_ns()))
+
+    # -- grids ----------------------------------------------------------------------------
+    def _on_grid(self, layer: str, msg: Any) -> None:
+        info = msg.info
+        o = info.origin
+        meta = GridMeta(int(info.width), int(info.height), float(info.resolution),
+                        (float(o.position.x), float(o.position.y), _yaw(o.orientation)),
+                        msg.header.frame_id.lstrip("/") or "map")
+        cells = np.asarray(msg.data, dtype=np.int8)
+        if cells.size != meta.width * meta.height or meta.resolution <= 0:
+            self._problems[GRID_LAYERS[layer]] = (
+                f"grid of {cells.size} cells does not match {meta.width}x{meta.height}")
+            return
+        cache = self._tiles[layer]
+        new_gen, tiles = cache.update(meta, cells.reshape(meta.height, meta.width))
+        if new_gen:
+            self._grid_meta[layer] = meta
+            self.hub.drop_prefix(f"tile:{layer}:")
+            self._post_grid_meta(layer)
+        for tx, ty, w, h, data in tiles:
+            self.hub.post(f"tile:{layer}:{tx}:{ty}", binary_frame(
+                {"t": "tile", "layer": layer, "gen": cache.generation, "tx": tx, "ty": ty,
+                 "w": w, "h": h, "tile": cache.tile}, data))
+
+    def _post_grid_meta(self, layer: str) -> None:
+        meta = self._grid_meta[layer]
+        where = self._to_display(meta.frame_id)
+        origin = None if where is None else _compose(where, *meta.origin)
+        self._grid_placed[layer] = None if origin is None else (self.display_frame, origin)
+        self.hub.post(f"grid:{layer}", text_frame(
+            "grid", layer=layer, gen=self._tiles[layer].generation, w=meta.width, h=meta.height,
+            res=meta.resolution, tile=self._tiles[layer].tile, frame=meta.frame_id,
+            origin=None if origin is None else [_r(v, 5) for v in origin]))
+
+    def _place_grids(self) -> None:
+        """Re-send grid placements whose transform into the display frame moved."""
+        for layer, meta in self._grid_meta.items():
+            where = self._to_display(meta.frame_id)
+            origin = None if where is None else _compose(where, *meta.origin)
+            placed = self._grid_placed.get(layer)
+            if origin is None and placed is None:
+                continue
+            if (placed is None or origin is None or placed[0] != self.display_frame
+                    or max(abs(a - b) for a, b in zip(placed[1], origin, strict=True)) > 1e-3):
+                self._post_grid_meta(layer)
+
+    def map_bounds(self) -> tuple[float, float, float, float] | None:
+        """Axis-aligned bounds of ``/map`` in the display frame (m), if placed."""
+        meta = self._grid_meta.get("map")
+        placed = self._grid_placed.get("map")
+        if meta is None or placed is None or placed[0] != self.display_frame:
+            return None
+        w, h = meta.width * meta.resolution, meta.height * meta.resolution
+        pts = [_compose(placed[1], x, y, 0.0) for x, y in ((0, 0), (w, 0), (0, h), (w, h))]
+        xs, ys = [p[0] for p in pts], [p[1] for p in pts]
+        return min(xs), min(ys), max(xs), max(ys)
+
+    # -- sensors --------------------------------------------------------------------------
+    def _on_scan(self, msg: Any) -> None:
+        where = self._to_display(msg.header.frame_id)
+        if where is None:
+            self._problems[self.topics.scan] = f"no TF from {msg.header.frame_id!r} to {self.display_frame!r}"
+            return
+        self._problems.pop(self.topics.scan, None)
+        ranges = np.asarray(msg.ranges, dtype=np.float32)
+        self.hub.post("scan", binary_frame(
+            {"t": "scan", "frame": self.display_frame, "pose": [_r(v) for v in where],
+             "amin": float(msg.angle_min), "ainc": float(msg.angle_increment),
+             "rmin": float(msg.range_min), "rmax": float(msg.range_max),
+             "stamp": [int(msg.header.stamp.sec), int(msg.header.stamp.nanosec)]}, ranges.tobytes()), retain=True)
+
+    def _on_range(self, topic: str, msg: Any) -> None:
+        now = self._wall.now_ns()
+        if now - self._last_range_ns.get(topic, 0) < _NS // 10:
+            return
+        self._last_range_ns[topic] = now
+        where = self._to_display(msg.header.frame_id)
+        if where is None:
+            return
+        name = topic.removeprefix("/eddie/")
+        self.hub.post(f"range:{name}", text_frame(
+            "range", name=name, pose=[_r(v) for v in where], fov=_r(msg.field_of_view),
+            range=_r(msg.range), min=_r(msg.min_range), max=_r(msg.max_range)))
+
+    def _on_path(self, name: str, topic: str, msg: Any) -> None:
+        frame = msg.header.frame_id or (msg.poses[0].header.frame_id if msg.poses else "")
+        where = self._to_display(frame)
+        if where is None:
+            self._problems[topic] = f"no TF from {frame!r} to {self.display_frame!r}"
+            return
+        self._problems.pop(topic, None)
+        poses = msg.poses
+        step = max(1, len(poses) // 400)
+        pts = []
+        for p in poses[::step]:
+            x, y, _ = _compose(where, p.pose.position.x, p.pose.position.y, 0.0)
+            pts.append([round(x, 3), round(y, 3)])
+        self.hub.post(f"path:{name}", text_frame("path", name=name, pts=pts))
+
+    def _on_goal_pose(self, msg: Any) -> None:
+        where = self._to_display(msg.header.frame_id)
+        if where is None:
+            return
+        p = msg.pose
+        self._set_goal(_compose(where, p.position.x, p.position.y, _yaw(p.orientation)), "published")
+
+    def _set_goal(self, pose: tuple[float, float, float] | None, status: str) -> None:
+        if pose is not None:
+            self._goal = {"x": _r(pose[0]), "y": _r(pose[1]), "yaw": _r(pose[2])}
+        self.hub.post("goal", text_frame("goal", pose=self._goal, status=status))
+
+    def _on_image(self, name: str, topic: str, msg: Any) -> None:
+        now = self._wall.now_ns()
+        if now - self._last_image_ns.get(name, 0) < self._image_period_ns:
+            return
+        self._last_image_ns[name] = now
+        w, h, step = int(msg.width), int(msg.height), int(msg.step)
+        try:
+            if name == "depth":
+                depth = depth_to_metres(msg.encoding, w, h, step, msg.data, msg.is_bigendian)
+                stride = max(1, w // 320)  # shrink before colouring: a quarter of the work
+                img = None if depth is None else colorize_depth(depth[::stride, ::stride])
+            else:
+                img = image_to_bgr(msg.encoding, w, h, step, msg.data)
+            if img is None:
+                self._problems[topic] = f"cannot show encoding {msg.encoding!r} ({w}x{h})"
+                return
+            jpeg = encode_jpeg(img)
+        except (ValueError, ImportError) as exc:
+            self._problems[topic] = str(exc)
+            return
+        self._problems.pop(topic, None)
+        self.hub.post(f"image:{name}", binary_frame({"t": "image", "name": name, "w": w, "h": h}, jpeg))
+
+    def _on_battery(self, msg: Any) -> None:
+        self._status["battery"] = _r(msg.value, 3)
+
+    def _on_odom(self, msg: Any) -> None:
+        self._status["linear"] = _r(msg.twist.twist.linear.x, 3)
+        self._status["angular"] = _r(msg.twist.twist.angular.z, 3)
+
+    def _on_collisions(self, msg: Any) -> None:
+        self._status["collisions"] = int(msg.data)
+
+    def _on_log(self, msg: Any) -> None:
+        self._logs.append({"level": int(msg.level), "name": str(msg.name), "msg": str(msg.msg)[:500],
+                           "sec": int(msg.stamp.sec)})
+        self._logs_dirty = True
+
+    def _on_estop(self, msg: Any) -> None:
+        locked = bool(msg.data)
+        if locked != self._estop:
+            self._estop = locked
+            self.hub.post("estop", text_frame("estop", locked=locked))
+
+    # -- periodic -------------------------------------------------------------------------
+    def _status_tick(self) -> None:
+        now = self._wall.now_ns()
+        self._choose_display_frame()
+        self._place_grids()
+        watched = [self.topics.scan, self.topics.odom, "/tf", "/map", self.topics.image,
+                   self.topics.depth, self.topics.plan, self.topics.local_plan, *RANGE_TOPICS,
+                   self.topics.battery, self.topics.collisions, *list(GRID_LAYERS.values())[1:],
+                   "/tf_static", self.topics.rosout]
+        rates, age = {}, {}
+        for topic in watched:
+            r = self._rates.get(topic)
+            rates[topic] = 0.0 if r is None else round(r.hz(now), 1)
+            age[topic] = None if r is None or r.last_ns is None else round((now - r.last_ns) / _NS, 1)
+        self.hub.post("status", text_frame(
+            "status", frame=self.display_frame, rates=rates, age=age, problems=dict(self._problems),
+            nav_server=self._nav.server_is_ready(), estop=self._estop, **self._status))
+        if self._logs_dirty:
+            self._logs_dirty = False
+            self.hub.post("log", text_frame("log", lines=list(self._logs)[-60:]))
+
+    def _teleop_tick(self) -> None:
+        with self._cmd_lock:
+            cmd = self._teleop
+            if cmd is None:
+                return
+            if self._wall.now_ns() - self._teleop_refresh_ns > self.teleop_timeout_s * _NS:
+                self._teleop = None
+                cmd = (0.0, 0.0)
+        self._publish_twist(*cmd)
+
+    # -- commands (called from the web server's thread) ---------------------------------------
+    def _publish_twist(self, linear: float, angular: float) -> None:
+        twist = self._twist_cls()
+        twist.linear.x = float(linear)
+        twist.angular.z = float(angular)
+        self._cmd_pub.publish(twist)
+
+    def teleop(self, linear: float, angular: float) -> None:
+        """Hold (linear, angular) until refreshed or released; zero releases at once."""
+        if self._estop and (linear or angular):
+            raise CommandError("teleop refused: the emergency stop is engaged")
+        with self._cmd_lock:
+            if linear == 0.0 and angular == 0.0:
+                self._teleop = None
+            else:
+                start = self._teleop is None
+                self._teleop = (linear, angular)
+                self._teleop_refresh_ns = self._wall.now_ns()
+                if not start:
+                    return
+        self._publish_twist(linear, angular)
+
+    def _stamp(self, msg: Any) -> None:
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.header.frame_id = self.display_frame
+
+    def _pose_msg(self, x: float, y: float, yaw: float) -> Any:
+        ps = self._pose_stamped_cls()
+        self._stamp(ps)
+        ps.pose.position.x, ps.pose.position.y = float(x), float(y)
+        ps.pose.orientation.z, ps.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        return ps
+
+    def send_goal(self, x: float, y: float, yaw: float) -> str:
+        """NavigateToPose when a server exists, else ``/goal_pose``; says which."""
+        if self._estop:
+            raise CommandError("goal refused: the emergency stop is engaged")
+        pose = self._pose_msg(x, y, yaw)
+        self._goal = {"x": _r(x), "y": _r(y), "yaw": _r(yaw)}
+        if self._nav.server_is_ready():
+            goal = self._nav.action_type.Goal(pose=pose)
+            future = self._nav.send_goal_async(goal)
+            future.add_done_callback(self._on_goal_response)
+            self._set_goal(None, "sent")
+            return "navigate_to_pose"
+        self._goal_pub.publish(pose)
+        return self.topics.goal_pose
+
+    def _on_goal_response(self, future: Future) -> None:
+        if future.exception() is not None:
+            self._set_goal(None, f"failed: {future.exception()}")
+            return
+        handle = future.result()
+        if not handle.accepted:
+            self._set_goal(None, "rejected")
+            return
+        self._nav_handles.append(handle)
+        self._set_goal(None, "active")
+        names = {4: "succeeded", 5: "canceled", 6: "aborted"}
+
+        def done(f: Future) -> None:
+            if handle in self._nav_handles:
+                self._nav_handles.remove(handle)
+            status = "failed" if f.exception() is not None else names.get(int(f.result().status), "ended")
+            self._set_goal(None, status)
+
+        handle.get_result_async().add_done_callback(done)
+
+    def set_initial_pose(self, x: float, y: float, yaw: float) -> None:
+        """``/initialpose`` with RViz's default covariance (0.25 m², 0.0685 rad²)."""
+        msg = self._pose_cov_cls()
+        self._stamp(msg)
+        p = msg.pose.pose
+        p.position.x, p.position.y = float(x), float(y)
+        p.orientation.z, p.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        cov = np.zeros(36)
+        cov[0], cov[7], cov[35] = 0.25, 0.25, 0.06853891909122467
+        msg.pose.covariance = cov
+        self._initial_pub.publish(msg)
+
+    def cancel_navigation(self) -> bool:
+        """Cancel every navigation goal; False when no server is there."""
+        if not self._nav.server_is_ready():
+            return False
+        self._nav.cancel_all_goals_async()
+        self._set_goal(None, "canceling")
+        return True
+
+    def estop(self, engage: bool | None = None) -> bool:
+        """Engage (zero velocity, lock, cancel goals) or release the lock; returns the state."""
+        engage = (not self._estop) if engage is None else engage
+        if engage:
+            with self._cmd_lock:
+                self._teleop = None
+            self._publish_twist(0.0, 0.0)
+            self._estop_pub.publish(self._bool_cls(data=True))
+            self.cancel_navigation()
+        else:
+            self._estop_pub.publish(self._bool_cls(data=False))
+        self._estop = engage
+        self.hub.post("estop", text_frame("estop", locked=engage))
+        return engage
+
+    def save_map(self, name: str, done: Callable[[bool, str], None]) -> None:
+        """Ask map_saver (else slam_toolbox) to save; ``done(ok, text)`` runs when it answers."""
+        if self._map_saver.service_is_ready():
+            req = self._map_saver.srv_type.Request(map_topic="map", map_url=name or "map")
+            fut = self._map_saver.call_async(req)
+            what = self.topics.map_saver
+        elif self._slam_saver.service_is_ready():
+            req = self._slam_saver.srv_type.Request()
+            req.name.data = name or "map"
+            fut = self._slam_saver.call_async(req)
+            what = self.topics.slam_saver
+        else:
+            done(False, f"no map saver: neither {self.topics.map_saver} nor {self.topics.slam_saver} exists")
+            return
+
+        def answered(f: Future) -> None:
+            if f.exception() is not None:
+                done(False, f"{what}: {f.exception()}")
+                return
+            res = f.result()
+            ok = bool(res.result) if isinstance(res.result, (bool, np.bool_)) else int(res.result) == 0
+            done(ok, f"{what}: {'saved' if ok else 'failed'} ({name or 'map'})")
+
+        fut.add_done_callback(answered)
+
+    @property
+    def estop_engaged(self) -> bool:
+        return self._estop

@@ -1,0 +1,391 @@
+// eddie dashboard front end: one WebSocket, one <canvas>. No external resources.
+"use strict";
+(() => {
+  const $ = (id) => document.getElementById(id);
+  const canvas = $("view");
+  const ctx = canvas.getContext("2d");
+  const LAYERS = ["map", "global_costmap", "local_costmap"];
+  const RANGE_COLOURS = { ir: "rgba(255,80,80,0.35)", ping: "rgba(80,160,255,0.35)" };
+  const state = {
+    view: { cx: 0, cy: 0, scale: 40 },
+    follow: true, mode: "pan", readOnly: true, footprint: 0.2245,
+    pose: null, scan: null, ranges: {}, paths: {}, goal: null, goalStatus: "",
+    grids: {}, status: null, estop: false, connected: false,
+    drag: null, tilesDrawn: 0, lastError: null, lastAck: null,
+  };
+  let ws = null;
+  let dirty = true;
+
+  // -- palettes ----------------------------------------------------------------------
+  function mapColour(v) {
+    if (v === 255) return [128, 128, 128, 255];
+    if (v > 100) return [128, 128, 128, 255];
+    const g = Math.round(255 - v * 2.55);
+    return [g, g, g, 255];
+  }
+  function costColour(v) {
+    if (v === 255 || v === 0) return [0, 0, 0, 0];
+    if (v >= 100) return [255, 0, 255, 190];       // lethal
+    if (v >= 99) return [0, 255, 255, 170];        // inscribed
+    const t = v / 98;
+    return [Math.round(255 * t), Math.round(60 * (1 - t)), Math.round(255 * (1 - t)), Math.round(60 + 100 * t)];
+  }
+  const PALETTES = {};
+  function palette(layer) {
+    if (!PALETTES[layer]) {
+      const f = layer === "map" ? mapColour : costColour;
+      const p = new Uint8ClampedArray(256 * 4);
+      for (let v = 0; v < 256; v++) p.set(f(v), v * 4);
+      PALETTES[layer] = p;
+    }
+    return PALETTES[layer];
+  }
+
+  // -- geometry ------------------------------------------------------------------------
+  function size() {
+    const w = canvas.clientWidth, h = canvas.clientHeight;
+    if (canvas.width !== w || canvas.height !== h) { canvas.width = w; canvas.height = h; dirty = true; }
+  }
+  function worldToScreen(x, y) {
+    const v = state.view;
+    return [canvas.width / 2 + (x - v.cx) * v.scale, canvas.height / 2 - (y - v.cy) * v.scale];
+  }
+  function screenToWorld(sx, sy) {
+    const v = state.view;
+    return [v.cx + (sx - canvas.width / 2) / v.scale, v.cy - (sy - canvas.height / 2) / v.scale];
+  }
+  function baseTransform() {
+    const v = state.view;
+    ctx.setTransform(v.scale, 0, 0, -v.scale, canvas.width / 2 - v.cx * v.scale, canvas.height / 2 + v.cy * v.scale);
+  }
+
+  // -- frames from the server -----------------------------------------------------------
+  function onText(m) {
+    switch (m.t) {
+      case "hello":
+        state.readOnly = m.read_only; state.footprint = m.footprint;
+        document.querySelectorAll(".control").forEach((e) => e.classList.toggle("hidden", m.read_only));
+        break;
+      case "pose":
+        state.pose = m;
+        if (state.follow) { state.view.cx = m.x; state.view.cy = m.y; }
+        break;
+      case "grid": {
+        const g = { gen: m.gen, w: m.w, h: m.h, res: m.res, tile: m.tile, origin: m.origin, frame: m.frame };
+        const old = state.grids[m.layer];
+        if (old && old.gen === m.gen) { old.origin = m.origin; break; }
+        g.canvas = document.createElement("canvas");
+        g.canvas.width = m.w; g.canvas.height = m.h;
+        g.ctx = g.canvas.getContext("2d");
+        state.grids[m.layer] = g;
+        if (m.layer === "map" && !state.pose && m.origin) {
+          state.view.cx = m.origin[0] + m.w * m.res / 2; state.view.cy = m.origin[1] + m.h * m.res / 2;
+        }
+        break;
+      }
+      case "range": state.ranges[m.name] = m; break;
+      case "path": state.paths[m.name] = m.pts; break;
+      case "goal": state.goal = m.pose; state.goalStatus = m.status; showGoal(); break;
+      case "status": state.status = m; showStatus(m); break;
+      case "log": showLog(m.lines); break;
+      case "estop":
+        state.estop = m.locked;
+        $("estop").classList.toggle("locked", m.locked);
+        $("estop").textContent = m.locked ? "E-STOP ENGAGED — click to release" : "EMERGENCY STOP";
+        break;
+      case "ack": state.lastAck = m; notice(m.msg, false); break;
+      case "error": state.lastError = m; notice(m.msg, true); break;
+      default: break;
+    }
+    dirty = true;
+  }
+  function onBinary(buf) {
+    const dv = new DataView(buf);
+    const n = dv.getUint32(0, true);
+    const head = JSON.parse(new TextDecoder().decode(new Uint8Array(buf, 4, n)));
+    const payload = buf.slice(4 + n);
+    if (head.t === "tile") {
+      const g = state.grids[head.layer];
+      if (!g || g.gen !== head.gen) return;
+      const cells = new Uint8Array(payload);
+      const img = g.ctx.createImageData(head.w, head.h);
+      const pal = palette(head.layer);
+      const px = img.data;
+      for (let i = 0; i < cells.length; i++) {
+        const o = cells[i] * 4, j = i * 4;
+        px[j] = pal[o]; px[j + 1] = pal[o + 1]; px[j + 2] = pal[o + 2]; px[j + 3] = pal[o + 3];
+      }
+      g.ctx.putImageData(img, head.tx * head.tile, head.ty * head.tile);
+      state.tilesDrawn++;
+    } else if (head.t === "scan") {
+      state.scan = { head, ranges: new Float32Array(payload) };
+    } else if (head.t === "image") {
+      const el = $("img-" + head.name);
+      const url = URL.createObjectURL(new Blob([payload], { type: "image/jpeg" }));
+      const old = el.dataset.url;
+      el.src = url; el.dataset.url = url;
+      if (old) URL.revokeObjectURL(old);
+    }
+    dirty = true;
+  }
+
+  // -- panels --------------------------------------------------------------------------
+  let noticeTimer = null;
+  function notice(text, isError) {
+    const el = $("notice");
+    el.textContent = text; el.className = isError ? "err" : "ok"; el.style.display = "block";
+    clearTimeout(noticeTimer);
+    noticeTimer = setTimeout(() => { el.style.display = "none"; }, 4000);
+  }
+  function fmt(v, unit, nd) { return v === null || v === undefined ? "–" : v.toFixed(nd) + unit; }
+  function showGoal() {
+    const g = state.goal;
+    $("goal").textContent = g ? `(${g.x.toFixed(2)}, ${g.y.toFixed(2)}, ${(g.yaw * 180 / Math.PI).toFixed(0)}°) ${state.goalStatus}` : "–";
+  }
+  function panelAge(topic, capId, label) {
+    const a = state.status.age[topic];
+    const cap = $(capId);
+    if (a === null || a === undefined) cap.textContent = `${label}: no data on ${topic}`;
+    else if (a > 3) cap.textContent = `${label}: stale (${a.toFixed(0)} s) ${topic}`;
+    else cap.textContent = `${label} ${topic}`;
+  }
+  function showStatus(m) {
+    $("battery").textContent = m.battery === null ? "no data on /eddie/battery_level" : m.battery.toFixed(2);
+    $("speed").textContent = m.linear === null ? "no data on /odom" : `${fmt(m.linear, " m/s", 2)}, ${fmt(m.angular, " rad/s", 2)}`;
+    $("collisions").textContent = m.collisions === null ? "no data on /sim/collisions" : String(m.collisions);
+    $("frame").textContent = m.frame + (m.nav_server ? " · nav server up" : "");
+    panelAge("/image_raw", "cap-camera", "camera");
+    panelAge("/depth/image_raw", "cap-depth", "depth");
+    const body = $("rates").querySelector("tbody");
+    body.textContent = "";
+    for (const [topic, hz] of Object.entries(m.rates)) {
+      const tr = document.createElement("tr");
+      if (m.age[topic] === null) tr.className = "missing";
+      const a = document.createElement("td"); a.textContent = topic;
+      const b = document.createElement("td"); b.textContent = m.age[topic] === null ? "missing" : hz.toFixed(1);
+      tr.append(a, b); body.append(tr);
+    }
+    const lines = [];
+    if (!state.grids.map) lines.push(m.age["/map"] === null ? "no map on /map" : "map not placed (TF?)");
+    if (!state.pose) lines.push("no robot pose (TF " + m.frame + " → base_footprint)");
+    if (m.age["/scan"] === null) lines.push("no data on /scan");
+    for (const [t, p] of Object.entries(m.problems)) lines.push(`${t}: ${p}`);
+    $("view-status").textContent = lines.join("\n");
+  }
+  const LEVELS = { 10: "DEBUG", 20: "INFO", 30: "WARN", 40: "ERROR", 50: "FATAL" };
+  function showLog(lines) {
+    const el = $("log");
+    el.textContent = lines.map((l) => `[${LEVELS[l.level] || l.level}] [${l.name}] ${l.msg}`).join("\n");
+    el.scrollTop = el.scrollHeight;
+  }
+
+  // -- drawing -------------------------------------------------------------------------
+  function shown(id) { return $(id).checked; }
+  function arrow(x, y, yaw, len, colour) {
+    const ex = x + len * Math.cos(yaw), ey = y + len * Math.sin(yaw);
+    ctx.strokeStyle = colour; ctx.fillStyle = colour; ctx.lineWidth = 3 / state.view.scale;
+    ctx.beginPath(); ctx.moveTo(x, y); ctx.lineTo(ex, ey); ctx.stroke();
+    const h = Math.min(0.15, len * 0.4);
+    ctx.beginPath(); ctx.moveTo(ex, ey);
+    ctx.lineTo(ex - h * Math.cos(yaw - 0.4), ey - h * Math.sin(yaw - 0.4));
+    ctx.lineTo(ex - h * Math.cos(yaw + 0.4), ey - h * Math.sin(yaw + 0.4));
+    ctx.closePath(); ctx.fill();
+  }
+  function draw() {
+    size();
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.fillStyle = "#2b2d30"; ctx.fillRect(0, 0, canvas.width, canvas.height);
+    ctx.imageSmoothingEnabled = false;
+    for (const layer of LAYERS) {
+      const g = state.grids[layer];
+      if (!g || !g.origin || !shown("show-" + layer)) continue;
+      baseTransform();
+      ctx.translate(g.origin[0], g.origin[1]); ctx.rotate(g.origin[2]); ctx.scale(g.res, g.res);
+      ctx.drawImage(g.canvas, 0, 0);
+    }
+    baseTransform();
+    const px = 1 / state.view.scale;
+    if (shown("show-plans")) {
+      for (const [name, colour] of [["plan", "#3c3"], ["local_plan", "#fa0"]]) {
+        const pts = state.paths[name];
+        if (!pts || pts.length < 2) continue;
+        ctx.strokeStyle = colour; ctx.lineWidth = 2 * px; ctx.beginPath();
+        ctx.moveTo(pts[0][0], pts[0][1]);
+        for (const p of pts) ctx.lineTo(p[0], p[1]);
+        ctx.stroke();
+      }
+    }
+    if (shown("show-ranges")) {
+      for (const r of Object.values(state.ranges)) {
+        const len = Math.min(Math.max(r.range, 0), r.max || r.range);
+        const [x, y, yaw] = r.pose;
+        ctx.fillStyle = RANGE_COLOURS[r.name.split("/")[0]] || "rgba(255,255,0,0.3)";
+        ctx.beginPath(); ctx.moveTo(x, y);
+        ctx.arc(x, y, len, yaw - r.fov / 2, yaw + r.fov / 2); ctx.closePath(); ctx.fill();
+      }
+    }
+    if (shown("show-scan") && state.scan) {
+      const { head, ranges } = state.scan;
+      const [sx, sy, syaw] = head.pose;
+      ctx.fillStyle = "#ff3030";
+      const d = 3 * px;
+      for (let i = 0; i < ranges.length; i++) {
+        const r = ranges[i];
+        if (!(r >= head.rmin && r <= head.rmax)) continue;
+        const a = syaw + head.amin + i * head.ainc;
+        ctx.fillRect(sx + r * Math.cos(a) - d / 2, sy + r * Math.sin(a) - d / 2, d, d);
+      }
+    }
+    if (state.goal) arrow(state.goal.x, state.goal.y, state.goal.yaw, 0.5, "#e040e0");
+    if (state.pose) {
+      const p = state.pose;
+      ctx.strokeStyle = "#40a0ff"; ctx.fillStyle = "rgba(64,160,255,0.35)"; ctx.lineWidth = 2 * px;
+      ctx.beginPath(); ctx.arc(p.x, p.y, state.footprint, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
+      ctx.beginPath(); ctx.moveTo(p.x, p.y);
+      ctx.lineTo(p.x + state.footprint * Math.cos(p.yaw), p.y + state.footprint * Math.sin(p.yaw)); ctx.stroke();
+    }
+    if (state.drag && state.drag.kind !== "pan") {
+      const d = state.drag;
+      const yaw = Math.atan2(d.y1 - d.y0, d.x1 - d.x0);
+      arrow(d.x0, d.y0, yaw, Math.max(0.3, Math.hypot(d.x1 - d.x0, d.y1 - d.y0)), d.kind === "goal" ? "#e040e0" : "#30e030");
+    }
+  }
+  function frame() {
+    if (dirty) { dirty = false; draw(); }
+    requestAnimationFrame(frame);
+  }
+
+  // -- commands ------------------------------------------------------------------------
+  function send(obj) {
+    if (state.readOnly || !ws || ws.readyState !== WebSocket.OPEN) return false;
+    ws.send(JSON.stringify(obj));
+    return true;
+  }
+  function setMode(mode) {
+    state.mode = state.mode === mode ? "pan" : mode;
+    document.querySelectorAll("[data-mode]").forEach((b) => b.classList.toggle("active", b.dataset.mode === state.mode));
+    canvas.classList.toggle("placing", state.mode !== "pan");
+  }
+  $("mode-goal").addEventListener("click", () => setMode("goal"));
+  $("mode-initialpose").addEventListener("click", () => setMode("initialpose"));
+  $("cancel").addEventListener("click", () => send({ op: "cancel" }));
+  $("estop").addEventListener("click", () => { releaseKeys(false); send({ op: "estop" }); });
+  $("save-map").addEventListener("click", () => send({ op: "save_map", name: $("map-name").value.trim() }));
+  $("follow").addEventListener("change", (e) => { state.follow = e.target.checked; dirty = true; });
+  document.querySelectorAll("input[type=checkbox]").forEach((c) => c.addEventListener("change", () => { dirty = true; }));
+
+  canvas.addEventListener("mousedown", (e) => {
+    const [x, y] = screenToWorld(e.offsetX, e.offsetY);
+    const kind = state.mode === "pan" ? "pan" : state.mode;
+    state.drag = { kind, x0: x, y0: y, x1: x, y1: y, sx: e.offsetX, sy: e.offsetY, cx: state.view.cx, cy: state.view.cy };
+    canvas.focus();
+    e.preventDefault();
+  });
+  canvas.addEventListener("mousemove", (e) => {
+    const d = state.drag;
+    if (!d) return;
+    if (d.kind === "pan") {
+      state.follow = false; $("follow").checked = false;
+      state.view.cx = d.cx - (e.offsetX - d.sx) / state.view.scale;
+      state.view.cy = d.cy + (e.offsetY - d.sy) / state.view.scale;
+    } else {
+      [d.x1, d.y1] = screenToWorld(e.offsetX, e.offsetY);
+    }
+    dirty = true;
+  });
+  window.addEventListener("mouseup", (e) => {
+    const d = state.drag;
+    state.drag = null;
+    if (!d || d.kind === "pan") return;
+    if (e.target === canvas) [d.x1, d.y1] = screenToWorld(e.offsetX, e.offsetY);
+    const moved = Math.hypot(d.x1 - d.x0, d.y1 - d.y0) * state.view.scale > 3;
+    const yaw = moved ? Math.atan2(d.y1 - d.y0, d.x1 - d.x0) : (state.pose ? state.pose.yaw : 0);
+    send({ op: d.kind, x: d.x0, y: d.y0, yaw });
+    setMode(d.kind);
+    dirty = true;
+  });
+  canvas.addEventListener("wheel", (e) => {
+    e.preventDefault();
+    const [wx, wy] = screenToWorld(e.offsetX, e.offsetY);
+    const f = Math.exp(-e.deltaY * 0.0015);
+    state.view.scale = Math.min(400, Math.max(2, state.view.scale * f));
+    if (!state.follow) {
+      const [nx, ny] = screenToWorld(e.offsetX, e.offsetY);
+      state.view.cx += wx - nx; state.view.cy += wy - ny;
+    }
+    dirty = true;
+  }, { passive: false });
+
+  // -- keyboard teleop (10 Hz while a key is held, zero on release) ------------------------
+  const KEYS = {
+    ArrowUp: [1, 0], w: [1, 0], i: [1, 0],
+    ArrowDown: [-1, 0], s: [-1, 0], ",": [-1, 0],
+    ArrowLeft: [0, 1], a: [0, 1], j: [0, 1],
+    ArrowRight: [0, -1], d: [0, -1], l: [0, -1],
+    u: [1, 1], o: [1, -1], m: [-1, -1], ".": [-1, 1],
+  };
+  const speed = { linear: 0.3, angular: 1.0 };
+  const held = new Set();
+  let teleopTimer = null;
+  function twist() {
+    let lx = 0, az = 0;
+    for (const k of held) { lx += KEYS[k][0]; az += KEYS[k][1]; }
+    lx = Math.max(-1, Math.min(1, lx)); az = Math.max(-1, Math.min(1, az));
+    return { op: "teleop", linear: lx * speed.linear, angular: az * speed.angular };
+  }
+  function teleopSend() {
+    if (held.size) send(twist());
+  }
+  function releaseKeys(sendZero) {
+    const was = held.size > 0;
+    held.clear();
+    clearInterval(teleopTimer); teleopTimer = null;
+    if (was && sendZero) send({ op: "teleop", linear: 0, angular: 0 });
+    $("teleop-state").textContent = "";
+  }
+  function showSpeed() { $("teleop-speed").textContent = `${speed.linear.toFixed(2)} m/s, ${speed.angular.toFixed(2)} rad/s`; }
+  function typing(e) { return e.target && (e.target.tagName === "INPUT" || e.target.tagName === "TEXTAREA"); }
+  window.addEventListener("keydown", (e) => {
+    if (typing(e) || state.readOnly || e.ctrlKey || e.metaKey || e.altKey) return;
+    const k = e.key.length === 1 ? e.key.toLowerCase() : e.key;
+    if (k === "k" || k === " ") { e.preventDefault(); releaseKeys(true); return; }
+    if (k === "q" || k === "z") {
+      const f = k === "q" ? 1.1 : 1 / 1.1;
+      speed.linear = Math.min(1.0, speed.linear * f); speed.angular = Math.min(3.0, speed.angular * f);
+      showSpeed(); return;
+    }
+    if (!(k in KEYS)) return;
+    e.preventDefault();
+    if (held.has(k)) return;  // auto-repeat: the interval keeps sending
+    held.add(k);
+    $("teleop-state").textContent = "driving";
+    teleopSend();
+    if (!teleopTimer) teleopTimer = setInterval(teleopSend, 100);
+  });
+  window.addEventListener("keyup", (e) => {
+    const k = e.key.length === 1 ? e.key.toLowerCase() : e.key;
+    if (!held.has(k)) return;
+    held.delete(k);
+    if (held.size === 0) { releaseKeys(false); send({ op: "teleop", linear: 0, angular: 0 }); } else teleopSend();
+  });
+  window.addEventListener("blur", () => releaseKeys(true));
+
+  // -- connection ----------------------------------------------------------------------
+  function connect() {
+    const proto = location.protocol === "https:" ? "wss" : "ws";
+    ws = new WebSocket(`${proto}://${location.host}/ws`);
+    ws.binaryType = "arraybuffer";
+    ws.onopen = () => { state.connected = true; $("conn").textContent = "live"; $("conn").className = "good"; };
+    ws.onclose = () => {
+      state.connected = false; $("conn").textContent = "disconnected — retrying"; $("conn").className = "bad";
+      releaseKeys(false);
+      setTimeout(connect, 1000);
+    };
+    ws.onmessage = (ev) => {
+      if (typeof ev.data === "string") onText(JSON.parse(ev.data)); else onBinary(ev.data);
+    };
+  }
+  window.eddie = { state, worldToScreen, screenToWorld, setMode, send };
+  connect();
+  requestAnimationFrame(frame);
+})();
