@@ -105,3 +105,26 @@ def test_kinematics_saturates_keeping_curvature():
     assert twist_to_wheel_positions(float("nan"), 0.0, max_positions_per_s=90) == (0, 0)
     l, r = twist_to_wheel_positions(0.5, 0.0, max_positions_per_s=90)
     assert l == r == round(0.5 / METRES_PER_POSITION)
+
+
+def test_veto_sees_the_path_not_the_door_jambs():
+    import math as _m
+
+    from eddiebot.base.safety import SafetyConfig, VetoState, forward_veto
+    from eddiebot.robot.constants import IR_SENSORS, PING_SENSORS
+
+    mounts = {s.name: (s.x_m, s.y_m, s.yaw_rad) for s in (*IR_SENSORS, *PING_SENSORS)}
+    cfg = SafetyConfig(veto_distance=0.25)
+    jambs = VetoState(mounts=mounts)
+    jambs.update({"ir_left": 0.2, "ir_right": 0.2, "ir_center": _m.inf})  # a door frame beside
+    assert forward_veto(0.3, jambs, cfg) == 0.3
+    wall = VetoState(mounts=mounts)
+    wall.update({"ir_center": 0.2})  # a wall 0.2 m ahead of the front sensor
+    assert forward_veto(0.3, wall, cfg) == 0.0
+    assert forward_veto(-0.2, wall, cfg) == -0.2  # backing away is allowed
+    too_close = VetoState(mounts=mounts)
+    too_close.update({"ping_left": -_m.inf})  # REP-117: closer than measurable
+    assert forward_veto(0.3, too_close, cfg) == 0.0
+    far = VetoState(mounts=mounts)
+    far.update({"ping_left": 1.0, "ping_right": _m.nan})
+    assert forward_veto(0.3, far, cfg) == 0.3

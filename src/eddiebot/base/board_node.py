@@ -83,7 +83,10 @@ class BoardNode(Node):
         if poll_rate <= 0:
             raise ValueError(f"{self.fully_qualified_name}: poll_rate must be positive")
         self.board = self._make_board()
-        self.veto = VetoState(veto_distance=self.safety.veto_distance)
+        self.veto = VetoState(
+            veto_distance=self.safety.veto_distance,
+            mounts={s.name: (s.x_m, s.y_m, s.yaw_rad) for s in (*IR_SENSORS, *PING_SENSORS)},
+        )
         self._last_cmd_ns: int | None = None
         self._moving = False
         self._last_wheels: tuple[int, int] = (0, 0)

@@ -31,20 +31,19 @@ class Waypoint:
     spin: float = 0.0
 
 
-#: Down the office corridor and back, looking into rooms through open doors, closing the
-#: loop at the start: about 45 m and five spins.
+#: Down the office corridor and back, into a room on each side through open doors (the
+#: doors at x 10.0–10.9 north and 12.0–12.9 south are closed), closing the loop at the start:
+#: about 45 m and five spins.
 OFFICE_ROUTE: tuple[Waypoint, ...] = (
     Waypoint(3.4, 7.5, spin=2 * math.pi),
-    Waypoint(7.5, 7.5),
-    Waypoint(10.45, 7.5, spin=2 * math.pi),
-    Waypoint(10.45, 10.2, spin=2 * math.pi),
-    Waypoint(10.45, 7.5),
-    Waypoint(14.5, 7.5),
-    Waypoint(18.5, 7.5, spin=2 * math.pi),
-    Waypoint(12.5, 7.6),
     Waypoint(7.45, 7.5),
     Waypoint(7.45, 5.0, spin=2 * math.pi),
     Waypoint(7.45, 7.5),
+    Waypoint(16.45, 7.5),
+    Waypoint(16.45, 10.3, spin=2 * math.pi),
+    Waypoint(16.45, 7.5),
+    Waypoint(18.5, 7.5, spin=2 * math.pi),
+    Waypoint(12.5, 7.6),
     Waypoint(3.0, 7.5),
     Waypoint(1.5, 7.5, spin=math.pi),
 )
