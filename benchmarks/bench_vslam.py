@@ -1,0 +1,212 @@
+"""RGB-D SLAM benchmarks: visual odometry time/accuracy and loop-closure update time at 1,000 nodes.
+
+Synthetic data: a textured corridor rendered by the pinhole ray-caster of the tests
+(`tests/vslam/vslam_synthetic.py`), so ground truth is exact. Prints a table and writes
+`benchmarks/results/vslam.json`. Optional `--tum FOLDER` replays a TUM RGB-D sequence too.
+
+    .venv/bin/python benchmarks/bench_vslam.py [--nodes 1000] [--vo-frames 120] [--tum DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import importlib.util
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from eddiebot.vslam.features import FeatureExtractor
+from eddiebot.vslam.odometry import VisualOdometry
+from eddiebot.vslam.parameters import RtabmapParameters
+from eddiebot.vslam.replay import replay_tum
+from eddiebot.vslam.rtabmap import Rtabmap
+from eddiebot.vslam.transforms import se3_inverse
+
+ROOT = Path(__file__).resolve().parents[1]
+RESULTS = ROOT / "benchmarks" / "results" / "vslam.json"
+REPORT_PARAMS = {
+    "Reg/Force3DoF": "true", "Vis/MinInliers": "12", "RGBD/ProximityBySpace": "false",
+    "RGBD/AngularUpdate": "0.01", "RGBD/LinearUpdate": "0.01",
+}
+
+
+def _synthetic():
+    spec = importlib.util.spec_from_file_location(
+        "vslam_synthetic", ROOT / "tests" / "vslam" / "vslam_synthetic.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["vslam_synthetic"] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def corridor_loop(step: float = 0.06, turn_step: float = 0.1) -> list[tuple[float, float, float]]:
+    """Planar poses (x, y, yaw) around a 26 m × 2 m rectangle in a 30 m × 5 m corridor."""
+    corners = [(2.0, 1.5), (28.0, 1.5), (28.0, 3.5), (2.0, 3.5)]
+    poses = []
+    yaw = 0.0
+    for k in range(4):
+        (x0, y0), (x1, y1) = corners[k], corners[(k + 1) % 4]
+        n = round(float(np.hypot(x1 - x0, y1 - y0)) / step)
+        poses += [(x0 + (x1 - x0) * i / n, y0 + (y1 - y0) * i / n, yaw) for i in range(n)]
+        for _ in range(round((np.pi / 2) / turn_step)):
+            yaw += turn_step
+            poses.append((x1, y1, yaw))
+    return poses
+
+
+def _stats(ms: list[float]) -> dict[str, float]:
+    a = np.asarray(ms)
+    return {"median_ms": float(np.median(a)), "p95_ms": float(np.percentile(a, 95)),
+            "max_ms": float(a.max()), "n": int(a.size)}
+
+
+def bench_vo(syn, world, n_frames: int) -> dict[str, dict[str, float]]:
+    cam = syn.kinect_camera(640, 480)
+    traj = corridor_loop(step=0.03, turn_step=0.05)[:n_frames]
+    frames = [syn.render(world, syn.planar_pose(*p), cam) for p in traj]
+    out = {}
+    for name, strategy in (("F2M", "0"), ("F2F", "1")):
+        vo = VisualOdometry(RtabmapParameters.from_dict({"Odom/Strategy": strategy}))
+        vo.process(*frames[0], cam, 0)  # warm-up (numba, first map)
+        vo.reset()
+        times = []
+        cpu = []
+        errors = []
+        lost = 0
+        first = syn.planar_pose(*traj[0])
+        for k, (rgb, depth) in enumerate(frames):
+            t0, c0 = time.perf_counter(), time.process_time()
+            r = vo.process(rgb, depth, cam, k * 33_333_333)
+            times.append((time.perf_counter() - t0) * 1e3)
+            cpu.append((time.process_time() - c0) * 1e3)
+            if r.pose is None:
+                lost += 1
+                continue
+            truth = se3_inverse(first) @ syn.planar_pose(*traj[k])
+            errors.append(float(np.linalg.norm(r.pose[:3, 3] - truth[:3, 3])))
+        path = float(sum(np.hypot(traj[k + 1][0] - traj[k][0], traj[k + 1][1] - traj[k][1])
+                         for k in range(len(traj) - 1)))
+        out[name] = {**_stats(times[1:]), "cpu": _stats(cpu[1:]), "lost": lost, "final_error_m": errors[-1],
+                     "rmse_m": float(np.sqrt(np.mean(np.square(errors)))), "path_m": path}
+    return out
+
+
+def bench_loop_closure(syn, world, n_nodes: int, extra: int,
+                       memory_thr: int = 0) -> dict[str, object]:
+    cam = syn.kinect_camera(640, 480)
+    # ~Eddie at 1 Hz: 0.25 m or 0.25 rad between nodes; laps repeat, so revisits start at lap 2
+    traj = corridor_loop(step=0.25, turn_step=0.25)
+    laps = (traj * (1 + (n_nodes + extra) // len(traj)))[: n_nodes + extra]
+    params = RtabmapParameters.from_dict({**REPORT_PARAMS, "Rtabmap/MemoryThr": str(memory_thr)})
+    extractor = FeatureExtractor(params, max_features=params.vis_max_features,
+                                 strategy=params.kp_detector_strategy)
+    slam = Rtabmap(params)
+    rng = np.random.default_rng(0)
+    odom = np.eye(4)
+    prev_truth = syn.planar_pose(*laps[0])
+    times: list[float] = []
+    cpu: list[float] = []
+    wm: list[int] = []
+    parts: list[dict[str, float]] = []
+    loops = 0
+    render_s = 0.0
+    for k, pose in enumerate(laps):
+        truth = syn.planar_pose(*pose)
+        step = se3_inverse(prev_truth) @ truth
+        # wheel-odometry-like drift: 2 % scale, small heading noise
+        step[:2, 3] *= 1.02
+        c, s = np.cos(rng.normal(0, 0.002)), np.sin(rng.normal(0, 0.002))
+        step[:2, :2] = step[:2, :2] @ np.array([[c, -s], [s, c]])
+        odom = odom @ step
+        prev_truth = truth
+        t0 = time.perf_counter()
+        rgb, depth = syn.render(world, truth, cam)
+        feats = extractor.extract(rgb, depth, cam)
+        render_s += time.perf_counter() - t0
+        t0, c0 = time.perf_counter(), time.process_time()
+        r = slam.process(rgb, depth, cam, odom, k * 1_000_000_000, features=feats)
+        times.append((time.perf_counter() - t0) * 1e3)
+        cpu.append((time.process_time() - c0) * 1e3)
+        wm.append(int(r.statistics["Memory/Working_memory_size/"]))
+        parts.append({k: v for k, v in r.statistics.items() if k.startswith("Timing/")})
+        loops += bool(r.loop_closure_id)
+    target = min(n_nodes, len(times)) if memory_thr <= 0 else memory_thr
+    near = [k for k, w in enumerate(wm) if w >= target - 110]
+    if memory_thr > 0:
+        near = list(range(max(0, len(times) - 200), len(times)))
+    at_1000 = [times[k] for k in near]
+    at_1000_cpu = [cpu[k] for k in near]
+    keys = sorted({k for p in parts for k in p})
+    breakdown = {k: float(np.median([parts[i].get(k, 0.0) for i in (near or range(len(parts)))]))
+                 for k in keys}
+    return {
+        "at_1000_wm_breakdown_median_ms": breakdown,
+        "at_1000_wm_cpu": _stats(at_1000_cpu or cpu[-50:]),
+        "nodes": len(times), "wm_final": wm[-1], "loop_closures": loops,
+        "dictionary_words": slam.vocabulary.active_words,
+        "all": _stats(times), "at_1000_wm": _stats(at_1000 or times[-50:]),
+        "render_and_extract_s": render_s,
+    }
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--nodes", type=int, default=1000)
+    ap.add_argument("--extra", type=int, default=100, help="frames after reaching --nodes")
+    ap.add_argument("--vo-frames", type=int, default=120)
+    ap.add_argument("--tum", type=Path, help="TUM RGB-D folder to replay (optional)")
+    ap.add_argument("--memory-thr", type=int, default=0, help="Rtabmap/MemoryThr for the SLAM run")
+    ap.add_argument("--out", type=Path, default=RESULTS)
+    args = ap.parse_args()
+    cv2.setNumThreads(1)  # one core, as the published figures
+    syn = _synthetic()
+    world = syn.BoxRoom(size_x=30.0, size_y=5.0, height=2.5, seed=7)
+    results: dict[str, object] = {
+        "machine": platform.processor() or platform.machine(),
+        "python": platform.python_version(),
+        "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+    }
+    vo = bench_vo(syn, world, args.vo_frames)
+    results["vo"] = vo
+    lc = bench_loop_closure(syn, world, args.nodes, args.extra, args.memory_thr)
+    lc["memory_thr"] = args.memory_thr
+    results["loop_closure"] = lc
+    if args.tum:
+        rep = replay_tum(args.tum, ROOT / "benchmarks" / "results" / "vslam_tum")
+        results["tum"] = {"folder": str(args.tum), **rep.__dict__}
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(json.dumps(results, indent=2))
+    print(f"{'measure':44s} {'median':>9s} {'p95':>9s} {'goal':>8s}")
+    for name in ("F2M", "F2F"):
+        v = vo[name]
+        print(f"VO {name} per 640x480 frame, wall (ms)         {v['median_ms']:9.1f} "
+              f"{v['p95_ms']:9.1f} {'<= 30':>8s}")
+        print(f"VO {name} per 640x480 frame, CPU (ms)          {v['cpu']['median_ms']:9.1f} "
+              f"{v['cpu']['p95_ms']:9.1f}")
+        print(f"VO {name} error after {v['path_m']:.1f} m (m)"
+              f"{'':18s}{v['final_error_m']:9.3f} {'':9s} lost={v['lost']}")
+    a = lc["at_1000_wm"]
+    c = lc["at_1000_wm_cpu"]
+    print(f"loop closure + update per node, WM~{lc['wm_final']}, wall (ms) {a['median_ms']:9.1f} "
+          f"{a['p95_ms']:9.1f} {'<= 50':>8s}")
+    print(f"loop closure + update per node, WM~{lc['wm_final']}, CPU (ms)  {c['median_ms']:9.1f} "
+          f"{c['p95_ms']:9.1f}")
+    print(f"  nodes {lc['nodes']}, loop closures {lc['loop_closures']}, "
+          f"active words {lc['dictionary_words']}")
+    for k, v in lc["at_1000_wm_breakdown_median_ms"].items():
+        print(f"  {k:42s} {v:9.1f}")
+    if args.tum:
+        print(json.dumps(results["tum"], indent=2))
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,139 @@
+"""Appearance-only loop-closure detection over an image sequence (no depth, no geometry).
+
+Bag of words + TF-IDF + the Bayes filter with a virtual place, exactly the detector inside
+`Rtabmap` but fed with bare images; `detect_loops(folder)` returns ``(query, match, score)`` rows
+in numeric file order, with an empty match when no loop is accepted.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import tempfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from eddiebot.vslam.bayes import VIRTUAL_PLACE_ID, BayesFilter, adjust_likelihood, tfidf_scores
+from eddiebot.vslam.camera import CameraIntrinsics
+from eddiebot.vslam.errors import VslamError
+from eddiebot.vslam.features import FeatureExtractor
+from eddiebot.vslam.memory import Link, LinkType, Memory, Node, NodeData
+from eddiebot.vslam.parameters import RtabmapParameters
+from eddiebot.vslam.tum import numeric_sort_key
+from eddiebot.vslam.vocabulary import Vocabulary
+
+__all__ = [
+    "IMAGE_SUFFIXES",
+    "AppearanceLoopDetector",
+    "LoopDetection",
+    "detect_loops",
+    "list_images",
+    "write_loop_rows",
+]
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm", ".tif", ".tiff")
+
+
+@dataclass(frozen=True)
+class LoopDetection:
+    """Per image: best hypothesis (id, value = 1 − P(new place)) and the accepted loop id (0 = none)."""
+
+    node_id: int
+    hypothesis_id: int
+    hypothesis_value: float
+    loop_id: int
+
+
+class AppearanceLoopDetector:
+    """Incremental bag-of-words + Bayes loop detector over images (`Rtabmap/LoopThr`, STM, ...)."""
+
+    def __init__(self, params: RtabmapParameters | Mapping[str, str] | None = None) -> None:
+        if params is None:
+            params = RtabmapParameters()
+        elif not isinstance(params, RtabmapParameters):
+            params = RtabmapParameters.from_dict(params)
+        self.params = params
+        self.vocabulary = Vocabulary(params.kp_nndr_ratio)
+        self.memory = Memory(self.vocabulary, params.mem_stm_size)
+        self.bayes = BayesFilter(params.prediction_lc(), params.bayes_virtual_place_prior_thr)
+        self._extractor = FeatureExtractor(
+            params, max_features=params.kp_max_features, strategy=params.kp_detector_strategy
+        )
+        self._next_id = 1
+        self._dummy_camera = CameraIntrinsics(500.0, 500.0, 320.0, 240.0, 640, 480)
+
+    def process(self, image: NDArray[np.uint8]) -> LoopDetection:
+        """Add one image; returns its id and the loop decision."""
+        features = self._extractor.extract(image, None, self._dummy_camera, depth_as_mask=False)
+        words = self.vocabulary.quantize(features.descriptors)
+        data = NodeData(features, words)
+        node = Node(self._next_id, 0, 0, np.eye(4), data=data, word_counts=data.word_counts())
+        self._next_id += 1
+        prev = self.memory.stm[-1] if self.memory.stm else 0
+        moved = self.memory.add_to_stm(node)
+        if prev:
+            self.memory.add_link(Link(prev, node.id, LinkType.NEIGHBOR, np.eye(4), np.eye(6)))
+        for m in moved:
+            self.bayes.node_entered(m, self.memory.neighbours(m, self.bayes.max_depth))
+        wm = self.memory.wm_ids
+        if not wm or not node.word_counts:
+            return LoopDetection(node.id, 0, 0.0, 0)
+        mem = self.memory
+        scores = tfidf_scores(node.word_counts, mem.inverted, mem.word_totals,
+                              len(mem.wm) + len(mem.stm), wm)
+        like = adjust_likelihood(scores, self.params.rtabmap_virtual_place_likelihood_ratio)
+        posterior = self.bayes.update(like, lambda i, d: mem.neighbours(i, d))
+        best = max((k for k in posterior if k != VIRTUAL_PLACE_ID), key=lambda k: posterior[k],
+                   default=0)
+        value = 1.0 - posterior.get(VIRTUAL_PLACE_ID, 1.0)
+        loop = best if (best and value >= self.params.rtabmap_loop_thr and len(wm) > 1) else 0
+        return LoopDetection(node.id, best, value, loop)
+
+
+def list_images(folder: str | Path) -> list[Path]:
+    """Image files of a folder in numeric order of the last number in their names."""
+    root = Path(folder)
+    if not root.is_dir():
+        raise VslamError(f"{root}: not a folder")
+    files = [p for p in root.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES]
+    return sorted(files, key=numeric_sort_key)
+
+
+def detect_loops(
+    folder: str | Path, params: RtabmapParameters | Mapping[str, str] | None = None
+) -> list[tuple[str, str, float]]:
+    """``(query, match, score)`` per image: file names; empty match when no loop is accepted.
+
+    The score is the highest hypothesis value (1 − P(new place)) whether or not accepted, so
+    the rows also give a precision–recall curve.
+    """
+    detector = AppearanceLoopDetector(params)
+    images = list_images(folder)
+    names: dict[int, str] = {}
+    rows = []
+    for path in images:
+        img = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
+        if img is None:
+            raise VslamError(f"cannot read image {path}")
+        det = detector.process(np.asarray(img, dtype=np.uint8))
+        names[det.node_id] = path.name
+        rows.append((path.name, names.get(det.loop_id, "") if det.loop_id else "",
+                     round(det.hypothesis_value, 6)))
+    return rows
+
+
+def write_loop_rows(rows: Sequence[tuple[str, str, float]], path: str | Path) -> None:
+    """CSV with a ``query,match,score`` header, written atomically."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=target.name, suffix=".tmp")
+    with os.fdopen(fd, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(["query", "match", "score"])
+        writer.writerows(rows)
+    os.replace(tmp, target)

@@ -1,0 +1,286 @@
+"""Short-term, working and long-term memory of graph nodes (RTAB-Map's memory management).
+
+* STM: the last `Mem/STMSize` nodes; never loop-closure candidates.
+* WM: loop-closure candidates (Bayes states), with their words in the inverted index.
+* LTM: nodes transferred out of WM; their heavy data (features, words, grid) leaves RAM when a
+  `NodeStore` (the session database) holds it, and comes back on retrieval. Poses and links of
+  every node stay in RAM (a few hundred bytes each).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from enum import IntEnum
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from eddiebot.vslam.features import FrameFeatures
+from eddiebot.vslam.occupancy import LocalGrid
+from eddiebot.vslam.vocabulary import Vocabulary
+
+__all__ = ["Link", "LinkType", "Memory", "Node", "NodeData", "NodeStore"]
+
+F64 = NDArray[np.float64]
+
+
+class LinkType(IntEnum):
+    """RTAB-Map link types (database values)."""
+
+    NEIGHBOR = 0
+    GLOBAL_CLOSURE = 1
+    LOCAL_SPACE_CLOSURE = 2
+    LOCAL_TIME_CLOSURE = 3
+    USER_CLOSURE = 4
+    VIRTUAL_CLOSURE = 5
+    NEIGHBOR_MERGED = 6
+    POSE_PRIOR = 7
+    LANDMARK = 8
+
+
+@dataclass(frozen=True)
+class Link:
+    """Pose of `to_id` in the base frame of `from_id` (4×4, m) with a 6×6 information matrix."""
+
+    from_id: int
+    to_id: int
+    type: LinkType
+    transform: F64
+    information: F64
+
+    def inverse(self) -> Link:
+        """The same constraint seen from the other end."""
+        from eddiebot.vslam.transforms import se3_inverse
+
+        return Link(self.to_id, self.from_id, self.type, se3_inverse(self.transform),
+                    self.information)
+
+
+@dataclass
+class NodeData:
+    """The heavy part of a node: features, their word ids, local grid and cloud."""
+
+    features: FrameFeatures
+    words: NDArray[np.int64]  # word id per feature, -1 = not quantised
+    grid: LocalGrid | None = None
+    cloud: tuple[F64, NDArray[np.uint8]] | None = None
+    scan_points: F64 | None = None  # (N, 2) base frame, for neighbour-link refinement
+
+    def word_counts(self) -> dict[int, int]:
+        """Word id → occurrences (valid words only)."""
+        w = self.words[self.words > 0]
+        ids, counts = np.unique(w, return_counts=True)
+        return {int(i): int(c) for i, c in zip(ids, counts)}
+
+
+@dataclass
+class Node:
+    """A graph node; `odom_pose` is the base pose in the odometry frame (4×4)."""
+
+    id: int
+    map_id: int
+    stamp_ns: int
+    odom_pose: F64
+    weight: int = 0
+    data: NodeData | None = None
+    label: str = ""
+    word_counts: dict[int, int] = field(default_factory=dict)
+
+
+class NodeStore(Protocol):
+    """Where LTM node data lives (the session database)."""
+
+    def load_node_data(self, node_id: int) -> NodeData | None:
+        """The node's features, words and grid, or None if unknown."""
+        ...
+
+
+class Memory:
+    """Nodes, links, STM/WM/LTM membership, inverted word index and transfers."""
+
+    def __init__(self, vocabulary: Vocabulary, stm_size: int, store: NodeStore | None = None):
+        self.vocabulary = vocabulary
+        self.stm_size = stm_size
+        self.store = store
+        self.nodes: dict[int, Node] = {}
+        self.links: dict[int, dict[int, Link]] = {}
+        self.stm: list[int] = []
+        self.wm: dict[int, int] = {}  # id → insertion counter
+        self.ltm: set[int] = set()
+        self._wm_counter = 0
+        self.inverted: dict[int, dict[int, int]] = {}
+        self.word_totals: dict[int, int] = {}
+
+    # -- membership -------------------------------------------------------------------------
+    @property
+    def wm_ids(self) -> list[int]:
+        """Working-memory ids, oldest insertion first."""
+        return list(self.wm)
+
+    def in_memory(self, node_id: int) -> bool:
+        """In STM or WM."""
+        return node_id in self.wm or node_id in self.stm
+
+    def _index_words(self, node: Node) -> None:
+        for w, c in node.word_counts.items():
+            self.inverted.setdefault(w, {})[node.id] = c
+        self.word_totals[node.id] = max(1, sum(node.word_counts.values()))
+        if node.data is not None:
+            self.vocabulary.add_references(node.data.words)
+
+    def _unindex_words(self, node: Node) -> None:
+        for w in node.word_counts:
+            postings = self.inverted.get(w)
+            if postings is not None:
+                postings.pop(node.id, None)
+                if not postings:
+                    del self.inverted[w]
+        self.word_totals.pop(node.id, None)
+        if node.data is not None:
+            self.vocabulary.remove_references(node.data.words)
+
+    def add_to_stm(self, node: Node) -> list[int]:
+        """Insert a new node; returns the ids that moved from STM to WM."""
+        self.nodes[node.id] = node
+        self.links.setdefault(node.id, {})
+        self.stm.append(node.id)
+        self._index_words(node)
+        moved = []
+        while len(self.stm) > self.stm_size:
+            oldest = self.stm.pop(0)
+            self._add_to_wm(oldest)
+            moved.append(oldest)
+        return moved
+
+    def add_to_wm(self, node: Node) -> None:
+        """Insert a node straight into WM (database load, retrieval)."""
+        self.nodes[node.id] = node
+        self.links.setdefault(node.id, {})
+        self.ltm.discard(node.id)
+        self._index_words(node)
+        self._add_to_wm(node.id)
+
+    def _add_to_wm(self, node_id: int) -> None:
+        self._wm_counter += 1
+        self.wm[node_id] = self._wm_counter
+
+    def add_ltm_node(self, node: Node) -> None:
+        """Register a node that stays in LTM (poses and links only)."""
+        node.data = None
+        node.word_counts = {}
+        self.nodes[node.id] = node
+        self.links.setdefault(node.id, {})
+        self.ltm.add(node.id)
+
+    def remove_node(self, node_id: int) -> None:
+        """Delete a node (not kept in the map) and its links."""
+        node = self.nodes.pop(node_id, None)
+        if node is None:
+            return
+        if node_id in self.stm:
+            self.stm.remove(node_id)
+        self.wm.pop(node_id, None)
+        self.ltm.discard(node_id)
+        self._unindex_words(node)
+        for other in list(self.links.get(node_id, {})):
+            self.links.get(other, {}).pop(node_id, None)
+        self.links.pop(node_id, None)
+
+    # -- links ------------------------------------------------------------------------------
+    def add_link(self, link: Link) -> None:
+        """Add a link (stored under both ends)."""
+        self.links.setdefault(link.from_id, {})[link.to_id] = link
+        self.links.setdefault(link.to_id, {})[link.from_id] = link.inverse()
+
+    def remove_link(self, a: int, b: int) -> None:
+        """Remove the link between two nodes."""
+        self.links.get(a, {}).pop(b, None)
+        self.links.get(b, {}).pop(a, None)
+
+    def unique_links(self, ids: Iterable[int] | None = None) -> list[Link]:
+        """Each link once (from < to orientation as stored by `from_id`), among `ids` if given."""
+        allowed = None if ids is None else set(ids)
+        out = []
+        for a, nb in self.links.items():
+            if allowed is not None and a not in allowed:
+                continue
+            for b, link in nb.items():
+                if a < b and (allowed is None or b in allowed):
+                    out.append(link)
+        return out
+
+    def neighbours(self, node_id: int, max_depth: int, *, exclude_stm: bool = True,
+                   wm_only: bool = True) -> dict[int, int]:
+        """Breadth-first {id: depth} over links up to `max_depth` (STM cut out of the search)."""
+        stm = set(self.stm) if exclude_stm else set()
+        out: dict[int, int] = {}
+        frontier = [node_id]
+        seen = {node_id}
+        for depth in range(1, max_depth + 1):
+            nxt = []
+            for n in frontier:
+                for m in self.links.get(n, ()):
+                    if m in seen or m in stm:
+                        continue
+                    seen.add(m)
+                    if wm_only and m not in self.wm:
+                        continue
+                    out[m] = depth
+                    nxt.append(m)
+            if not nxt:
+                break
+            frontier = nxt
+        return out
+
+    def component(self, node_id: int, within: set[int]) -> set[int]:
+        """Nodes connected to `node_id` through links among `within`."""
+        seen = {node_id}
+        stack = [node_id]
+        while stack:
+            n = stack.pop()
+            for m in self.links.get(n, ()):
+                if m in within and m not in seen:
+                    seen.add(m)
+                    stack.append(m)
+        return seen
+
+    # -- transfer / retrieval ---------------------------------------------------------------
+    def transfer_candidates(self, protected: set[int], recent_ratio: float) -> list[int]:
+        """WM ids in transfer order (weight ↑, insertion ↑, id ↑), protected ones removed."""
+        wm = list(self.wm.items())
+        n_recent = int(len(wm) * recent_ratio)
+        recent = {i for i, _ in sorted(wm, key=lambda kv: kv[1])[len(wm) - n_recent:]} if n_recent else set()
+        stm = set(self.stm)
+        linked_to_stm = {i for i, _ in wm if any(m in stm for m in self.links.get(i, ()))}
+        blocked = protected | recent | linked_to_stm
+        order = sorted((self.nodes[i].weight, ins, i) for i, ins in wm if i not in blocked)
+        return [i for _, _, i in order]
+
+    def transfer_to_ltm(self, node_id: int) -> None:
+        """Move a WM node to LTM; its data leaves RAM when a store holds it."""
+        node = self.nodes[node_id]
+        self.wm.pop(node_id, None)
+        self._unindex_words(node)
+        self.ltm.add(node_id)
+        if self.store is not None:
+            node.data = None
+
+    def retrieve(self, node_id: int) -> bool:
+        """Bring an LTM node back into WM; False if its data cannot be loaded."""
+        node = self.nodes.get(node_id)
+        if node is None or node_id not in self.ltm:
+            return False
+        if node.data is None:
+            if self.store is None:
+                return False
+            data = self.store.load_node_data(node_id)
+            if data is None:
+                return False
+            node.data = data
+            node.word_counts = data.word_counts()
+        self.ltm.discard(node_id)
+        self._index_words(node)
+        self._add_to_wm(node_id)
+        return True

@@ -1,0 +1,221 @@
+"""Typed table of the RTAB-Map parameters this package understands.
+
+Every field of `RtabmapParameters` carries the upstream name (``Group/Name``) in its metadata and
+the upstream default (introlab/rtabmap @ 5fad2d29) unless the field's help says otherwise.
+`RtabmapParameters.from_dict` takes the ``dict[str, str]`` form RTAB-Map uses on its command
+line, in ROS parameters and in the database's ``Info.parameters``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from eddiebot.vslam.errors import ParameterError
+
+__all__ = [
+    "DEFAULT_PREDICTION_LC",
+    "ODOM_STRATEGY_F2F",
+    "ODOM_STRATEGY_F2M",
+    "RtabmapParameters",
+    "parameter_names",
+]
+
+DEFAULT_PREDICTION_LC = (
+    "0.1 0.36 0.30 0.16 0.062 0.0151 0.00255 0.000324 2.5e-05 1.3e-06 4.8e-08 1.2e-09 "
+    "1.9e-11 2.2e-13 1.7e-15 8.5e-18 2.9e-20 6.9e-23"
+)
+ODOM_STRATEGY_F2M = 0
+ODOM_STRATEGY_F2F = 1
+
+# Detector strategies implemented here (RTAB-Map numbering): 2 = ORB, 8 = GFTT/ORB.
+_SUPPORTED_DETECTORS = (2, 8)
+
+
+def _p(name: str, default: Any, help_: str) -> Any:
+    return field(default=default, metadata={"name": name, "help": help_})
+
+
+@dataclass(frozen=True)
+class RtabmapParameters:
+    """RTAB-Map parameters by their upstream names (metadata ``name``); units as upstream."""
+
+    # --- features ---
+    kp_detector_strategy: int = _p("Kp/DetectorStrategy", 8, "2 = ORB, 8 = GFTT/ORB")
+    vis_feature_type: int = _p("Vis/FeatureType", 8, "detector for odometry/registration")
+    kp_max_features: int = _p("Kp/MaxFeatures", 500, "features quantised to words (0 = all)")
+    vis_max_features: int = _p("Vis/MaxFeatures", 1000, "features extracted per frame")
+    kp_nndr_ratio: float = _p("Kp/NndrRatio", 0.8, "vocabulary NNDR")
+    kp_min_depth: float = _p("Kp/MinDepth", 0.0, "m, 0 = off")
+    kp_max_depth: float = _p("Kp/MaxDepth", 0.0, "m, 0 = off")
+    kp_tf_idf_likelihood_used: bool = _p("Kp/TfIdfLikelihoodUsed", True, "TF-IDF likelihood")
+    gftt_quality_level: float = _p("GFTT/QualityLevel", 0.001, "")
+    gftt_min_distance: float = _p("GFTT/MinDistance", 7.0, "px")
+    gftt_block_size: int = _p("GFTT/BlockSize", 3, "px")
+    mem_depth_as_mask: bool = _p("Mem/DepthAsMask", True, "detect only where depth > 0")
+    # --- registration ---
+    vis_estimation_type: int = _p("Vis/EstimationType", 1, "1 = PnP (only value supported)")
+    vis_min_inliers: int = _p("Vis/MinInliers", 20, "")
+    vis_inlier_distance: float = _p("Vis/InlierDistance", 0.1, "m, 3D inlier gate")
+    vis_pnp_reproj_error: float = _p("Vis/PnPReprojError", 2.0, "px")
+    vis_iterations: int = _p("Vis/Iterations", 300, "RANSAC iterations")
+    vis_cor_nndr: float = _p("Vis/CorNNDR", 0.8, "registration NNDR")
+    vis_cor_guess_win_size: int = _p("Vis/CorGuessWinSize", 40, "px, projection matching window")
+    vis_pnp_variance_median_ratio: int = _p("Vis/PnPVarianceMedianRatio", 4, "")
+    reg_force_3dof: bool = _p("Reg/Force3DoF", False, "x, y, yaw only")
+    reg_repeat_once: bool = _p("Reg/RepeatOnce", True, "second pass with the first result as guess")
+    # --- odometry ---
+    odom_strategy: int = _p("Odom/Strategy", 0, "0 = frame-to-map, 1 = frame-to-frame")
+    odom_key_frame_thr: float = _p("Odom/KeyFrameThr", 0.3, "inlier ratio")
+    odom_vis_key_frame_thr: int = _p("Odom/VisKeyFrameThr", 150, "inliers")
+    odom_guess_motion: bool = _p("Odom/GuessMotion", True, "constant-velocity prediction")
+    odom_reset_countdown: int = _p("Odom/ResetCountdown", 0, "frames lost before reset, 0 = off")
+    odom_f2m_max_size: int = _p("OdomF2M/MaxSize", 2000, "local map words")
+    odom_f2m_max_new_features: int = _p("OdomF2M/MaxNewFeatures", 0, "0 = all")
+    # --- loop closure ---
+    rtabmap_loop_thr: float = _p("Rtabmap/LoopThr", 0.11, "")
+    rtabmap_loop_ratio: float = _p("Rtabmap/LoopRatio", 0.0, "")
+    rtabmap_virtual_place_likelihood_ratio: int = _p(
+        "Rtabmap/VirtualPlaceLikelihoodRatio", 0, "0 = mu/sigma + 1, 1 = sigma/(max-mu) + 1"
+    )
+    rtabmap_detection_rate: float = _p("Rtabmap/DetectionRate", 1.0, "Hz (applied by the node)")
+    rtabmap_time_thr: float = _p("Rtabmap/TimeThr", 0.0, "ms, 0 = off")
+    rtabmap_memory_thr: int = _p("Rtabmap/MemoryThr", 0, "WM nodes, 0 = off")
+    rtabmap_max_retrieved: int = _p("Rtabmap/MaxRetrieved", 2, "")
+    bayes_prediction_lc: str = _p("Bayes/PredictionLC", DEFAULT_PREDICTION_LC, "")
+    bayes_virtual_place_prior_thr: float = _p("Bayes/VirtualPlacePriorThr", 0.9, "")
+    # --- memory ---
+    mem_stm_size: int = _p("Mem/STMSize", 10, "")
+    mem_incremental_memory: bool = _p("Mem/IncrementalMemory", True, "false = localization")
+    mem_init_wm_with_all_nodes: bool = _p("Mem/InitWMWithAllNodes", False, "")
+    mem_recent_wm_ratio: float = _p("Mem/RecentWmRatio", 0.2, "")
+    mem_image_compression_format: str = _p("Mem/ImageCompressionFormat", ".jpg", ".jpg or .png")
+    mem_depth_compression_format: str = _p(
+        "Mem/DepthCompressionFormat", ".png", ".png only (upstream default .rvl)"
+    )
+    # --- RGB-D graph ---
+    rgbd_linear_update: float = _p("RGBD/LinearUpdate", 0.1, "m")
+    rgbd_angular_update: float = _p("RGBD/AngularUpdate", 0.1, "rad")
+    rgbd_optimize_max_error: float = _p("RGBD/OptimizeMaxError", 3.0, "sigmas, 0 = off")
+    rgbd_optimize_from_graph_end: bool = _p("RGBD/OptimizeFromGraphEnd", False, "")
+    rgbd_max_loop_closure_distance: float = _p("RGBD/MaxLoopClosureDistance", 0.0, "m, 0 = off")
+    rgbd_proximity_by_space: bool = _p("RGBD/ProximityBySpace", True, "")
+    rgbd_local_radius: float = _p("RGBD/LocalRadius", 10.0, "m")
+    rgbd_proximity_max_graph_depth: int = _p("RGBD/ProximityMaxGraphDepth", 50, "")
+    rgbd_proximity_max_paths: int = _p("RGBD/ProximityMaxPaths", 3, "")
+    rgbd_proximity_angle: float = _p("RGBD/ProximityAngle", 45.0, "deg")
+    rgbd_proximity_path_filtering_radius: float = _p(
+        "RGBD/ProximityPathFilteringRadius", 1.0, "m"
+    )
+    rgbd_neighbor_link_refining: bool = _p(
+        "RGBD/NeighborLinkRefining", False, "refine neighbour links with the 2D scan (ICP)"
+    )
+    rgbd_create_occupancy_grid: bool = _p("RGBD/CreateOccupancyGrid", False, "the node sets true")
+    # --- grid ---
+    grid_sensor: int = _p("Grid/Sensor", 1, "0 = scan, 1 = depth, 2 = both")
+    grid_cell_size: float = _p("Grid/CellSize", 0.05, "m")
+    grid_range_min: float = _p("Grid/RangeMin", 0.0, "m")
+    grid_range_max: float = _p("Grid/RangeMax", 5.0, "m, 0 = unbounded")
+    grid_depth_decimation: int = _p("Grid/DepthDecimation", 4, "")
+    grid_min_ground_height: float = _p("Grid/MinGroundHeight", 0.0, "m, 0 = unbounded")
+    grid_max_ground_height: float = _p("Grid/MaxGroundHeight", 0.0, "m; 0 = one cell size")
+    grid_max_obstacle_height: float = _p("Grid/MaxObstacleHeight", 0.0, "m, 0 = unbounded")
+    # --- optimiser ---
+    optimizer_iterations: int = _p("Optimizer/Iterations", 20, "")
+    optimizer_epsilon: float = _p("Optimizer/Epsilon", 1e-5, "")
+
+    def __post_init__(self) -> None:
+        for strategy_name, value in (
+            ("Kp/DetectorStrategy", self.kp_detector_strategy),
+            ("Vis/FeatureType", self.vis_feature_type),
+        ):
+            if value not in _SUPPORTED_DETECTORS:
+                raise ParameterError(
+                    f"{strategy_name}={value} is not supported (supported: 2 ORB, 8 GFTT/ORB)"
+                )
+        if self.vis_estimation_type != 1:
+            raise ParameterError("Vis/EstimationType: only 1 (PnP) is supported")
+        if self.odom_strategy not in (ODOM_STRATEGY_F2M, ODOM_STRATEGY_F2F):
+            raise ParameterError(f"Odom/Strategy={self.odom_strategy}: use 0 (F2M) or 1 (F2F)")
+        if self.mem_image_compression_format not in (".jpg", ".png"):
+            raise ParameterError("Mem/ImageCompressionFormat must be .jpg or .png")
+        if self.mem_depth_compression_format != ".png":
+            raise ParameterError("Mem/DepthCompressionFormat: only .png is supported")
+        if self.grid_sensor not in (0, 1, 2):
+            raise ParameterError("Grid/Sensor must be 0, 1 or 2")
+        if self.mem_stm_size < 0:
+            raise ParameterError("Mem/STMSize must be >= 0")
+        if self.vis_min_inliers < 4:
+            raise ParameterError("Vis/MinInliers must be >= 4 (PnP needs 4 points)")
+        self.prediction_lc()  # validates the string
+
+    def prediction_lc(self) -> tuple[float, ...]:
+        """`Bayes/PredictionLC` as numbers: (virtual place, loop, neighbour depth 1, 2, ...)."""
+        try:
+            values = tuple(float(v) for v in self.bayes_prediction_lc.split())
+        except ValueError as exc:
+            raise ParameterError(f"Bayes/PredictionLC: {exc}") from exc
+        if len(values) < 2 or any(v < 0 for v in values):
+            raise ParameterError("Bayes/PredictionLC needs >= 2 non-negative numbers")
+        return values
+
+    @classmethod
+    def from_dict(
+        cls, values: Mapping[str, str], *, strict: bool = True
+    ) -> RtabmapParameters:
+        """Parse RTAB-Map ``Group/Name -> str`` pairs; unknown names raise unless not strict."""
+        by_name = {f.metadata["name"]: f for f in dataclasses.fields(cls)}
+        kwargs: dict[str, Any] = {}
+        for key, raw in values.items():
+            f = by_name.get(key)
+            if f is None:
+                if strict:
+                    raise ParameterError(f"unknown RTAB-Map parameter {key!r}")
+                continue
+            kwargs[f.name] = _parse(key, str(raw), type(f.default))
+        return cls(**kwargs)
+
+    def to_dict(self) -> dict[str, str]:
+        """All parameters as RTAB-Map ``Group/Name -> str`` (booleans as true/false)."""
+        out: dict[str, str] = {}
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            out[f.metadata["name"]] = (
+                ("true" if value else "false") if isinstance(value, bool) else str(value)
+            )
+        return out
+
+    def replace(self, values: Mapping[str, str]) -> RtabmapParameters:
+        """A copy with some parameters (by RTAB-Map name) changed."""
+        merged = self.to_dict()
+        merged.update(values)
+        return RtabmapParameters.from_dict(merged)
+
+
+def parameter_names() -> tuple[str, ...]:
+    """Every supported ``Group/Name``."""
+    return tuple(f.metadata["name"] for f in dataclasses.fields(RtabmapParameters))
+
+
+def _parse(key: str, raw: str, kind: type) -> Any:
+    text = raw.strip()
+    try:
+        if kind is bool:
+            low = text.lower()
+            if low in ("true", "1", "yes", "on"):
+                return True
+            if low in ("false", "0", "no", "off"):
+                return False
+            raise ValueError(f"not a boolean: {raw!r}")
+        if kind is int:
+            as_float = float(text)
+            if not as_float.is_integer():
+                raise ValueError(f"not an integer: {raw!r}")
+            return int(as_float)
+        if kind is float:
+            return float(text)
+        return text
+    except ValueError as exc:
+        raise ParameterError(f"{key}: {exc}") from exc

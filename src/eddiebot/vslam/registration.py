@@ -1,0 +1,270 @@
+"""Visual registration of two feature sets: descriptor or projection matching, then PnP RANSAC.
+
+Conventions: registration goes *from* an older frame (whose 3D points are used) *to* a newer one
+(whose keypoints are used); the result is the pose of the new base frame expressed in the old
+base frame (4×4, m). A failed registration returns ``transform=None`` — never a guess.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from eddiebot.vslam.camera import CameraIntrinsics
+from eddiebot.vslam.features import FrameFeatures
+from eddiebot.vslam.matching import (
+    as_words64,
+    knn2_hamming,
+    knn2_hamming_candidates,
+    nndr_one_to_one,
+)
+from eddiebot.vslam.parameters import RtabmapParameters
+from eddiebot.vslam.transforms import se3_inverse, to_3dof
+
+__all__ = [
+    "LOST_VARIANCE",
+    "RegistrationResult",
+    "estimate_covariance",
+    "match_by_projection",
+    "match_descriptors",
+    "register",
+    "solve_pnp",
+]
+
+F64 = NDArray[np.float64]
+LOST_VARIANCE = 9999.0
+_CONFIDENCE = 0.99
+_LINEAR_VARIANCE_FLOOR = 1e-8
+_ANGULAR_VARIANCE_FLOOR = 3e-8
+_CHI2_FACTOR = 2.1981
+
+
+def _huge_covariance() -> F64:
+    return np.eye(6) * LOST_VARIANCE
+
+
+@dataclass(frozen=True)
+class RegistrationResult:
+    """Outcome of a registration; `transform` is None on failure (see `reason`)."""
+
+    transform: F64 | None
+    covariance: F64 = field(default_factory=_huge_covariance)
+    inliers: int = 0
+    matches: int = 0
+    from_index: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    to_index: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    reason: str = ""
+
+    @property
+    def ok(self) -> bool:
+        """True when a transform was found."""
+        return self.transform is not None
+
+
+def match_descriptors(
+    from_desc: NDArray[np.uint8],
+    to_desc: NDArray[np.uint8],
+    nndr: float,
+    from_mask: NDArray[np.bool_] | None = None,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """One-to-one NNDR matches without a guess: (from indices, to indices)."""
+    if from_desc.shape[0] < 2 or to_desc.shape[0] == 0:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    idx, dist = knn2_hamming(as_words64(to_desc), as_words64(from_desc), from_mask)
+    to_i, from_i = nndr_one_to_one(idx, dist, nndr)
+    return from_i, to_i
+
+
+def match_by_projection(
+    from_points_in_to: F64,
+    from_desc: NDArray[np.uint8],
+    to_uv: NDArray[np.float32],
+    to_desc: NDArray[np.uint8],
+    camera: CameraIntrinsics,
+    window_px: float,
+    nndr: float,
+) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Matches searched within `window_px` of where each 3D point projects in the new image.
+
+    `from_points_in_to`: old 3D points expressed in the new *base* frame (NaN rows skipped).
+    """
+    lt_inv = se3_inverse(camera.local_transform)
+    cam = from_points_in_to @ lt_inv[:3, :3].T + lt_inv[:3, 3]
+    valid = np.isfinite(cam[:, 2]) & (cam[:, 2] > 1e-3)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = camera.fx * cam[:, 0] / cam[:, 2] + camera.cx
+        v = camera.fy * cam[:, 1] / cam[:, 2] + camera.cy
+    margin = window_px
+    valid &= (u > -margin) & (u < camera.width + margin) & (v > -margin) & (v < camera.height + margin)
+    proj_index = np.flatnonzero(valid)
+    if proj_index.size < 2 or to_uv.shape[0] == 0:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    tree = cKDTree(np.stack([u[proj_index], v[proj_index]], axis=1))
+    lists = tree.query_ball_point(to_uv.astype(np.float64), r=window_px)
+    lengths = np.fromiter((len(c) for c in lists), dtype=np.int64, count=len(lists))
+    offsets = np.zeros(len(lists) + 1, np.int64)
+    np.cumsum(lengths, out=offsets[1:])
+    flat = (
+        np.concatenate([np.asarray(c, dtype=np.int64) for c in lists if c])
+        if offsets[-1] > 0 else np.zeros(0, np.int64)
+    )
+    cand = proj_index[flat].astype(np.int64)
+    idx, dist = knn2_hamming_candidates(as_words64(to_desc), as_words64(from_desc), offsets, cand)
+    # A window with a single candidate has no second neighbour; such a match passes when it is
+    # clearly close (a quarter of the descriptor bits), as the projection already disambiguates.
+    single = (idx[:, 0] >= 0) & (idx[:, 1] < 0) & (dist[:, 0] <= 64)
+    dist2 = dist.copy()
+    idx2 = idx.copy()
+    dist2[single, 1] = 256
+    idx2[single, 1] = idx2[single, 0]
+    to_i, from_i = nndr_one_to_one(idx2, dist2, nndr)
+    return from_i, to_i
+
+
+def solve_pnp(
+    object_points: F64,
+    image_points: NDArray[np.float32],
+    camera: CameraIntrinsics,
+    params: RtabmapParameters,
+    guess: F64 | None = None,
+) -> tuple[F64 | None, NDArray[np.intp]]:
+    """PnP RANSAC: pose of the new base frame in the old one, and inlier positions (into the inputs)."""
+    n = object_points.shape[0]
+    if n < 4:
+        return None, np.zeros(0, np.intp)
+    lt = camera.local_transform
+    rvec = np.zeros((3, 1))
+    tvec = np.zeros((3, 1))
+    use_guess = guess is not None
+    if guess is not None:
+        p = se3_inverse(lt) @ se3_inverse(guess)
+        rvec = np.asarray(cv2.Rodrigues(p[:3, :3])[0], dtype=np.float64)
+        tvec = p[:3, 3].reshape(3, 1).copy()
+    ok, rvec_out, tvec_out, inliers = cv2.solvePnPRansac(
+        object_points.astype(np.float64),
+        image_points.astype(np.float64),
+        camera.matrix,
+        None,
+        rvec,
+        tvec,
+        useExtrinsicGuess=use_guess,
+        iterationsCount=params.vis_iterations,
+        reprojectionError=float(params.vis_pnp_reproj_error),
+        confidence=_CONFIDENCE,
+        flags=cv2.SOLVEPNP_ITERATIVE,
+    )
+    if not ok or inliers is None or not np.all(np.isfinite(tvec_out)):
+        return None, np.zeros(0, np.intp)
+    rot, _ = cv2.Rodrigues(rvec_out)
+    p = np.eye(4)
+    p[:3, :3] = rot
+    p[:3, 3] = np.asarray(tvec_out).ravel()
+    return se3_inverse(lt @ p), inliers.ravel().astype(np.intp)
+
+
+def estimate_covariance(
+    transform: F64,
+    from_points: F64,
+    to_points: F64,
+    to_uv: NDArray[np.float32],
+    camera: CameraIntrinsics,
+    median_ratio: int,
+) -> F64:
+    """Registration covariance from inlier 3D errors (diagonal, x y z roll pitch yaw).
+
+    Squared distance between each old point and the new point mapped into the old frame (a new
+    point without depth is taken along its ray at 1.1 × the old point's depth), and the angle
+    between the two as seen from the new camera; variance = 2.1981 × the order statistic at n/ratio.
+    """
+    n = from_points.shape[0]
+    if n == 0:
+        return _huge_covariance()
+    lt = camera.local_transform
+    cam_to_old = transform @ lt
+    origin = cam_to_old[:3, 3]
+    new_in_old = to_points @ transform[:3, :3].T + transform[:3, 3]
+    missing = ~np.isfinite(new_in_old[:, 0])
+    if missing.any():
+        rays = np.stack(
+            [(to_uv[missing, 0] - camera.cx) / camera.fx,
+             (to_uv[missing, 1] - camera.cy) / camera.fy,
+             np.ones(int(missing.sum()))], axis=1,
+        )
+        old_in_cam = (from_points[missing] - origin) @ cam_to_old[:3, :3]
+        depth = np.abs(old_in_cam[:, 2]) * 1.1
+        new_in_old[missing] = (rays * depth[:, None]) @ cam_to_old[:3, :3].T + origin
+    err2 = np.sum((from_points - new_in_old) ** 2, axis=1)
+    a = from_points - origin
+    b = new_in_old - origin
+    cosang = np.sum(a * b, axis=1) / np.maximum(
+        np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-12
+    )
+    ang = np.arccos(np.clip(cosang, -1.0, 1.0))
+    k = min(n - 1, n // max(1, median_ratio))
+    lin = max(_CHI2_FACTOR * float(np.sort(err2)[k]), _LINEAR_VARIANCE_FLOOR)
+    angv = max(_CHI2_FACTOR * float(np.sort(ang)[k]) ** 2, _ANGULAR_VARIANCE_FLOOR)
+    return np.diag([lin, lin, lin, angv, angv, angv])
+
+
+def register(
+    old: FrameFeatures,
+    new: FrameFeatures,
+    camera: CameraIntrinsics,
+    params: RtabmapParameters,
+    guess: F64 | None = None,
+    *,
+    nndr: float | None = None,
+) -> RegistrationResult:
+    """Register `new` against `old` (old 3D points ↔ new keypoints); pose of new in old.
+
+    Without a guess, descriptors are matched globally (NNDR `Vis/CorNNDR`); with a guess, by
+    projection within `Vis/CorGuessWinSize` px. `Reg/RepeatOnce` re-matches by projection using
+    the first result. `Reg/Force3DoF` projects the guess and the result to x, y, yaw.
+    """
+    ratio = params.vis_cor_nndr if nndr is None else nndr
+    force = params.reg_force_3dof
+    if guess is not None and force:
+        guess = to_3dof(guess)
+    old_valid = old.has_depth
+    if int(old_valid.sum()) < params.vis_min_inliers or len(new) < params.vis_min_inliers:
+        return RegistrationResult(None, reason="too few features")
+
+    def _once(g: F64 | None) -> RegistrationResult:
+        if g is None:
+            fi, ti = match_descriptors(old.descriptors, new.descriptors, ratio, old_valid)
+        else:
+            pts = old.points.copy()
+            pts[~old_valid] = np.nan
+            inv = se3_inverse(g)
+            fi, ti = match_by_projection(
+                pts @ inv[:3, :3].T + inv[:3, 3], old.descriptors, new.uv, new.descriptors,
+                camera, float(params.vis_cor_guess_win_size), ratio,
+            )
+        if fi.size < params.vis_min_inliers:
+            return RegistrationResult(None, matches=int(fi.size), reason="too few matches")
+        transform, inl = solve_pnp(old.points[fi], new.uv[ti], camera, params, g)
+        if transform is None or inl.size < params.vis_min_inliers:
+            return RegistrationResult(
+                None, matches=int(fi.size), inliers=int(inl.size), reason="too few inliers"
+            )
+        if force:
+            transform = to_3dof(transform)
+        fi_in, ti_in = fi[inl], ti[inl]
+        cov = estimate_covariance(
+            transform, old.points[fi_in], new.points[ti_in], new.uv[ti_in], camera,
+            params.vis_pnp_variance_median_ratio,
+        )
+        return RegistrationResult(transform, cov, int(inl.size), int(fi.size), fi_in, ti_in)
+
+    result = _once(guess)
+    if guess is not None and not result.ok:
+        result = _once(None)
+    if result.ok and params.reg_repeat_once and guess is None:
+        second = _once(result.transform)
+        if second.ok and second.inliers >= result.inliers:
+            result = second
+    return result

@@ -1,0 +1,543 @@
+"""RTAB-Map-style RGB-D graph SLAM core: one call per synchronised frame.
+
+`Rtabmap.process(rgb, depth, camera, odom_pose, stamp_ns, scan)` creates a node, runs the
+bag-of-words Bayes loop-closure detector over working memory, verifies a hypothesis with PnP,
+optionally adds proximity links, optimises the graph and returns the map→odom correction.
+Pure core: the optional `SessionDatabase` is the only I/O, and time is only measured (for
+`Rtabmap/TimeThr`) through an injected timer.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from eddiebot.vslam.bayes import VIRTUAL_PLACE_ID, BayesFilter, adjust_likelihood, tfidf_scores
+from eddiebot.vslam.camera import CameraIntrinsics
+from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
+from eddiebot.vslam.graph import GraphLink, GtsamPoseGraph, PoseGraphOptimizer, link_errors
+from eddiebot.vslam.icp import icp_2d
+from eddiebot.vslam.memory import Link, LinkType, Memory, Node, NodeData
+from eddiebot.vslam.occupancy import (
+    GlobalGrid,
+    LocalGrid,
+    Scan2D,
+    assemble_cloud,
+    assemble_grid,
+    depth_cloud,
+    local_grid_from_points,
+    local_grid_from_scan,
+    merge_local_grids,
+    voxel_first_indices,
+)
+from eddiebot.vslam.parameters import RtabmapParameters
+from eddiebot.vslam.registration import register
+from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, to_3dof, xyz_rpy, yaw_of
+from eddiebot.vslam.vocabulary import Vocabulary
+
+__all__ = ["FrameRecord", "ProcessResult", "Rtabmap"]
+
+F64 = NDArray[np.float64]
+_DEFAULT_ODOM_VARIANCE = 0.001
+_CLOUD_VOXEL = 0.02
+
+
+@dataclass(frozen=True)
+class ProcessResult:
+    """Outcome of one `Rtabmap.process` call.
+
+    `map_to_odom`: correction (4×4) to publish as map→odom; `pose`: base pose in the map frame
+    (None if the frame was rejected); ids are 0 when absent.
+    """
+
+    node_id: int
+    added: bool
+    map_to_odom: F64
+    pose: F64 | None
+    loop_closure_id: int = 0
+    proximity_id: int = 0
+    hypothesis_id: int = 0
+    hypothesis_value: float = 0.0
+    rejected_loop_id: int = 0
+    rejection_reason: str = ""
+    localized: bool = False
+    statistics: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class FrameRecord:
+    """Everything written to the database for one kept node (one transaction)."""
+
+    node: Node
+    image: NDArray[np.uint8] | None
+    depth: NDArray[np.generic] | None
+    camera: CameraIntrinsics
+    scan: Scan2D | None
+    links: tuple[Link, ...]
+    word_ids: NDArray[np.int64]  # unique word ids the node uses
+    word_descriptors: NDArray[np.uint8]  # their descriptors (N, 32)
+    statistics: dict[str, float]
+
+
+
+
+class MapDatabase(Protocol):
+    """What the core needs from a session database (see `SessionDatabase`)."""
+
+    def load_into(self, rtabmap: Rtabmap) -> None:
+        """Fill a fresh core with the stored map."""
+        ...
+
+    def write_frame(self, record: FrameRecord) -> None:
+        """Persist one kept node, atomically."""
+        ...
+
+    def load_node_data(self, node_id: int) -> NodeData | None:
+        """Heavy data of an LTM node."""
+        ...
+
+
+class Rtabmap:
+    """The SLAM core. Create with RTAB-Map parameters, feed frames with `process`."""
+
+    def __init__(
+        self,
+        params: RtabmapParameters | Mapping[str, str] | None = None,
+        *,
+        database: MapDatabase | None = None,
+        optimizer: PoseGraphOptimizer | None = None,
+        timer: Callable[[], float] = time.perf_counter,
+    ) -> None:
+        if params is None:
+            params = RtabmapParameters()
+        elif not isinstance(params, RtabmapParameters):
+            params = RtabmapParameters.from_dict(params)
+        self.params = params
+        self._timer = timer
+        self._db = database
+        self.vocabulary = Vocabulary(params.kp_nndr_ratio)
+        self.memory = Memory(self.vocabulary, params.mem_stm_size, store=database)
+        self.bayes = BayesFilter(params.prediction_lc(), params.bayes_virtual_place_prior_thr)
+        self._extractor = FeatureExtractor(
+            params, max_features=params.vis_max_features, strategy=params.kp_detector_strategy
+        )
+        self.optimizer: PoseGraphOptimizer = optimizer or GtsamPoseGraph(
+            params.reg_force_3dof, params.optimizer_epsilon
+        )
+        self.optimized_poses: dict[int, F64] = {}
+        self.map_to_odom = np.eye(4)
+        self._next_id = 1
+        self._map_id = 0
+        self._last_node_id = 0
+        self._last_loop_id = 0
+        self._last_had_loop = False
+        self._last_hypothesis = (0, 0.0)
+        self._prev_hyp_value = 0.0
+        self._localized = False
+        if database is not None:
+            database.load_into(self)
+
+    # -- properties -------------------------------------------------------------------------
+    @property
+    def map_id(self) -> int:
+        """Current session/map id."""
+        return self._map_id
+
+    @property
+    def localization_mode(self) -> bool:
+        """`Mem/IncrementalMemory` false."""
+        return not self.params.mem_incremental_memory
+
+    def restore_state(self, next_id: int, map_id: int) -> None:
+        """Continue numbering after a database session (`map_id` is the new session's id)."""
+        self._next_id = max(self._next_id, next_id)
+        self._map_id = map_id
+
+    # -- main entry -------------------------------------------------------------------------
+    def process(
+        self,
+        rgb: NDArray[np.uint8],
+        depth: NDArray[np.generic],
+        camera: CameraIntrinsics,
+        odom_pose: F64,
+        stamp_ns: int,
+        scan: Scan2D | None = None,
+        *,
+        odom_covariance: F64 | None = None,
+        features: FrameFeatures | None = None,
+    ) -> ProcessResult:
+        """Process one synchronised frame; `odom_pose` is the base pose in the odom frame (4×4)."""
+        p = self.params
+        t0 = self._timer()
+        stats: dict[str, float] = {}
+        odom = np.asarray(odom_pose, dtype=np.float64)
+        if p.reg_force_3dof:
+            odom = to_3dof(odom)
+        if not np.all(np.isfinite(odom)):
+            return ProcessResult(0, False, self.map_to_odom.copy(), None,
+                                 rejection_reason="invalid odometry pose")
+        if features is None:
+            features = self._extractor.extract(rgb, depth, camera)
+        n_words = len(features) if p.kp_max_features <= 0 else min(len(features), p.kp_max_features)
+        words = np.full(len(features), -1, np.int64)
+        words[:n_words] = self.vocabulary.quantize(
+            features.descriptors[:n_words], add_new=not self.localization_mode
+        )
+        stats["Keypoint/Current_frame/words"] = float(n_words)
+        xyz, colors = depth_cloud(depth, camera, p.grid_depth_decimation, p.grid_range_min,
+                                  p.grid_range_max, rgb)
+        grid = self._local_grid(xyz, camera, scan) if p.rgbd_create_occupancy_grid else None
+        first = voxel_first_indices(xyz, _CLOUD_VOXEL)
+        cloud = (xyz[first], colors[first])
+        scan_points = scan.points_in_base() if scan is not None else None
+        data = NodeData(features, words, grid, cloud, scan_points)
+        node = Node(self._next_id, self._map_id, stamp_ns, odom, data=data,
+                    word_counts=data.word_counts())
+        self._next_id += 1
+        bad = not node.word_counts
+
+        prev = self.memory.nodes.get(self._last_node_id)
+        small = False
+        new_links: list[Link] = []
+        if prev is not None and prev.map_id == node.map_id:
+            delta = se3_inverse(prev.odom_pose) @ odom
+            small = self._small_displacement(delta)
+            info = self._odom_information(odom_covariance)
+            link = Link(prev.id, node.id, LinkType.NEIGHBOR, delta, info)
+            if p.rgbd_neighbor_link_refining and scan is not None and prev.data is not None:
+                link = self._refine_with_scan(link, prev, scan)
+            new_links.append(link)
+
+        t_mem = self._timer()
+        stats["Timing/Features_and_words/ms"] = (t_mem - t0) * 1e3
+        moved = self.memory.add_to_stm(node)
+        for link in new_links:
+            self.memory.add_link(link)
+        for m in moved:
+            self.bayes.node_entered(m, self.memory.neighbours(m, self.bayes.max_depth))
+
+        # --- loop-closure hypothesis over WM ---
+        hyp_id, hyp_value = 0, 0.0
+        skip_update = bad or (small and self._last_had_loop)
+        wm = self.memory.wm_ids
+        if not skip_update and wm:
+            scores = self._likelihood_scores(node, wm)
+            like = adjust_likelihood(scores, p.rtabmap_virtual_place_likelihood_ratio)
+            posterior = self.bayes.update(
+                like, lambda i, d: self.memory.neighbours(i, d)
+            )
+            best = max((k for k in posterior if k != VIRTUAL_PLACE_ID),
+                       key=lambda k: posterior[k], default=0)
+            hyp_id = best
+            hyp_value = 1.0 - posterior.get(VIRTUAL_PLACE_ID, 1.0)
+            stats["Loop/Likelihood_max/"] = max(scores.values(), default=0.0)
+        elif skip_update:
+            hyp_id, hyp_value = self._last_hypothesis
+        self._last_hypothesis = (hyp_id, hyp_value)
+        t_bayes = self._timer()
+        stats["Timing/Memory_and_Bayes/ms"] = (t_bayes - t_mem) * 1e3
+        stats["Loop/Highest_hypothesis_id/"] = float(hyp_id)
+        stats["Loop/Highest_hypothesis_value/"] = hyp_value
+
+        # --- retrieval from LTM around the hypothesis ---
+        retrieved = self._retrieve_around(hyp_id) if (self.memory.ltm and hyp_id) else []
+        stats["Memory/Retrieved/"] = float(len(retrieved))
+
+        loop_id = 0
+        rejected_id = 0
+        reason = ""
+        graph_changed = bool(retrieved)
+        closure_links: list[Link] = []
+        accept_hyp = (
+            not skip_update and hyp_id > 0 and hyp_value >= p.rtabmap_loop_thr
+            and len(self.memory.wm) > 1
+            and not (p.rtabmap_loop_ratio > 0
+                     and (self._prev_hyp_value == 0 or hyp_value < p.rtabmap_loop_ratio * self._prev_hyp_value))
+        )
+        if not skip_update:
+            self._prev_hyp_value = hyp_value
+        if accept_hyp:
+            old = self.memory.nodes[hyp_id]
+            closure, reason = self._verify(old, node, camera, LinkType.GLOBAL_CLOSURE)
+            if closure is not None:
+                closure_links.append(closure)
+                loop_id = hyp_id
+            else:
+                rejected_id = hyp_id
+
+        # --- proximity by space ---
+        proximity_id = 0
+        if p.rgbd_proximity_by_space and not loop_id and not self.localization_mode:
+            near = self._proximity(node, camera)
+            if near is not None:
+                closure_links.append(near)
+                proximity_id = near.to_id
+
+        t_verify = self._timer()
+        stats["Timing/Retrieval_and_verification/ms"] = (t_verify - t_bayes) * 1e3
+        # --- graph update ---
+        if self.localization_mode:
+            pose = self._localize(node, closure_links, odom)
+        else:
+            for link in closure_links:
+                self.memory.add_link(link)
+                # only the two ends learn about the shortcut (incremental prediction update)
+                self.bayes.invalidate([link.from_id, link.to_id])
+            graph_changed |= bool(closure_links)
+            self.optimized_poses[node.id] = self.map_to_odom @ odom
+            if graph_changed:
+                ok = self._optimize(node.id, closure_links)
+                if not ok:
+                    for link in closure_links:
+                        self.memory.remove_link(link.from_id, link.to_id)
+                    rejected_id = rejected_id or (loop_id or proximity_id)
+                    reason = "RGBD/OptimizeMaxError exceeded"
+                    loop_id = proximity_id = 0
+                    closure_links = []
+                    self.optimized_poses[node.id] = self.map_to_odom @ odom
+            if loop_id or proximity_id:
+                self._last_loop_id = loop_id or proximity_id
+            pose = self.optimized_poses[node.id]
+            self.map_to_odom = pose @ se3_inverse(odom)
+        self._last_had_loop = bool(loop_id or proximity_id)
+        stats["Timing/Optimization/ms"] = (self._timer() - t_verify) * 1e3
+
+        # --- keep or delete the node ---
+        keep = not self.localization_mode and (not small or bool(closure_links))
+        if prev is None and not self.localization_mode:
+            keep = True
+        if keep:
+            self._last_node_id = node.id
+        else:
+            self.memory.remove_node(node.id)
+            self.optimized_poses.pop(node.id, None)
+            self.bayes.forget([node.id])
+        stats["Loop/Id/"] = float(loop_id)
+        stats["Proximity/Space_id/"] = float(proximity_id)
+        # --- memory management ---
+        transferred = self._manage_memory(t0, protected=set(retrieved) | {hyp_id, node.id})
+        stats["Memory/Transferred/"] = float(transferred)
+        stats["Memory/Working_memory_size/"] = float(len(self.memory.wm))
+        stats["Memory/Short_time_memory_size/"] = float(len(self.memory.stm))
+        stats["Keypoint/Dictionary_size/words"] = float(self.vocabulary.active_words)
+        stats["Timing/Total/ms"] = (self._timer() - t0) * 1e3
+        if keep and self._db is not None:
+            all_new = tuple(new_links) + tuple(closure_links)
+            used = np.array(sorted(node.word_counts), np.int64)
+            self._db.write_frame(FrameRecord(
+                node, rgb, depth, camera, scan, all_new, used,
+                self.vocabulary.descriptors(used), stats))
+        return ProcessResult(
+            node.id if keep else 0, keep, self.map_to_odom.copy(), pose,
+            loop_closure_id=loop_id, proximity_id=proximity_id, hypothesis_id=hyp_id,
+            hypothesis_value=hyp_value, rejected_loop_id=rejected_id, rejection_reason=reason,
+            localized=self._localized, statistics=stats,
+        )
+
+    # -- maps -------------------------------------------------------------------------------
+    def occupancy_grid(self) -> GlobalGrid | None:
+        """Global grid assembled from the local grids at the optimised poses."""
+        grids = {i: n.data.grid for i, n in self.memory.nodes.items()
+                 if n.data is not None and n.data.grid is not None}
+        return assemble_grid(grids, self.optimized_poses, self.params.grid_cell_size)
+
+    def point_cloud(self, voxel_size: float = 0.05) -> tuple[F64, NDArray[np.uint8]]:
+        """Assembled coloured cloud (map frame) of the nodes in RAM."""
+        clouds = {i: n.data.cloud for i, n in self.memory.nodes.items()
+                  if n.data is not None and n.data.cloud is not None}
+        return assemble_cloud(clouds, self.optimized_poses, voxel_size)
+
+    def graph(self) -> tuple[dict[int, F64], list[Link]]:
+        """Optimised poses and all links."""
+        return dict(self.optimized_poses), self.memory.unique_links()
+
+    # -- helpers ----------------------------------------------------------------------------
+    def _local_grid(self, xyz: F64, camera: CameraIntrinsics,
+                    scan: Scan2D | None) -> LocalGrid | None:
+        p = self.params
+        sensor = p.grid_sensor
+        if sensor == 0:
+            return local_grid_from_scan(scan, p) if scan is not None else None
+        depth_grid = local_grid_from_points(xyz, camera.local_transform[:3, 3], p)
+        if sensor == 2 and scan is not None:
+            return merge_local_grids(depth_grid, local_grid_from_scan(scan, p))
+        return depth_grid
+
+    def _small_displacement(self, delta: F64) -> bool:
+        p = self.params
+        if p.rgbd_linear_update <= 0 and p.rgbd_angular_update <= 0:
+            return False
+        x, y, z, roll, pitch, yaw = xyz_rpy(delta)
+        return (
+            max(abs(x), abs(y), abs(z)) <= p.rgbd_linear_update
+            and max(abs(roll), abs(pitch), abs(yaw)) <= p.rgbd_angular_update
+        )
+
+    def _odom_information(self, covariance: F64 | None) -> F64:
+        if covariance is None:
+            var = np.full(6, _DEFAULT_ODOM_VARIANCE)
+        else:
+            var = np.diag(np.asarray(covariance, dtype=np.float64).reshape(6, 6)).copy()
+            if var[0] >= 9999 or var[0] == 1.0 or var[0] <= 0:
+                var = np.full(6, _DEFAULT_ODOM_VARIANCE)
+            var[var <= 0] = _DEFAULT_ODOM_VARIANCE
+        if self.params.reg_force_3dof:
+            var[2:5] = np.where(var[2:5] <= 0, 1.0, var[2:5])
+        return np.asarray(np.diag(1.0 / var), dtype=np.float64)
+
+    def _likelihood_scores(self, node: Node, candidates: list[int]) -> dict[int, float]:
+        mem = self.memory
+        if self.params.kp_tf_idf_likelihood_used:
+            n_nodes = len(mem.wm) + len(mem.stm)
+            return tfidf_scores(node.word_counts, mem.inverted, mem.word_totals, n_nodes,
+                                candidates)
+        scores = {}
+        n_new = sum(node.word_counts.values())
+        for j in candidates:
+            other = mem.nodes[j].word_counts
+            common = sum(min(c, other.get(w, 0)) for w, c in node.word_counts.items())
+            scores[j] = common / max(1, max(n_new, sum(other.values())))
+        return scores
+
+    def _verify(self, old: Node, new: Node, camera: CameraIntrinsics,
+                link_type: LinkType) -> tuple[Link | None, str]:
+        if old.data is None or new.data is None:
+            return None, "no data"
+        reg = register(old.data.features, new.data.features, camera, self.params)
+        if reg.transform is None:
+            return None, f"registration failed: {reg.reason} ({reg.inliers} inliers)"
+        limit = self.params.rgbd_max_loop_closure_distance
+        if limit > 0 and float(np.linalg.norm(reg.transform[:3, 3])) > limit:
+            return None, "RGBD/MaxLoopClosureDistance exceeded"
+        info = np.asarray(np.linalg.inv(reg.covariance), dtype=np.float64)
+        return Link(new.id, old.id, link_type, se3_inverse(reg.transform), info), ""
+
+    def _refine_with_scan(self, link: Link, prev: Node, scan: Scan2D) -> Link:
+        """`RGBD/NeighborLinkRefining`: 2D ICP of this scan against the previous node's scan."""
+        prev_scan = None if prev.data is None else prev.data.scan_points
+        cur = scan.points_in_base()
+        if prev_scan is None or prev_scan.shape[0] < 10 or cur.shape[0] < 10:
+            return link
+        guess = link.transform
+        result = icp_2d(prev_scan, cur, np.array([guess[0, 3], guess[1, 3], yaw_of(guess)]))
+        if result is None:
+            # failure: keep odometry, multiply its covariance by 100
+            return Link(link.from_id, link.to_id, link.type, link.transform,
+                        link.information / 100.0)
+        t = from_xyz_yaw(result.x, result.y, result.theta)
+        t[2, 3] = guess[2, 3]
+        lin = 1.0 / result.linear_variance
+        ang = 1.0 / result.angular_variance
+        info = np.diag([lin, lin, link.information[2, 2], link.information[3, 3],
+                        link.information[4, 4], ang])
+        return Link(link.from_id, link.to_id, link.type, t, info)
+
+    def _proximity(self, node: Node, camera: CameraIntrinsics) -> Link | None:
+        p = self.params
+        if not self.optimized_poses:
+            return None
+        here = self.map_to_odom @ node.odom_pose
+        stm = set(self.memory.stm)
+        linked = set(self.memory.links.get(node.id, ()))
+        radius = p.rgbd_proximity_path_filtering_radius
+        max_angle = np.deg2rad(p.rgbd_proximity_angle)
+        cands = []
+        for i in self.memory.wm:
+            if i in stm or i in linked or i not in self.optimized_poses:
+                continue
+            pose = self.optimized_poses[i]
+            d = float(np.linalg.norm(pose[:2, 3] - here[:2, 3]))
+            dyaw = abs(np.arctan2(np.sin(yaw_of(pose) - yaw_of(here)),
+                                  np.cos(yaw_of(pose) - yaw_of(here))))
+            if d <= radius and dyaw <= max_angle:
+                cands.append((d, i))
+        for _, i in sorted(cands)[: max(1, p.rgbd_proximity_max_paths)]:
+            old = self.memory.nodes[i]
+            link, _ = self._verify(old, node, camera, LinkType.LOCAL_SPACE_CLOSURE)
+            if link is not None and float(np.linalg.norm(link.transform[:3, 3])) <= radius:
+                return link
+        return None
+
+    def _optimize(self, current: int, new_links: list[Link]) -> bool:
+        mem = self.memory
+        in_ram = set(mem.wm) | set(mem.stm)
+        comp = mem.component(current, in_ram)
+        poses = {i: self.optimized_poses.get(i, self.map_to_odom @ mem.nodes[i].odom_pose)
+                 for i in comp}
+        links = [GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information)
+                 for lk in mem.unique_links(comp)]
+        if self.params.rgbd_optimize_from_graph_end:
+            root = current
+            poses[root] = mem.nodes[root].odom_pose
+        else:
+            root = min(comp)
+        optimized = self.optimizer.optimize(poses, links, root, self.params.optimizer_iterations)
+        thr = self.params.rgbd_optimize_max_error
+        if thr > 0 and new_links:
+            errors = link_errors(optimized, links)
+            worst = max((max(e.linear_ratio, e.angular_ratio) for e in errors), default=0.0)
+            if worst > thr:
+                return False
+        self.optimized_poses.update(optimized)
+        return True
+
+    def _localize(self, node: Node, closure_links: list[Link], odom: F64) -> F64:
+        if closure_links:
+            link = closure_links[0]
+            old_pose = self.optimized_poses.get(link.to_id)
+            if old_pose is not None:
+                pose = old_pose @ se3_inverse(link.transform)
+                self.map_to_odom = pose @ se3_inverse(odom)
+                self._localized = True
+                return pose
+        return self.map_to_odom @ odom
+
+    def _retrieve_around(self, hyp_id: int) -> list[int]:
+        mem = self.memory
+        limit = self.params.rtabmap_max_retrieved
+        if limit <= 0:
+            return []
+        frontier = [hyp_id]
+        seen = {hyp_id}
+        out: list[int] = []
+        for _ in range(self.bayes.max_depth):
+            nxt = []
+            for n in frontier:
+                # time neighbours (adjacent ids) first, then loop links
+                for m in sorted(mem.links.get(n, ()), key=lambda k: (abs(k - n) != 1, k)):
+                    if m in seen:
+                        continue
+                    seen.add(m)
+                    nxt.append(m)
+                    if m in mem.ltm and len(out) < limit and mem.retrieve(m):
+                        out.append(m)
+            if len(out) >= limit or not nxt:
+                break
+            frontier = nxt
+        for m in out:
+            self.bayes.node_entered(m, mem.neighbours(m, self.bayes.max_depth))
+        return out
+
+    def _manage_memory(self, t0: float, protected: set[int]) -> int:
+        p = self.params
+        mem = self.memory
+        elapsed_ms = (self._timer() - t0) * 1e3
+        n = 0
+        if p.rtabmap_memory_thr > 0 and len(mem.wm) > p.rtabmap_memory_thr:
+            n = len(mem.wm) - p.rtabmap_memory_thr
+        if p.rtabmap_time_thr > 0 and elapsed_ms > p.rtabmap_time_thr:
+            n = max(n, 2)
+        if n <= 0:
+            return 0
+        protected = protected | {self._last_loop_id}
+        cands = mem.transfer_candidates(protected, p.mem_recent_wm_ratio)[:n]
+        for i in cands:
+            neighbourhood = mem.neighbours(i, self.bayes.max_depth)
+            mem.transfer_to_ltm(i)
+            self.bayes.node_left(i, neighbourhood)
+        return len(cands)
