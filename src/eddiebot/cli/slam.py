@@ -1,0 +1,131 @@
+"""``eddie slam``: 2D SLAM.
+
+    eddie slam replay FILE [--mode sync|async] [-o DIR] [--params YAML] [--strict]
+
+``replay`` runs the SLAM core over a CARMEN log (``.clf``, ``.log``, ``.log.gz``) and writes
+the map (nav2 ``.pgm`` + ``.yaml`` and a ``.png`` with the trajectory), the trajectory (TUM,
+one line per processed scan, stamped with the scan's time) and ``report.md``.
+rosbag2 input will come later. Live SLAM in the simulator (``eddie slam --world office``)
+will be a further sub-command beside ``replay``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+__all__ = ["HELP", "add_arguments", "run"]
+
+HELP = "2D SLAM: replay a CARMEN log into a map, trajectory and report"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    sub = parser.add_subparsers(dest="slam_command", required=True)
+    rep = sub.add_parser("replay", help="run SLAM over a CARMEN log (.clf/.log/.log.gz)")
+    rep.add_argument("file", type=Path, help="CARMEN log")
+    rep.add_argument(
+        "--mode",
+        choices=("sync", "async"),
+        default="sync",
+        help="sync: every scan; async: drop scans that arrive while busy (default sync)",
+    )
+    rep.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        default=None,
+        help="output folder (default out/slam/<log name>)",
+    )
+    rep.add_argument(
+        "--params",
+        type=Path,
+        default=None,
+        help="ROS 2 parameter file with a slam_toolbox section (default config/slam.yaml values)",
+    )
+    rep.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="NAME:=VALUE",
+        help="override one parameter (repeatable), e.g. --set minimum_travel_distance:=0.2",
+    )
+    rep.add_argument("--strict", action="store_true", help="stop at the first malformed log line")
+    rep.add_argument(
+        "--session", type=Path, default=None, help="also save the session (graph + scans) here"
+    )
+    rep.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _overrides(items: list[str]) -> dict[str, object]:
+    import yaml
+
+    out: dict[str, object] = {}
+    for item in items:
+        if ":=" not in item:
+            raise ValueError(f"--set expects NAME:=VALUE, got {item!r}")
+        key, value = item.split(":=", 1)
+        out[key.strip()] = yaml.safe_load(value)
+    return out
+
+
+def _default_params() -> Path | None:
+    here = Path(__file__).resolve()
+    for parent in here.parents:
+        candidate = parent / "config" / "slam.yaml"
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from eddiebot.slam import SlamError, load_slam_config, save_session
+    from eddiebot.slam.replay import replay_log, write_outputs
+
+    try:
+        params = args.params or _default_params()
+        config = load_slam_config(params, overrides=_overrides(args.set))
+    except (SlamError, ValueError) as exc:
+        print(f"eddie slam replay: {exc}", file=sys.stderr)
+        return 2
+    progress_factory: Callable[[int], Callable[[int], None]] | None = None
+    bar = None
+    if not args.no_progress:
+        from tqdm import tqdm
+
+        def progress_factory(total: int) -> Callable[[int], None]:
+            nonlocal bar
+            bar = tqdm(total=total, unit="scan", desc=args.file.name, file=sys.stderr)
+            return bar.update
+
+    try:
+        result = replay_log(
+            args.file, config, mode=args.mode, strict=args.strict, progress_factory=progress_factory
+        )
+    except SlamError as exc:
+        print(f"eddie slam replay: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if bar is not None:
+            bar.close()
+    name = args.file.name.split(".")[0]
+    out_dir = args.output or Path("out") / "slam" / name
+    paths = write_outputs(result, out_dir)
+    if args.session is not None:
+        save_session(result.core, args.session)
+    core = result.core
+    print(
+        f"{result.scans} scans, {len(core.nodes)} processed, {len(core.loop_closures)} loops closed, "
+        f"{result.cpu_s:.1f} s CPU ({result.realtime_factor:.1f}x real time)"
+    )
+    for key, path in paths.items():
+        print(f"{key:10s} {path}")
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.slam_command == "replay":
+        return _replay(args)
+    print(f"eddie slam: unknown sub-command {args.slam_command!r}", file=sys.stderr)
+    return 2

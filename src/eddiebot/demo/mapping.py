@@ -1,0 +1,192 @@
+"""Demo stage 2: Eddie maps the ``office`` world with the Kinect-made scan.
+
+The simulator, the whole base stack, depthimage_to_laserscan and the SLAM node run in one
+process on a simulated clock, as fast as the CPU allows; a scripted operator drives the
+route. Afterwards the map is saved (nav2 map_server files) and judged against the world's
+ground truth: trajectory error of the SLAM poses and agreement with the scan-height
+ground-truth map on the cells both call known.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from eddiebot.core.context import Context
+from eddiebot.core.executors import SingleThreadedExecutor
+from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
+from eddiebot.core.node import Node
+from eddiebot.demo.route import OFFICE_ROUTE, RouteDriver, Waypoint
+from eddiebot.geometry import quaternion_to_yaw, se2_compose
+from eddiebot.maps import OccupancyMap, save_map
+from eddiebot.msgs.nav_msgs import Odometry
+from eddiebot.registry import NODES
+
+__all__ = ["MappingResult", "map_agreement", "run_mapping"]
+
+
+@dataclass
+class MappingResult:
+    world: str
+    sim_seconds: float = 0.0
+    wall_seconds: float = 0.0
+    distance_m: float = 0.0
+    nodes: int = 0
+    loop_closures: int = 0
+    collisions: int = 0
+    ate_rmse_m: float = math.nan
+    ate_max_m: float = math.nan
+    odom_end_error_m: float = math.nan
+    slam_end_error_m: float = math.nan
+    agreement: float = math.nan
+    agreement_tolerant: float = math.nan
+    map_yaml: Path | None = None
+    session: Path | None = None
+    bag: Path | None = None
+    finished: bool = False
+    slam_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    truth: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    odom_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    grid: OccupancyMap | None = None
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+def map_agreement(slam: OccupancyMap, truth: OccupancyMap, world_from_map: np.ndarray,
+                  tolerance_cells: int = 1) -> tuple[float, float]:
+    """Fraction of cells both maps call known on which they agree (occupied vs free): strict,
+    and with an occupied cell matching any occupied ground-truth cell within
+    ``tolerance_cells`` (walls one cell apart are the same wall)."""
+    rows, cols = np.nonzero(slam.data >= 0)
+    if rows.size == 0:
+        return math.nan, math.nan
+    res = slam.resolution
+    ox, oy, oth = slam.origin
+    local = np.stack([(cols + 0.5) * res, (rows + 0.5) * res], axis=1)
+    c, s = math.cos(oth), math.sin(oth)
+    in_map = np.stack([ox + c * local[:, 0] - s * local[:, 1], oy + s * local[:, 0] + c * local[:, 1]], 1)
+    wx, wy, wth = world_from_map
+    c, s = math.cos(wth), math.sin(wth)
+    world = np.stack([wx + c * in_map[:, 0] - s * in_map[:, 1], wy + s * in_map[:, 0] + c * in_map[:, 1]], 1)
+    tc = np.floor((world[:, 0] - truth.origin[0]) / truth.resolution).astype(int)
+    tr = np.floor((world[:, 1] - truth.origin[1]) / truth.resolution).astype(int)
+    inside = (tc >= 0) & (tr >= 0) & (tc < truth.width) & (tr < truth.height)
+    slam_occ = slam.data[rows, cols] >= 65
+    t = np.full(rows.size, -1, dtype=np.int16)
+    t[inside] = truth.data[tr[inside], tc[inside]]
+    known = t >= 0
+    truth_occ = t >= 65
+    strict = float(np.mean(slam_occ[known] == truth_occ[known])) if known.any() else math.nan
+    # dilate the ground truth's occupied cells for the tolerant figure
+    occ = truth.data >= 65
+    dil = occ.copy()
+    for dr in range(-tolerance_cells, tolerance_cells + 1):
+        for dc in range(-tolerance_cells, tolerance_cells + 1):
+            dil |= np.roll(np.roll(occ, dr, axis=0), dc, axis=1)
+    near = np.zeros(rows.size, dtype=bool)
+    near[inside] = dil[tr[inside], tc[inside]]
+    ok = np.where(slam_occ, near, ~truth_occ)
+    tolerant = float(np.mean(ok[known])) if known.any() else math.nan
+    return strict, tolerant
+
+
+def _pose_of(msg: Any) -> tuple[float, float, float]:
+    p = msg.pose.pose
+    q = p.orientation
+    return (p.position.x, p.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))
+
+
+def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ...] = OFFICE_ROUTE,
+                seed: int = 0, camera: tuple[int, int, float] = (320, 240, 10.0),
+                record: bool = True, wall_timeout_s: float = 900.0) -> MappingResult:
+    """Map ``world`` along ``route``; write map, session and bag under ``out_dir``."""
+    from eddiebot.sim.ground_truth import cached_ground_truth
+    from eddiebot.slam.session import save_session
+
+    result = MappingResult(world)
+    context = Context(use_sim_time=True)
+    args = {"world": world, "seed": str(seed), "camera_width": str(camera[0]),
+            "camera_height": str(camera[1]), "camera_rate": str(camera[2])}
+    nodes: list[Node] = build_nodes(parse_launch_file(find_launch_file("slam"), args), context, NODES)
+    slam: Any = next(n for n in nodes if n.get_name() == "slam_toolbox")
+    sim = context.resources["simulator"]
+    result.start = tuple(float(v) for v in sim.world.start)  # type: ignore[assignment]
+    driver = RouteDriver(route, context=context)
+    nodes.append(driver)
+    truth: dict[int, tuple[float, float, float]] = {}
+    odom: list[tuple[int, tuple[float, float, float]]] = []
+    probe = Node("demo_probe", context=context)
+    probe.create_subscription(Odometry, "/ground_truth/odom",
+                              lambda m: truth.__setitem__(probe.get_clock().now_ns(), _pose_of(m)), 50)
+    probe.create_subscription(Odometry, "/odom", lambda m: odom.append((0, _pose_of(m))), 50)
+    nodes.append(probe)
+    if record:
+        from eddiebot.viz.bag import RecorderNode
+
+        bag = out_dir / "mapping_bag"
+        if bag.exists():
+            import shutil
+
+            shutil.rmtree(bag)
+        topics = ["/scan", "/odom", "/ground_truth/odom", "/tf", "/tf_static", "/map", "/cmd_vel",
+                  "/joint_states", "/eddie/ir/left", "/eddie/ir/center", "/eddie/ir/right",
+                  "/eddie/ping/left", "/eddie/ping/right", "/robot_description", "/sim/collisions"]
+        nodes.append(RecorderNode(context=context,
+                                  parameter_overrides={"output": str(bag), "topics": topics}))
+        result.bag = bag
+    executor = SingleThreadedExecutor(context=context)
+    for n in nodes:
+        executor.add_node(n)
+    t0 = time.perf_counter()
+    while not driver.done.is_set() and time.perf_counter() - t0 < wall_timeout_s:
+        executor.spin_for(1.0)
+    executor.spin_for(2.0)  # settle; let the last scans in
+    result.wall_seconds = time.perf_counter() - t0
+    result.sim_seconds = context.sim_clock.now_ns() / 1e9
+    result.finished = driver.done.is_set() and not driver.failed
+    result.distance_m = driver.distance
+    result.collisions = int(sim.collisions)
+    core = slam.core
+    result.nodes = len(core.nodes)
+    result.loop_closures = len(core.loop_closures)
+    # SLAM poses in the world: the map frame starts at the robot's start pose
+    start = np.array(result.start)
+    poses = core.node_poses()
+    stamps = np.array([n.scan.stamp_ns for n in core.nodes], dtype=np.int64)
+    truth_t = np.array(sorted(truth))
+    truth_p = np.array([truth[t] for t in truth_t])
+    if len(poses) and len(truth_t):
+        idx = np.clip(np.searchsorted(truth_t, stamps), 0, len(truth_t) - 1)
+        gt = truth_p[idx]
+        est = se2_compose(np.broadcast_to(start, poses.shape), poses)
+        err = np.hypot(est[:, 0] - gt[:, 0], est[:, 1] - gt[:, 1])
+        result.ate_rmse_m = float(np.sqrt(np.mean(err**2)))
+        result.ate_max_m = float(err.max())
+        result.slam_world, result.truth = est, truth_p
+        # end-point errors: wheel odometry alone vs SLAM
+        final_truth = truth_p[-1]
+        if odom:
+            o = se2_compose(start, np.array(odom[-1][1]))
+            result.odom_end_error_m = float(math.hypot(o[0] - final_truth[0], o[1] - final_truth[1]))
+            result.odom_world = se2_compose(np.broadcast_to(start, (len(odom), 3)),
+                                            np.array([p for _, p in odom]))
+        m2o = core.map_to_odom
+        last_odom = np.array(odom[-1][1]) if odom else np.zeros(3)
+        s_end = se2_compose(start, se2_compose(m2o, last_odom))
+        result.slam_end_error_m = float(math.hypot(s_end[0] - final_truth[0], s_end[1] - final_truth[1]))
+    core.update_map()
+    grid = core.occupancy_map()
+    result.grid = grid
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result.map_yaml = save_map(grid, out_dir / "office_map")
+    result.session = save_session(core, out_dir / "office_session.slam")
+    gt_maps = cached_ground_truth(sim.world)
+    result.agreement, result.agreement_tolerant = map_agreement(grid, gt_maps.scan, start)
+    for n in reversed(nodes):
+        n.destroy_node()
+    context.shutdown()
+    return result

@@ -1,0 +1,231 @@
+"""SLAM parameters: slam_toolbox's names and the upstream node's code defaults.
+
+Field defaults are what ``slam_toolbox`` uses when a parameter is not set (its node code,
+not its sample YAML; the two differ in a few places, e.g. ``minimum_distance_penalty``
+0.05 in code vs 0.5 in ``mapper_params_online_async.yaml``). ``config/slam_defaults.yaml``
+holds the sample YAML's values and ``config/slam.yaml`` Eddie's overrides.
+
+Fields after ``occupancy_threshold`` are eddiebot's own (no upstream counterpart): the
+pose-graph back end is GTSAM rather than Ceres, so the ``ceres_*`` keys are accepted and
+ignored, and ``optimizer`` / ``loop_robust_kernel`` choose the GTSAM set-up.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from eddiebot.slam.errors import ConfigError
+
+__all__ = ["SlamConfig", "SlamMode", "load_slam_config"]
+
+SlamMode = str  # "mapping" | "localization" | "lifelong"
+_MODES = ("mapping", "localization", "lifelong")
+_OPTIMIZERS = ("isam2", "levenberg_marquardt")
+_KERNELS = ("none", "huber", "cauchy", "dcs")
+
+
+@dataclass(frozen=True)
+class SlamConfig:
+    """2D SLAM parameters (distances m, angles rad, times s)."""
+
+    # --- node / ROS plumbing (used by the node, carried here so one file configures both)
+    solver_plugin: str = "solver_plugins::CeresSolver"
+    ceres_linear_solver: str = "SPARSE_NORMAL_CHOLESKY"
+    ceres_preconditioner: str = "SCHUR_JACOBI"
+    ceres_trust_strategy: str = "LEVENBERG_MARQUARDT"
+    ceres_dogleg_type: str = "TRADITIONAL_DOGLEG"
+    ceres_loss_function: str = "None"
+    odom_frame: str = "odom"
+    map_frame: str = "map"
+    base_frame: str = "base_footprint"
+    scan_topic: str = "/scan"
+    use_map_saver: bool = True
+    mode: str = "mapping"
+    map_file_name: str = ""
+    debug_logging: bool = False
+    throttle_scans: int = 1
+    transform_publish_period: float = 0.05
+    map_update_interval: float = 10.0
+    resolution: float = 0.05
+    max_laser_range: float = 25.0
+    minimum_time_interval: float = 0.5
+    transform_timeout: float = 0.5
+    tf_buffer_duration: float = 30.0
+    stack_size_to_use: int = 40_000_000
+    enable_interactive_mode: bool = False
+    # --- Karto mapper
+    use_scan_matching: bool = True
+    use_scan_barycenter: bool = True
+    minimum_travel_distance: float = 0.5
+    minimum_travel_heading: float = 0.5
+    scan_buffer_size: int = 10
+    scan_buffer_maximum_scan_distance: float = 10.0
+    link_match_minimum_response_fine: float = 0.1
+    link_scan_maximum_distance: float = 1.5
+    loop_search_maximum_distance: float = 3.0
+    do_loop_closing: bool = True
+    loop_match_minimum_chain_size: int = 10
+    loop_match_maximum_variance_coarse: float = 3.0
+    loop_match_minimum_response_coarse: float = 0.35
+    loop_match_minimum_response_fine: float = 0.45
+    correlation_search_space_dimension: float = 0.5
+    correlation_search_space_resolution: float = 0.01
+    correlation_search_space_smear_deviation: float = 0.1
+    loop_search_space_dimension: float = 8.0
+    loop_search_space_resolution: float = 0.05
+    loop_search_space_smear_deviation: float = 0.03
+    distance_variance_penalty: float = 0.5
+    angle_variance_penalty: float = 1.0
+    fine_search_angle_offset: float = 0.00349
+    coarse_search_angle_offset: float = 0.349
+    coarse_angle_resolution: float = 0.0349
+    minimum_angle_penalty: float = 0.9
+    minimum_distance_penalty: float = 0.05
+    use_response_expansion: bool = True
+    min_pass_through: int = 2
+    occupancy_threshold: float = 0.1
+    # --- eddiebot's own
+    optimizer: str = "isam2"
+    """``isam2`` (incremental, every node) or ``levenberg_marquardt`` (batch, on loop closure)."""
+    loop_robust_kernel: str = "dcs"
+    """Robust kernel on loop-closure edges: ``none``, ``huber``, ``cauchy`` or ``dcs``."""
+    loop_robust_kernel_width: float = 1.0
+    """Kernel width in whitened units (σ)."""
+    corridor_covariance_threshold: float = 0.01
+    """Warn when the scan-match variance along the weakest direction exceeds this (m²)."""
+    use_icp_refinement: bool = True
+    """Polish each correlative match with point-to-line ICP on the reference points."""
+    slip_search_dimension: float = 2.0
+    """Side (m) of the wide re-search after a weak or window-edge sequential match; 0 = off."""
+    lifelong_node_overlap: float = 0.9
+    """Lifelong mode retires an old node when this share of its cells is seen by a newer one."""
+    extra: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
+    """Parameters present in the file but not used by the core (kept for the node)."""
+
+    def __post_init__(self) -> None:
+        # A node that declares every field as a parameter hands ``extra`` back as None.
+        if self.extra is None:
+            object.__setattr__(self, "extra", {})
+
+    def validated(self) -> SlamConfig:
+        """Apply the node's fall-backs for non-positive values and check enumerations."""
+        changes: dict[str, Any] = {}
+        if self.scan_buffer_size <= 0:
+            changes["scan_buffer_size"] = 10
+        if self.scan_buffer_maximum_scan_distance**2 <= 1e-6:
+            changes["scan_buffer_maximum_scan_distance"] = 10.0
+        fallbacks = (
+            ("correlation_search_space_dimension", 0.5),
+            ("correlation_search_space_resolution", 0.01),
+            ("correlation_search_space_smear_deviation", 0.1),
+            ("loop_search_space_dimension", 8.0),
+            ("loop_search_space_resolution", 0.05),
+            ("loop_search_space_smear_deviation", 0.03),
+            ("resolution", 0.05),
+        )
+        changes.update({name: default for name, default in fallbacks if getattr(self, name) <= 0})
+        out = dataclasses.replace(self, **changes) if changes else self
+        if out.mode not in _MODES:
+            raise ConfigError(f"parameter 'mode' must be one of {_MODES}, got {out.mode!r}")
+        if out.optimizer not in _OPTIMIZERS:
+            raise ConfigError(
+                f"parameter 'optimizer' must be one of {_OPTIMIZERS}, got {out.optimizer!r}"
+            )
+        if out.loop_robust_kernel not in _KERNELS:
+            raise ConfigError(
+                f"parameter 'loop_robust_kernel' must be one of {_KERNELS}, got {out.loop_robust_kernel!r}"
+            )
+        for name in ("minimum_travel_distance", "minimum_travel_heading", "max_laser_range"):
+            value = getattr(out, name)
+            if not math.isfinite(value) or value < 0:
+                raise ConfigError(f"parameter '{name}' must be a finite value >= 0, got {value}")
+        return out
+
+    @classmethod
+    def from_parameters(cls, params: dict[str, Any], *, source: str = "<parameters>") -> SlamConfig:
+        """Build from a flat parameter dict; unknown keys go to ``extra``; types are checked."""
+        known = {f.name: f for f in fields(cls) if f.name != "extra"}
+        kwargs: dict[str, Any] = {}
+        extra: dict[str, Any] = {}
+        defaults = cls()
+        for key, value in params.items():
+            if key not in known:
+                extra[key] = value
+                continue
+            default = getattr(defaults, key)
+            kwargs[key] = _coerce(key, value, default, source)
+        return cls(**kwargs, extra=extra).validated()
+
+    def to_parameters(self) -> dict[str, Any]:
+        """Flat dict of every parameter (for writing the resolved set beside outputs)."""
+        out = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "extra"}
+        out.update(self.extra)
+        return out
+
+
+def _coerce(key: str, value: Any, default: Any, source: str) -> Any:
+    if isinstance(default, bool):
+        if isinstance(value, bool):
+            return value
+        raise ConfigError(f"{source}: parameter '{key}' must be true/false, got {value!r}")
+    if isinstance(default, int):
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        raise ConfigError(f"{source}: parameter '{key}' must be an integer, got {value!r}")
+    if isinstance(default, float):
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise ConfigError(f"{source}: parameter '{key}' must be a number, got {value!r}")
+    if isinstance(default, str):
+        if isinstance(value, str):
+            return value
+        raise ConfigError(f"{source}: parameter '{key}' must be a string, got {value!r}")
+    return value
+
+
+def load_slam_config(
+    path: str | os.PathLike[str] | None = None,
+    *,
+    node_name: str = "slam_toolbox",
+    overrides: dict[str, Any] | None = None,
+) -> SlamConfig:
+    """Read a ROS 2 parameter file (``node: {ros__parameters: {...}}`` or ``/**``).
+
+    Several files can be layered by calling ``from_parameters`` on merged dicts; here one
+    file plus ``overrides``. Errors name the file and the key.
+    """
+    params: dict[str, Any] = {}
+    source = "<overrides>"
+    if path is not None:
+        source = str(path)
+        try:
+            doc = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise ConfigError(f"{source}: cannot read: {exc.strerror or exc}") from exc
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{source}: not valid YAML: {exc}") from exc
+        if not isinstance(doc, dict):
+            raise ConfigError(f"{source}: expected '<node>: {{ros__parameters: ...}}'")
+        found = False
+        for name in ("/**", node_name, "/" + node_name):
+            section = doc.get(name)
+            if section is None:
+                continue
+            if not isinstance(section, dict) or not isinstance(
+                section.get("ros__parameters"), dict
+            ):
+                raise ConfigError(f"{source}: key '{name}' must hold a 'ros__parameters' mapping")
+            params.update(section["ros__parameters"])
+            found = True
+        if not found:
+            raise ConfigError(f"{source}: no section for node '{node_name}' (or '/**')")
+    if overrides:
+        params.update(overrides)
+    return SlamConfig.from_parameters(params, source=source)

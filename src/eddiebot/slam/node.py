@@ -1,0 +1,322 @@
+"""slam_toolbox's node: ``/scan`` + TF ``odom → base_footprint`` → ``/map`` and TF
+``map → odom``, on `SlamCore`.
+
+Parameters are slam_toolbox's names (every field of `SlamConfig`, declared with the
+upstream node's code defaults); ``mode`` is ``mapping``, ``localization`` or ``lifelong``
+(a saved session is loaded from ``map_file_name`` for the latter two). ``processing``
+chooses between slam_toolbox's sync node (every accepted scan, queued) and async node (the
+latest scan only; older ones are dropped while one is being processed).
+
+Services (under the node's name, as slam_toolbox): ``~/save_map`` (slam_toolbox/SaveMap:
+nav2 map_server files), ``~/serialize_map`` and ``~/deserialize_map`` (the session file),
+``~/pause_new_measurements`` (toggle), ``~/reset``, ``~/clear_queue``. The graph is published
+as markers on ``~/graph_visualization``.
+
+A scan is processed when the robot moved ``minimum_travel_distance`` **or** turned
+``minimum_travel_heading`` — in every mode (upstream's sync and localization modes ignore
+pure rotation; with a 57° Kinect scan, turning in place is how Eddie sees a room).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from eddiebot.core.node import Node
+from eddiebot.core.qos import QoSProfile, qos_profile_latched, qos_profile_sensor_data
+from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, make_transform_2d
+from eddiebot.core.time import stamp_to_ns
+from eddiebot.geometry import yaw_to_quaternion
+from eddiebot.maps import map_to_msg, save_map
+from eddiebot.msgs.geometry_msgs import Point
+from eddiebot.msgs.nav_msgs import MapMetaData, OccupancyGrid
+from eddiebot.msgs.sensor_msgs import LaserScan
+from eddiebot.msgs.slam_toolbox import (
+    ClearQueue,
+    DeserializePoseGraph,
+    Pause,
+    Reset,
+    SaveMap,
+    SerializePoseGraph,
+)
+from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
+from eddiebot.slam.config import SlamConfig
+from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning
+from eddiebot.slam.scan import Scan
+from eddiebot.slam.session import load_session, save_session
+
+__all__ = ["SlamNode"]
+
+_NODE_ONLY = {"extra"}
+
+
+class SlamNode(Node):
+    default_node_name = "slam_toolbox"
+
+    def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        values: dict[str, Any] = {}
+        for f in dataclasses.fields(SlamConfig):
+            if f.name in _NODE_ONLY:
+                continue
+            default = f.default if f.default is not dataclasses.MISSING else None
+            values[f.name] = self.declare_parameter(f.name, default).value
+        self.processing = str(self.declare_parameter("processing", "async").value)
+        if self.processing not in ("sync", "async"):
+            raise ValueError(f"{self.fully_qualified_name}: processing must be sync or async")
+        self.config = SlamConfig(**values).validated()
+        self._warned: set[str] = set()
+        if self.config.mode in ("localization", "lifelong") and self.config.map_file_name:
+            self.core = load_session(self.config.map_file_name, self.config, mode=self.config.mode)
+            self.core.on_warning = self._on_warning
+        else:
+            self.core = SlamCore(self.config, on_warning=self._on_warning)
+        self.paused = False
+        self._sensor_offset: tuple[str, np.ndarray] | None = None
+        self._scan_queue: deque[Any] = deque(maxlen=max(1, self.config.scan_buffer_size))
+        self._last_scan_ns: int | None = None
+        self._scan_count = 0
+        self._map_dirty = False
+        self.tf_buffer = Buffer(self.config.tf_buffer_duration, node=self)
+        self.tf_listener = TransformListener(self.tf_buffer, self)
+        self.tf_broadcaster = TransformBroadcaster(self)
+        self.map_pub = self.create_publisher(OccupancyGrid, "/map", qos_profile_latched)
+        self.meta_pub = self.create_publisher(MapMetaData, "/map_metadata", qos_profile_latched)
+        self.graph_pub = self.create_publisher(MarkerArray, "~/graph_visualization", 1)
+        depth = 1 if self.processing == "async" else max(1, self.config.scan_buffer_size)
+        self.create_subscription(
+            LaserScan,
+            self.config.scan_topic,
+            self._on_scan,
+            QoSProfile(depth=depth, reliability=qos_profile_sensor_data.reliability),
+        )
+        self.create_timer(self.config.transform_publish_period, self._publish_transform)
+        self.create_timer(0.02, self._drain)
+        self.create_timer(self.config.map_update_interval, self._publish_map)
+        self.create_service(SaveMap, "~/save_map", self._save_map)
+        self.create_service(SerializePoseGraph, "~/serialize_map", self._serialize)
+        self.create_service(DeserializePoseGraph, "~/deserialize_map", self._deserialize)
+        self.create_service(Pause, "~/pause_new_measurements", self._pause)
+        self.create_service(Reset, "~/reset", self._reset)
+        self.create_service(ClearQueue, "~/clear_queue", self._clear_queue)
+        self.get_logger().info(
+            f"slam in {self.config.mode} mode ({self.processing}), resolution {self.config.resolution} m"
+        )
+
+    # -- warnings --------------------------------------------------------------------------
+    def _on_warning(self, w: SlamWarning) -> None:
+        if w.kind == "corridor":
+            self.get_logger().warning(w.message)  # worth repeating: it is about this place
+            return
+        if w.kind not in self._warned:
+            self._warned.add(w.kind)
+            self.get_logger().warning(f"{w.message} (further '{w.kind}' warnings suppressed)")
+
+    def _warn_once(self, kind: str, text: str) -> None:
+        if kind not in self._warned:
+            self._warned.add(kind)
+            self.get_logger().warning(text)
+
+    # -- scans -----------------------------------------------------------------------------
+    def _sensor_pose(self, frame: str) -> np.ndarray | None:
+        if self._sensor_offset is not None and self._sensor_offset[0] == frame:
+            return self._sensor_offset[1]
+        try:
+            x, y, yaw = self.tf_buffer.lookup_pose2d(self.config.base_frame, frame, 0)
+        except Exception as exc:
+            self._warn_once(
+                "no_sensor_tf", f"no transform {self.config.base_frame} → {frame}: {exc}"
+            )
+            return None
+        offset = np.array([x, y, yaw])
+        self._sensor_offset = (frame, offset)
+        self.core.sensor_offset = offset
+        return offset
+
+    def _on_scan(self, msg: Any) -> None:
+        if self.paused:
+            return
+        self._scan_count += 1
+        if self.config.throttle_scans > 1 and self._scan_count % self.config.throttle_scans:
+            return
+        # tf2 MessageFilter's role: a scan waits (up to transform_timeout) for the odometry
+        # of its time, which may be published just after it
+        self._scan_queue.append(msg)
+        self._drain()
+
+    def _drain(self) -> None:
+        now = self.get_clock().now_ns()
+        timeout = round(self.config.transform_timeout * 1e9)
+        while self._scan_queue:
+            msg = self._scan_queue[0]
+            stamp = stamp_to_ns(msg.header.stamp)
+            if not self.tf_buffer.can_transform(
+                self.config.odom_frame, self.config.base_frame, stamp
+            ):
+                if now - stamp <= timeout:
+                    return  # wait for newer odometry
+                self._scan_queue.popleft()
+                self._warn_once(
+                    "no_odom_tf",
+                    f"no odometry at a scan's time within "
+                    f"transform_timeout {self.config.transform_timeout} s: scan dropped",
+                )
+                continue
+            self._scan_queue.popleft()
+            self._process(msg)
+
+    def _process(self, msg: Any) -> None:
+        stamp = stamp_to_ns(msg.header.stamp)
+        if self._last_scan_ns is not None:
+            if stamp < self._last_scan_ns:
+                self._warn_once(
+                    "time_backwards", "scan time went backwards (bag restarted?): skipped"
+                )
+                return
+            if stamp - self._last_scan_ns < self.config.minimum_time_interval * 1e9 * 0.999:
+                return
+        if self._sensor_pose(msg.header.frame_id) is None:
+            return
+        try:
+            odom = self.tf_buffer.lookup_pose2d(
+                self.config.odom_frame, self.config.base_frame, stamp
+            )
+        except Exception as exc:
+            self._warn_once("no_odom_tf", f"no odometry at the scan's time: {exc}")
+            return
+        scan = Scan.from_laser_scan(msg, stamp)
+        result = self.core.process(scan, np.array(odom), expected_beams=len(msg.ranges))
+        if result.status in (ProcessStatus.ADDED, ProcessStatus.LOCALIZED):
+            self._last_scan_ns = stamp
+            self._map_dirty = self._map_dirty or result.status == ProcessStatus.ADDED
+            if result.loop_closed:
+                self.get_logger().info(f"loop closed at node {result.node_id}")
+                self._map_dirty = True
+
+    # -- outputs ---------------------------------------------------------------------------
+    def _publish_transform(self) -> None:
+        x, y, th = (float(v) for v in self.core.map_to_odom)
+        # as slam_toolbox: stamped a little in the future so consumers never extrapolate
+        stamp = self.get_clock().now_ns() + round(self.config.transform_timeout * 1e9)
+        self.tf_broadcaster.sendTransform(
+            make_transform_2d(self.config.map_frame, self.config.odom_frame, stamp, x, y, th)
+        )
+
+    def _publish_map(self) -> None:
+        if not self._map_dirty and self.map_pub.sequence > 0:
+            return
+        if len(self.core.nodes) == 0:
+            return
+        self.core.update_map()
+        grid = self.core.occupancy_map()
+        msg = map_to_msg(grid, frame_id=self.config.map_frame, stamp_ns=self.get_clock().now_ns())
+        self.map_pub.publish(msg)
+        self.meta_pub.publish(msg.info)
+        self._map_dirty = False
+        self._publish_graph()
+
+    def _publish_graph(self) -> None:
+        poses = self.core.node_poses()
+        nodes = Marker(ns="slam_toolbox", id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
+        nodes.header.frame_id = self.config.map_frame
+        nodes.scale.x = nodes.scale.y = nodes.scale.z = 0.08
+        nodes.color.r, nodes.color.g, nodes.color.b, nodes.color.a = 0.1, 0.3, 1.0, 1.0
+        nodes.pose.orientation.w = 1.0
+        nodes.points = [Point(x=float(p[0]), y=float(p[1]), z=0.0) for p in poses]
+        edges = Marker(ns="slam_toolbox_edges", id=1, type=Marker.LINE_LIST, action=Marker.ADD)
+        edges.header.frame_id = self.config.map_frame
+        edges.scale.x = 0.02
+        edges.color.g, edges.color.a = 0.8, 0.8
+        edges.pose.orientation.w = 1.0
+        pts = []
+        for e in self.core.graph.edges:
+            a, b = poses[e.i], poses[e.j]
+            pts += [
+                Point(x=float(a[0]), y=float(a[1]), z=0.0),
+                Point(x=float(b[0]), y=float(b[1]), z=0.0),
+            ]
+        edges.points = pts
+        self.graph_pub.publish(MarkerArray(markers=[nodes, edges]))
+
+    # -- services --------------------------------------------------------------------------
+    def _save_map(self, req: Any, res: Any) -> Any:
+        name = str(req.name.data) or "map"
+        if len(self.core.nodes) == 0:
+            res.result = SaveMap.Response.RESULT_NO_MAP_RECEIEVD
+            return res
+        try:
+            self.core.update_map()
+            save_map(self.core.occupancy_map(), Path(name).expanduser())
+            res.result = SaveMap.Response.RESULT_SUCCESS
+            self.get_logger().info(f"saved the map to {name}.yaml / {name}.pgm")
+        except Exception as exc:
+            self.get_logger().error(f"save_map {name!r} failed: {exc}")
+            res.result = SaveMap.Response.RESULT_UNDEFINED_FAILURE
+        return res
+
+    def _serialize(self, req: Any, res: Any) -> Any:
+        try:
+            path = save_session(self.core, Path(str(req.filename)).expanduser())
+            self.get_logger().info(f"serialized the session to {path}")
+            res.result = SerializePoseGraph.Response.RESULT_SUCCESS
+        except Exception as exc:
+            self.get_logger().error(f"serialize_map {req.filename!r} failed: {exc}")
+            res.result = SerializePoseGraph.Response.RESULT_FAILED_TO_WRITE_FILE
+        return res
+
+    def _deserialize(self, req: Any, res: Any) -> Any:
+        try:
+            core = load_session(
+                Path(str(req.filename)).expanduser(), self.config, mode=self.config.mode
+            )
+        except Exception as exc:
+            self.get_logger().error(
+                f"deserialize_map {req.filename!r} failed: {exc}; kept the current session"
+            )
+            return res
+        core.on_warning = self._on_warning
+        if self._sensor_offset is not None:
+            core.sensor_offset = self._sensor_offset[1]
+        if req.match_type in (
+            DeserializePoseGraph.Request.START_AT_GIVEN_POSE,
+            DeserializePoseGraph.Request.LOCALIZE_AT_POSE,
+        ):
+            p = req.initial_pose
+            try:
+                odom = self.tf_buffer.lookup_pose2d(
+                    self.config.odom_frame, self.config.base_frame, 0
+                )
+            except Exception:
+                odom = (0.0, 0.0, 0.0)
+            core.set_initial_pose([p.x, p.y, p.theta], odom)
+        self.core = core
+        self._map_dirty = True
+        self.get_logger().info(f"loaded session {req.filename} ({len(core.nodes)} nodes)")
+        return res
+
+    def _pause(self, req: Any, res: Any) -> Any:
+        self.paused = not self.paused
+        res.status = True
+        self.get_logger().info(
+            "paused new measurements" if self.paused else "resumed new measurements"
+        )
+        return res
+
+    def _reset(self, req: Any, res: Any) -> Any:
+        self.core.clear()
+        self._last_scan_ns = None
+        self.paused = bool(req.pause_new_measurements)
+        self._map_dirty = True
+        res.result = Reset.Response.RESULT_SUCCESS
+        return res
+
+    def _clear_queue(self, req: Any, res: Any) -> Any:
+        res.status = True
+        return res
+
+    def map_to_odom_quaternion(self) -> tuple[float, float, float, float]:
+        return yaw_to_quaternion(float(self.core.map_to_odom[2]))

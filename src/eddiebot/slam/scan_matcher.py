@@ -1,0 +1,775 @@
+"""Correlative scan-to-map matching, multi-resolution (Olson 2009), with sub-cell refinement.
+
+A reference point set (the local map) is rasterised into a *correlation grid* whose cells hold
+``exp(-½ (d/σ)²)`` for the distance d to the nearest reference point (Karto's smear kernel,
+computed with a Euclidean distance transform; 0 beyond 2σ). A scan's response at a pose is the
+mean grid value under its end points (0..1, Karto's response scaled from 0..100).
+
+The search covers a translation window around the prior at the grid's resolution and
+headings ``prior ± coarse_search_angle_offset`` in ``coarse_angle_resolution`` steps.
+Translations are searched by branch and bound over precomputed max-pooled grids
+(Olson's multi-resolution idea in Cartographer's form: level h holds the maximum of the
+2^h × 2^h cells it covers, an upper bound on every finer candidate beneath it), so wide
+windows cost little. The best coarse candidate is refined on a fine angular step
+(``fine_search_angle_offset``) over ±½ coarse step and ±2 cells, then to sub-cell accuracy by
+Gauss–Newton on the bilinearly interpolated grid. Karto's distance/angle penalties are
+applied to candidate responses when ``penalize`` is set (sequential matching).
+
+The covariance follows Karto's recipe: the response-weighted spread of every translation
+candidate at the best heading whose response is within 0.1 of the best, floored and scaled by
+1/response; the heading variance likewise over the fine headings.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+import numpy.typing as npt
+from numba import njit
+
+from eddiebot.geometry import wrap_angle
+
+__all__ = [
+    "CorrelationGrid",
+    "MatchResult",
+    "MatcherParams",
+    "build_correlation_grid",
+    "match_scan",
+    "point_normals",
+    "pyramid_levels",
+    "refine_icp",
+    "score_pose",
+]
+
+FloatArray = npt.NDArray[np.float64]
+
+_MAX_LEVELS = 6
+
+
+@dataclass(frozen=True)
+class MatcherParams:
+    """One search set-up (slam_toolbox names in brackets)."""
+
+    search_dimension: float = 0.5
+    """Side of the square translation window, m [correlation_search_space_dimension]."""
+    resolution: float = 0.01
+    """Correlation grid cell, m [correlation_search_space_resolution]."""
+    smear_deviation: float = 0.1
+    """σ of the smear kernel, m [correlation_search_space_smear_deviation]."""
+    coarse_angle_offset: float = 0.349
+    """± heading range, rad [coarse_search_angle_offset]."""
+    coarse_angle_resolution: float = 0.0349
+    """Coarse heading step, rad [coarse_angle_resolution]."""
+    fine_angle_step: float = 0.00349
+    """Fine heading step, rad [fine_search_angle_offset]."""
+    penalize: bool = True
+    distance_variance_penalty: float = 0.5
+    angle_variance_penalty: float = 1.0
+    minimum_distance_penalty: float = 0.05
+    minimum_angle_penalty: float = 0.9
+    use_response_expansion: bool = True
+    refine: bool = True
+    """Sub-cell Gauss–Newton refinement after the discrete search."""
+
+
+@dataclass(frozen=True)
+class CorrelationGrid:
+    """Smeared likelihood of a reference point set, with its max-pooled pyramid.
+
+    ``levels[h][row, col]`` = max of ``levels[0]`` over rows row..row+2^h-1 and columns
+    col..col+2^h-1. Cell (0, 0)'s lower-left corner is at ``origin`` (map frame, m).
+    """
+
+    levels: tuple[npt.NDArray[np.float32], ...]
+    origin: tuple[float, float]
+    resolution: float
+
+    @property
+    def likelihood(self) -> npt.NDArray[np.float32]:
+        """The full-resolution grid (rows along y)."""
+        return self.levels[0]
+
+
+@dataclass(frozen=True)
+class MatchResult:
+    """Best pose (map frame, m/rad), its response (0..1) and covariance (3×3, m², rad²)."""
+
+    pose: FloatArray
+    response: float
+    covariance: FloatArray
+
+
+@njit(cache=True)
+def _splat(
+    grid: npt.NDArray[np.float32],
+    cols: npt.NDArray[np.int64],
+    rows: npt.NDArray[np.int64],
+    kernel: npt.NDArray[np.float32],
+) -> None:
+    """grid = max(grid, kernel centred on each (row, col)) — Karto's smear."""
+    h, w = grid.shape
+    k = kernel.shape[0] // 2
+    for i in range(cols.size):
+        c0 = cols[i]
+        r0 = rows[i]
+        for dr in range(-k, k + 1):
+            r = r0 + dr
+            if r < 0 or r >= h:
+                continue
+            for dc in range(-k, k + 1):
+                c = c0 + dc
+                if c < 0 or c >= w:
+                    continue
+                v = kernel[dr + k, dc + k]
+                if v > grid[r, c]:
+                    grid[r, c] = v
+
+
+def _smear_kernel(resolution: float, smear_deviation: float) -> npt.NDArray[np.float32]:
+    half = max(1, round(2.0 * smear_deviation / resolution))
+    d = np.arange(-half, half + 1, dtype=np.float64) * resolution
+    dist2 = d[None, :] ** 2 + d[:, None] ** 2
+    kernel = np.exp(-0.5 * dist2 / (smear_deviation * smear_deviation))
+    kernel[dist2 > (half * resolution) ** 2 + 1e-12] = 0.0
+    return kernel.astype(np.float32)
+
+
+def build_correlation_grid(
+    reference_points: FloatArray,
+    bounds: tuple[float, float, float, float],
+    resolution: float,
+    smear_deviation: float,
+    levels: int = 1,
+) -> CorrelationGrid:
+    """Rasterise reference points (N, 2, map frame) inside ``bounds`` = (xmin, ymin, xmax, ymax).
+
+    Each point's cell gets value 1 and its neighbours ``exp(-½ (d/σ)²)`` out to 2σ (max over
+    points). ``levels`` > 1 adds the max-pooled pyramid used by branch and bound.
+    """
+    xmin, ymin, xmax, ymax = bounds
+    margin = 2.0 * smear_deviation + resolution
+    xmin, ymin, xmax, ymax = xmin - margin, ymin - margin, xmax + margin, ymax + margin
+    width = max(1, math.ceil((xmax - xmin) / resolution))
+    height = max(1, math.ceil((ymax - ymin) / resolution))
+    like = np.zeros((height, width), dtype=np.float32)
+    pts = np.asarray(reference_points, dtype=np.float64)
+    if pts.size:
+        col = np.floor((pts[:, 0] - xmin) / resolution).astype(np.int64)
+        row = np.floor((pts[:, 1] - ymin) / resolution).astype(np.int64)
+        kernel = _smear_kernel(resolution, smear_deviation)
+        half = kernel.shape[0] // 2
+        ok = (col >= -half) & (col < width + half) & (row >= -half) & (row < height + half)
+        stride = width + 2 * half
+        cells = np.unique((row[ok] + half) * stride + (col[ok] + half))
+        _splat(like, cells % stride - half, cells // stride - half, kernel)
+    pyramid = [like]
+    for h in range(1, max(1, levels)):
+        k = 1 << h
+        kernel = np.ones((k, k), dtype=np.uint8)
+        pooled = cv2.dilate(
+            like, kernel, anchor=(0, 0), borderType=cv2.BORDER_CONSTANT, borderValue=0
+        )
+        pyramid.append(np.asarray(pooled, dtype=np.float32))
+    return CorrelationGrid(tuple(pyramid), (xmin, ymin), resolution)
+
+
+@njit(cache=True)
+def _score(
+    grid: npt.NDArray[np.float32],
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    dx: int,
+    dy: int,
+) -> float:
+    h, w = grid.shape
+    total = 0.0
+    for i in range(px.size):
+        c = px[i] + dx
+        r = py[i] + dy
+        if 0 <= c < w and 0 <= r < h:
+            total += grid[r, c]
+    return total / max(px.size, 1)
+
+
+@njit(cache=True)
+def _penalty(
+    dx: float, dy: float, dth: float, dvp: float, avp: float, mdp: float, map_: float
+) -> float:
+    dist_pen = 1.0 - 0.2 * (dx * dx + dy * dy) / dvp
+    if dist_pen < mdp:
+        dist_pen = mdp
+    ang_pen = 1.0 - 0.2 * dth * dth / avp
+    if ang_pen < map_:
+        ang_pen = map_
+    return dist_pen * ang_pen
+
+
+@njit(cache=True)
+def _branch_and_bound(
+    g0: npt.NDArray[np.float32],
+    g1: npt.NDArray[np.float32],
+    g2: npt.NDArray[np.float32],
+    g3: npt.NDArray[np.float32],
+    g4: npt.NDArray[np.float32],
+    g5: npt.NDArray[np.float32],
+    n_levels: int,
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    dth: npt.NDArray[np.float64],
+    window: int,
+    res: float,
+    penalize: bool,
+    dvp: float,
+    avp: float,
+    mdp: float,
+    map_: float,
+) -> tuple[int, int, int, float]:
+    """Best (angle index, dx, dy, penalised response) over the window, depth-first B&B."""
+    grids = (g0, g1, g2, g3, g4, g5)
+    top = n_levels - 1
+    step = 1 << top
+    n_ang = px.shape[0]
+    span = 2 * window + 1
+    n_side = (span + step - 1) // step
+    cap = n_ang * n_side * n_side + 8 * n_levels + 8
+    s_a = np.empty(cap, np.int64)
+    s_x = np.empty(cap, np.int64)
+    s_y = np.empty(cap, np.int64)
+    s_h = np.empty(cap, np.int64)
+    s_s = np.empty(cap, np.float64)
+    # top level candidates, sorted ascending so the best is popped first
+    n = 0
+    for a in range(n_ang):
+        for ix in range(n_side):
+            for iy in range(n_side):
+                dx = -window + ix * step
+                dy = -window + iy * step
+                s_a[n] = a
+                s_x[n] = dx
+                s_y[n] = dy
+                s_h[n] = top
+                s_s[n] = _score(grids[top], px[a], py[a], dx, dy)
+                n += 1
+    order = np.argsort(s_s[:n])
+    s_a[:n] = s_a[:n][order]
+    s_x[:n] = s_x[:n][order]
+    s_y[:n] = s_y[:n][order]
+    s_h[:n] = s_h[:n][order]
+    s_s[:n] = s_s[:n][order]
+    best_a, best_x, best_y, best_s = -1, 0, 0, 0.0
+    c_a = np.empty(4, np.int64)
+    c_x = np.empty(4, np.int64)
+    c_y = np.empty(4, np.int64)
+    c_s = np.empty(4, np.float64)
+    while n > 0:
+        n -= 1
+        a, x, y, h, s = s_a[n], s_x[n], s_y[n], s_h[n], s_s[n]
+        if s <= best_s:
+            continue
+        if h == 0:
+            if penalize:
+                s = s * _penalty(x * res, y * res, dth[a], dvp, avp, mdp, map_)
+            if s > best_s:
+                best_a, best_x, best_y, best_s = a, x, y, s
+            continue
+        half = 1 << (h - 1)
+        m = 0
+        for ox in (0, half):
+            for oy in (0, half):
+                cx = x + ox
+                cy = y + oy
+                if cx > window or cy > window:
+                    continue
+                c_a[m] = a
+                c_x[m] = cx
+                c_y[m] = cy
+                c_s[m] = _score(grids[h - 1], px[a], py[a], cx, cy)
+                m += 1
+        # push in ascending order of score
+        for _ in range(m):
+            k_min = -1
+            v_min = 1e300
+            for k in range(m):
+                if c_s[k] >= 0.0 and c_s[k] < v_min:
+                    v_min = c_s[k]
+                    k_min = k
+            if k_min < 0:
+                break
+            if v_min > best_s:
+                s_a[n] = c_a[k_min]
+                s_x[n] = c_x[k_min]
+                s_y[n] = c_y[k_min]
+                s_h[n] = h - 1
+                s_s[n] = v_min
+                n += 1
+            c_s[k_min] = -1.0
+    return best_a, best_x, best_y, best_s
+
+
+@njit(cache=True)
+def _response_block(
+    grid: npt.NDArray[np.float32],
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    x0: int,
+    y0: int,
+    n: int,
+    step: int,
+) -> npt.NDArray[np.float64]:
+    """Mean grid value under the points for translations x0 + step·ix, y0 + step·iy (n × n).
+
+    Loops run point → row → column so that each point reads short runs of one grid row
+    (cache-friendly; the naive candidate-major order is several times slower).
+    """
+    h, w = grid.shape
+    out = np.zeros((n, n))
+    for i in range(px.size):
+        for iy in range(n):
+            r = py[i] + y0 + step * iy
+            if r < 0 or r >= h:
+                continue
+            row = grid[r]
+            c = px[i] + x0
+            for ix in range(n):
+                if 0 <= c < w:
+                    out[ix, iy] += row[c]
+                c += step
+    inv = 1.0 / max(px.size, 1)
+    for ix in range(n):
+        for iy in range(n):
+            out[ix, iy] *= inv
+    return out
+
+
+@njit(cache=True)
+def _coarse_grid_search(
+    g0: npt.NDArray[np.float32],
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    dth: npt.NDArray[np.float64],
+    window: int,
+    step: int,
+    res: float,
+    penalize: bool,
+    dvp: float,
+    avp: float,
+    mdp: float,
+    map_: float,
+) -> tuple[int, int, int, float]:
+    """Karto's coarse pass: every heading, translations every ``step`` cells."""
+    best_a, best_x, best_y, best_s = -1, 0, 0, 0.0
+    n = 2 * (window // step) + 1
+    x0 = -(window // step) * step
+    for a in range(px.shape[0]):
+        block = _response_block(g0, px[a], py[a], x0, x0, n, step)
+        for ix in range(n):
+            for iy in range(n):
+                s = block[ix, iy]
+                if s <= best_s:
+                    continue
+                dx = x0 + step * ix
+                dy = x0 + step * iy
+                if penalize:
+                    s *= _penalty(dx * res, dy * res, dth[a], dvp, avp, mdp, map_)
+                if s > best_s:
+                    best_a, best_x, best_y, best_s = a, dx, dy, s
+    return best_a, best_x, best_y, best_s
+
+
+@njit(cache=True)
+def _exhaustive(
+    g0: npt.NDArray[np.float32],
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    dth: npt.NDArray[np.float64],
+    cx: int,
+    cy: int,
+    radius: int,
+    res: float,
+    penalize: bool,
+    dvp: float,
+    avp: float,
+    mdp: float,
+    map_: float,
+) -> npt.NDArray[np.float64]:
+    """Penalised responses (n_angles, 2r+1, 2r+1) around cell offset (cx, cy); [a, ix, iy]."""
+    n_ang = px.shape[0]
+    side = 2 * radius + 1
+    out = np.zeros((n_ang, side, side))
+    for a in range(n_ang):
+        block = _response_block(g0, px[a], py[a], cx - radius, cy - radius, side, 1)
+        for ix in range(side):
+            for iy in range(side):
+                s = block[ix, iy]
+                if penalize and s > 0.0:
+                    s *= _penalty(
+                        (cx - radius + ix) * res,
+                        (cy - radius + iy) * res,
+                        dth[a],
+                        dvp,
+                        avp,
+                        mdp,
+                        map_,
+                    )
+                out[a, ix, iy] = s
+    return out
+
+
+@njit(cache=True)
+def _bilinear(grid: npt.NDArray[np.float32], u: float, v: float) -> tuple[float, float, float]:
+    """Value and gradient (d/du, d/dv) at continuous cell coordinates (cell centres at k+0.5)."""
+    h, w = grid.shape
+    fu = u - 0.5
+    fv = v - 0.5
+    c0 = math.floor(fu)
+    r0 = math.floor(fv)
+    if c0 < 0 or r0 < 0 or c0 + 1 >= w or r0 + 1 >= h:
+        return 0.0, 0.0, 0.0
+    tu = fu - c0
+    tv = fv - r0
+    v00 = grid[r0, c0]
+    v01 = grid[r0, c0 + 1]
+    v10 = grid[r0 + 1, c0]
+    v11 = grid[r0 + 1, c0 + 1]
+    val = (1 - tv) * ((1 - tu) * v00 + tu * v01) + tv * ((1 - tu) * v10 + tu * v11)
+    du = (1 - tv) * (v01 - v00) + tv * (v11 - v10)
+    dv = (1 - tu) * (v10 - v00) + tu * (v11 - v01)
+    return val, du, dv
+
+
+@njit(cache=True)
+def _refine(
+    grid: npt.NDArray[np.float32],
+    pts: npt.NDArray[np.float64],
+    x: float,
+    y: float,
+    th: float,
+    ox: float,
+    oy: float,
+    res: float,
+    iterations: int,
+) -> tuple[float, float, float, float]:
+    """Gauss–Newton on Σ (1 - f(T p))² (Hector-style); returns pose and mean f."""
+    n = pts.shape[0]
+    for _ in range(iterations):
+        c = math.cos(th)
+        s = math.sin(th)
+        H = np.zeros((3, 3))
+        g = np.zeros(3)
+        for i in range(n):
+            px = pts[i, 0]
+            py = pts[i, 1]
+            wx = c * px - s * py + x
+            wy = s * px + c * py + y
+            val, du, dv = _bilinear(grid, (wx - ox) / res, (wy - oy) / res)
+            if val <= 0.0:
+                continue
+            gx = du / res
+            gy = dv / res
+            gth = gx * (-s * px - c * py) + gy * (c * px - s * py)
+            r = 1.0 - val
+            J0, J1, J2 = gx, gy, gth
+            g[0] += J0 * r
+            g[1] += J1 * r
+            g[2] += J2 * r
+            H[0, 0] += J0 * J0
+            H[0, 1] += J0 * J1
+            H[0, 2] += J0 * J2
+            H[1, 1] += J1 * J1
+            H[1, 2] += J1 * J2
+            H[2, 2] += J2 * J2
+        H[1, 0] = H[0, 1]
+        H[2, 0] = H[0, 2]
+        H[2, 1] = H[1, 2]
+        for k in range(3):
+            H[k, k] += 1e-9 + 1e-3 * H[k, k]
+        delta = np.linalg.solve(H, g)
+        x += delta[0]
+        y += delta[1]
+        th += delta[2]
+        if abs(delta[0]) < 1e-5 and abs(delta[1]) < 1e-5 and abs(delta[2]) < 1e-6:
+            break
+    c = math.cos(th)
+    s = math.sin(th)
+    total = 0.0
+    for i in range(n):
+        wx = c * pts[i, 0] - s * pts[i, 1] + x
+        wy = s * pts[i, 0] + c * pts[i, 1] + y
+        val, _, _ = _bilinear(grid, (wx - ox) / res, (wy - oy) / res)
+        total += val
+    return x, y, th, total / max(n, 1)
+
+
+def _cells_for_angles(
+    points: FloatArray, prior: FloatArray, thetas: FloatArray, grid: CorrelationGrid
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    c = np.cos(thetas)[:, None]
+    s = np.sin(thetas)[:, None]
+    wx = c * points[None, :, 0] - s * points[None, :, 1] + prior[0]
+    wy = s * points[None, :, 0] + c * points[None, :, 1] + prior[1]
+    px = np.floor((wx - grid.origin[0]) / grid.resolution).astype(np.int64)
+    py = np.floor((wy - grid.origin[1]) / grid.resolution).astype(np.int64)
+    return np.ascontiguousarray(px), np.ascontiguousarray(py)
+
+
+def _thin(points: FloatArray, cell: float) -> FloatArray:
+    """One point per ``cell``-sized square (the first in scan order)."""
+    if points.shape[0] < 2:
+        return points
+    keys = np.floor(points / cell).astype(np.int64)
+    _, first = np.unique(keys[:, 0] * 1_000_003 + keys[:, 1], return_index=True)
+    return np.ascontiguousarray(points[np.sort(first)])
+
+
+def score_pose(points: FloatArray, pose: FloatArray, grid: CorrelationGrid) -> float:
+    """Response (0..1) of scan points (sensor frame) at ``pose`` (map frame) on ``grid``."""
+    px, py = _cells_for_angles(points, np.asarray(pose, float), np.array([pose[2]], float), grid)
+    return float(_score(grid.likelihood, px[0], py[0], 0, 0))
+
+
+def _weighted_covariance(
+    values: FloatArray, coords: FloatArray, best: float, floor: FloatArray
+) -> FloatArray:
+    keep = values >= best - 0.1
+    w = values[keep]
+    c = coords[keep]
+    norm = float(w.sum())
+    if norm <= 1e-12:
+        return np.diag(floor)
+    mean = (w[:, None] * c).sum(axis=0) / norm
+    d = c - mean
+    cov = (w[:, None, None] * d[:, :, None] * d[:, None, :]).sum(axis=0) / norm
+    return cov + np.diag(floor)
+
+
+def match_scan(
+    points: FloatArray,
+    grid: CorrelationGrid,
+    prior: FloatArray,
+    params: MatcherParams,
+) -> MatchResult:
+    """Match scan end points (M, 2, sensor frame) to ``grid`` around ``prior`` (sensor pose).
+
+    With a single-level grid the translations are searched as Karto does (every second to
+    fourth cell, then every cell around the best); with a pyramid (`build_correlation_grid(levels=n)`,
+    n ≈ log2 of the window in cells) by branch and bound, exactly, at every cell.
+    """
+    prior = np.asarray(prior, dtype=np.float64)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    res = grid.resolution
+    if pts.shape[0] == 0:
+        return MatchResult(prior.copy(), 0.0, np.diag([1e3, 1e3, 1e3]))
+    window = max(1, round(0.5 * params.search_dimension / res))
+    levels = list(grid.levels[:_MAX_LEVELS])
+    while len(levels) < _MAX_LEVELS:
+        levels.append(levels[-1])
+    n_levels = min(len(grid.levels), _MAX_LEVELS)
+    offset = params.coarse_angle_offset
+    step = max(params.coarse_angle_resolution, 1e-6)
+    best = (-1, 0, 0, 0.0)
+    dth = np.zeros(1)
+    # The coarse pass scores a thinned point set (one point per half-σ cell): the smear
+    # makes nearby points nearly redundant there; fine pass, covariance and refinement use all.
+    coarse_pts = _thin(pts, max(0.5 * params.smear_deviation, 2.0 * res))
+    # Karto steps 2 cells; a wide smear (σ >= 10 cells) is smooth enough for up to 4, and the
+    # fine pass below covers ±(step/2 + 1) cells around the coarse best.
+    coarse_step = int(max(2, min(4, math.floor(params.smear_deviation / (2.5 * res)))))
+    for attempt in range(4 if params.use_response_expansion else 1):
+        n_half = math.floor(offset / step + 1e-9)
+        dth = step * np.arange(-n_half, n_half + 1, dtype=np.float64)
+        px, py = _cells_for_angles(coarse_pts, prior, prior[2] + dth, grid)
+        penalties = (
+            params.penalize,
+            params.distance_variance_penalty,
+            params.angle_variance_penalty,
+            params.minimum_distance_penalty,
+            params.minimum_angle_penalty,
+        )
+        if n_levels > 1:
+            best = _branch_and_bound(
+                levels[0],
+                levels[1],
+                levels[2],
+                levels[3],
+                levels[4],
+                levels[5],
+                n_levels,
+                px,
+                py,
+                dth,
+                window,
+                res,
+                *penalties,
+            )
+        else:
+            best = _coarse_grid_search(
+                grid.likelihood, px, py, dth, window, coarse_step, res, *penalties
+            )
+        if best[3] > 0.0 or attempt == 3:
+            break
+        offset += 0.349  # slam_toolbox widens by 20° per retry
+    a_idx, bx, by, coarse_score = best
+    if a_idx < 0:
+        return MatchResult(prior.copy(), 0.0, np.diag([1e3, 1e3, 1e3]))
+    # fine headings around the coarse best
+    fine = max(params.fine_angle_step, 1e-6)
+    n_fine = math.floor(0.5 * step / fine + 1e-9)
+    fdth = dth[a_idx] + fine * np.arange(-n_fine, n_fine + 1, dtype=np.float64)
+    fpx, fpy = _cells_for_angles(pts, prior, prior[2] + fdth, grid)
+    radius = coarse_step // 2 + 1 if n_levels == 1 else 1
+    resp = _exhaustive(
+        grid.likelihood,
+        fpx,
+        fpy,
+        fdth,
+        bx,
+        by,
+        radius,
+        res,
+        params.penalize,
+        params.distance_variance_penalty,
+        params.angle_variance_penalty,
+        params.minimum_distance_penalty,
+        params.minimum_angle_penalty,
+    )
+    fa, fix, fiy = np.unravel_index(int(np.argmax(resp)), resp.shape)
+    best_resp = float(resp[fa, fix, fiy])
+    dx = bx - radius + int(fix)
+    dy = by - radius + int(fiy)
+    pose = np.array([prior[0] + dx * res, prior[1] + dy * res, prior[2] + fdth[fa]])
+    # covariance: translation spread over the whole window at the best heading (thinned
+    # points: the spread, not the exact values, matters here)
+    cpx, cpy = _cells_for_angles(coarse_pts, prior, prior[2] + fdth[fa : fa + 1], grid)
+    full = _exhaustive(
+        grid.likelihood,
+        cpx,
+        cpy,
+        fdth[fa : fa + 1],
+        0,
+        0,
+        window,
+        res,
+        params.penalize,
+        params.distance_variance_penalty,
+        params.angle_variance_penalty,
+        params.minimum_distance_penalty,
+        params.minimum_angle_penalty,
+    )[0]
+    gx, gy = np.meshgrid(
+        np.arange(-window, window + 1) * res, np.arange(-window, window + 1) * res, indexing="ij"
+    )
+    coords = np.stack([gx.ravel(), gy.ravel()], axis=-1)
+    ref = float(full.max())
+    xy_cov = _weighted_covariance(full.ravel(), coords, ref, np.full(2, 0.1 * res * res))
+    ang_vals = resp[:, fix, fiy]
+    th_cov = _weighted_covariance(ang_vals, fdth[:, None], best_resp, np.array([0.1 * fine * fine]))
+    cov = np.zeros((3, 3))
+    cov[:2, :2] = xy_cov
+    cov[2, 2] = th_cov[0, 0]
+    cov /= max(best_resp, 1e-3)
+    if params.refine and best_resp > 0.0:
+        rx, ry, rth, rscore = _refine(
+            grid.likelihood, pts, pose[0], pose[1], pose[2], grid.origin[0], grid.origin[1], res, 10
+        )
+        # Trust the refinement near the discrete optimum (within one smear σ: the penalty can
+        # hold the discrete pose that far from the best fit) and only when it does not lose fit.
+        raw = score_pose(pts, pose, grid)
+        if (
+            math.hypot(rx - pose[0], ry - pose[1]) <= max(2.0 * res, params.smear_deviation)
+            and abs(rth - pose[2]) <= 0.5 * step
+            and rscore >= raw - 0.01
+        ):
+            pose = np.array([rx, ry, rth])
+    pose[2] = float(wrap_angle(pose[2]))
+    del coarse_score
+    return MatchResult(pose, best_resp, cov)
+
+
+def pyramid_levels(params: MatcherParams) -> int:
+    """Pyramid depth for a search window: 1 (plain grid search) for small windows, else ~log2."""
+    half = max(1, round(0.5 * params.search_dimension / params.resolution))
+    if half <= 40:
+        return 1
+    return max(1, min(_MAX_LEVELS, int(math.log2(2 * half + 1))))
+
+
+def point_normals(
+    points: FloatArray, tree: Any = None, neighbours: int = 6
+) -> FloatArray:
+    """Unit normals (M, 2) from a PCA of each point's nearest neighbours; NaN where the
+    neighbourhood is not line-like (corners, clutter)."""
+    from scipy.spatial import cKDTree
+
+    if points.shape[0] < neighbours:
+        return np.full(points.shape, np.nan)
+    kd = tree if tree is not None else cKDTree(points)
+    _, nn = kd.query(points, k=neighbours)
+    nb = points[nn]
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    cov = np.einsum("mki,mkj->mij", centred, centred)
+    vals, vecs = np.linalg.eigh(cov)
+    normals = vecs[:, :, 0].copy()
+    normals[~(vals[:, 0] < 0.1 * vals[:, 1] + 1e-12)] = np.nan
+    return normals
+
+
+def refine_icp(
+    points: FloatArray,
+    reference: FloatArray,
+    pose: FloatArray,
+    *,
+    max_distance: float = 0.2,
+    iterations: int = 10,
+    normal_neighbours: int = 6,
+    reference_normals: FloatArray | None = None,
+) -> tuple[FloatArray, float]:
+    """Point-to-line ICP from ``pose`` (sensor pose, map frame) onto reference points (map).
+
+    Normals come from a PCA of each reference point's nearest neighbours; pairs farther than
+    ``max_distance`` are ignored and the rest weighted by a Huber kernel (5 cm). Returns the
+    refined pose and the inlier share (0..1). The correlative search finds the basin; this
+    polishes the pose below the search grid's and the smear's resolution.
+    """
+    from scipy.spatial import cKDTree
+
+    pose = np.asarray(pose, dtype=np.float64).copy()
+    if points.shape[0] < 10 or reference.shape[0] < normal_neighbours + 1:
+        return pose, 0.0
+    tree = cKDTree(reference)
+    if reference_normals is None:
+        normals = point_normals(reference, tree, normal_neighbours)
+    else:
+        normals = reference_normals
+    planar = np.isfinite(normals[:, 0])
+    normals = np.where(planar[:, None], normals, 0.0)
+    inlier_share = 0.0
+    for _ in range(iterations):
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        wx = pose[0] + c * points[:, 0] - s * points[:, 1]
+        wy = pose[1] + s * points[:, 0] + c * points[:, 1]
+        world = np.stack([wx, wy], axis=-1)
+        dist, idx = tree.query(world, k=1, distance_upper_bound=max_distance)
+        ok = np.isfinite(dist)
+        ok[ok] &= planar[idx[ok]]
+        inlier_share = float(np.count_nonzero(ok)) / points.shape[0]
+        if np.count_nonzero(ok) < 10:
+            break
+        n = normals[idx[ok]]
+        q = reference[idx[ok]]
+        p = points[ok]
+        r = np.einsum("ij,ij->i", n, world[ok] - q)
+        # d(world)/d(theta) = R' p
+        dth = np.stack([-s * p[:, 0] - c * p[:, 1], c * p[:, 0] - s * p[:, 1]], axis=-1)
+        jac = np.column_stack([n[:, 0], n[:, 1], np.einsum("ij,ij->i", n, dth)])
+        w = np.minimum(1.0, 0.05 / np.maximum(np.abs(r), 1e-9))
+        h = jac.T @ (jac * w[:, None]) + 1e-9 * np.eye(3)
+        delta = -np.linalg.solve(h, jac.T @ (w * r))
+        pose += delta
+        if abs(delta[0]) < 1e-5 and abs(delta[1]) < 1e-5 and abs(delta[2]) < 1e-6:
+            break
+    pose[2] = float(wrap_angle(pose[2]))
+    return pose, inlier_share

@@ -1,0 +1,203 @@
+"""SlamCore: mapping a synthetic room, gating, bad input, localization, lifelong."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from slam_world import ROOM, SCAN_ANGLES, drifting_odometry, loop_path, raycast
+
+from eddiebot.maps import load_map, save_map
+from eddiebot.slam import ProcessStatus, Scan, SlamConfig, SlamCore, load_session, save_session
+
+CONFIG = SlamConfig(minimum_travel_distance=0.5, loop_match_minimum_chain_size=6)
+
+
+def _scan(pose: np.ndarray, stamp_ns: int) -> Scan:
+    return Scan(raycast(ROOM, pose, SCAN_ANGLES, 12.0), SCAN_ANGLES.copy(), 0.05, 12.0, stamp_ns)
+
+
+@pytest.fixture(scope="module")
+def mapped() -> tuple[SlamCore, np.ndarray, np.ndarray, list]:
+    truth = loop_path()
+    odom = drifting_odometry(truth)
+    core = SlamCore(CONFIG)
+    results = [
+        core.process(_scan(p, k * 100_000_000), o) for k, (p, o) in enumerate(zip(truth, odom))
+    ]
+    return core, truth, odom, results
+
+
+def test_mapping_tracks_truth_better_than_odometry(mapped) -> None:
+    core, truth, odom, results = mapped
+    added = [k for k, r in enumerate(results) if r.status is ProcessStatus.ADDED]
+    assert 30 < len(added) < len(truth)
+    est = core.node_poses()
+    err = np.hypot(*(est[:, :2] - truth[added, :2]).T)
+    odo_err = np.hypot(*(odom[added, :2] - truth[added, :2]).T)
+    assert odo_err.max() > 0.5
+    assert err.max() < 0.08
+    assert err.mean() < 0.04
+    assert err.max() < 0.1 * odo_err.max()
+    # map→odom maps the last odometry pose onto the estimate
+    last = results[added[-1]]
+    assert last.pose is not None
+    from eddiebot.geometry import se2_compose
+
+    assert np.allclose(se2_compose(last.map_to_odom, odom[added[-1]]), last.pose, atol=1e-9)
+
+
+def test_processing_rule_distance_or_heading(mapped) -> None:
+    core, truth, _, results = mapped
+    statuses = [r.status for r in results]
+    assert statuses[0] is ProcessStatus.ADDED
+    assert statuses[1] is ProcessStatus.NOT_MOVED  # 0.25 m < 0.5 m
+    # turning on the spot is processed (upstream's sync gate would refuse it)
+    core2 = SlamCore(CONFIG)
+    pose = np.array([5.0, 5.0, 0.0])
+    assert core2.process(_scan(pose, 0), pose).status is ProcessStatus.ADDED
+    turned = pose + np.array([0.0, 0.0, 0.6])
+    assert core2.process(_scan(turned, 1), turned).status is ProcessStatus.ADDED
+
+
+def test_occupancy_map_export(mapped, tmp_path) -> None:
+    core, *_ = mapped
+    grid = core.occupancy_map()
+    assert grid.resolution == CONFIG.resolution
+    # the wall at x = 12 is occupied, the robot's path free
+    from eddiebot.maps import world_to_map
+
+    c, r = world_to_map(grid, [11.99, 5.0])
+    assert grid.data[r - 1 : r + 2, c - 1 : c + 2].max() == 100
+    c, r = world_to_map(grid, [5.0, 5.0])
+    assert grid.data[r, c] == 0
+    yaml_path = save_map(grid, tmp_path / "room")
+    assert load_map(yaml_path).data.shape == grid.data.shape
+
+
+def test_bad_scans_are_skipped_with_one_warning_each() -> None:
+    seen = []
+    core = SlamCore(CONFIG, on_warning=seen.append)
+    pose = np.array([5.0, 5.0, 0.0])
+    assert core.process(_scan(pose, 1_000), pose).status is ProcessStatus.ADDED
+    moved = pose + np.array([1.0, 0.0, 0.0])
+    bad_cases = [
+        Scan(np.full(360, np.nan), SCAN_ANGLES, 0.05, 12.0, 2_000),
+        Scan(np.zeros(360), SCAN_ANGLES, 0.05, 12.0, 2_000),
+        Scan(np.full(360, np.inf), SCAN_ANGLES, 0.05, 12.0, 2_000),
+        Scan(np.ones(200), SCAN_ANGLES, 0.05, 12.0, 2_000),  # fewer ranges than angles
+        _scan(moved, 500),  # time went backwards
+    ]
+    for scan in bad_cases:
+        result = core.process(scan, moved)
+        assert result.status is ProcessStatus.SKIPPED
+        assert len(result.warnings) == 1
+    # fewer beams than announced
+    r = core.process(_scan(moved, 3_000), moved, expected_beams=720)
+    assert r.status is ProcessStatus.SKIPPED
+    assert "announced" in r.warnings[0].message
+    r = core.process(_scan(moved, 3_000), [np.nan, 0.0, 0.0])
+    assert r.status is ProcessStatus.SKIPPED
+    assert len(seen) == 7
+    assert len(core.nodes) == 1
+    assert len(core.graph) == 1
+    assert core.process(_scan(moved, 4_000), moved).status is ProcessStatus.ADDED
+    assert len(core.graph.edges) == 1
+
+
+def test_corridor_warning_hook() -> None:
+    from slam_world import CORRIDOR
+
+    seen = []
+    core = SlamCore(SlamConfig(corridor_covariance_threshold=0.002), on_warning=seen.append)
+    for k in range(4):
+        pose = np.array([10.0 + 0.5 * k, 1.0, 0.0])
+        r = raycast(CORRIDOR, pose, SCAN_ANGLES, 5.0)
+        core.process(Scan(r, SCAN_ANGLES.copy(), 0.05, 5.0, k), pose)
+    assert any(w.kind == "low_feature" for w in seen)
+
+
+def test_session_round_trip_and_localization(mapped, tmp_path) -> None:
+    core, truth, *_ = mapped
+    path = save_session(core, tmp_path / "room.eslam")
+    loaded = load_session(path)
+    assert np.allclose(loaded.node_poses(), core.node_poses())
+    assert len(loaded.graph.edges) == len(core.graph.edges)
+    assert [e.kind for e in loaded.graph.edges] == [e.kind for e in core.graph.edges]
+    for a, b in zip(loaded.nodes, core.nodes):
+        assert np.array_equal(a.scan.ranges, b.scan.ranges, equal_nan=True)
+        assert a.scan.stamp_ns == b.scan.stamp_ns
+    assert np.array_equal(loaded.occupancy_map().data, core.occupancy_map().data)
+    # localization: odometry starts at zero somewhere on the map
+    loc = load_session(path, mode="localization")
+    start = truth[10]
+    loc.set_initial_pose(start + np.array([0.1, -0.1, 0.05]))
+    nodes_before = len(loc.graph)
+    odom0 = np.zeros(3)
+    from eddiebot.geometry import se2_between, se2_compose
+
+    for k in (10, 14, 18):
+        odom = se2_compose(odom0, se2_between(start, truth[k]))
+        r = loc.process(_scan(truth[k], 10**9 + k), odom)
+        assert r.status is ProcessStatus.LOCALIZED
+        assert r.pose is not None
+        assert np.hypot(*(r.pose[:2] - truth[k, :2])) < 0.03
+    assert len(loc.graph) == nodes_before
+
+
+def test_lifelong_continues_and_retires(mapped, tmp_path) -> None:
+    core, truth, *_ = mapped
+    path = save_session(core, tmp_path / "room.eslam")
+    life = load_session(path, mode="lifelong")
+    n0 = len(life.graph)
+    life.set_initial_pose(truth[0])
+    for k in range(0, 20, 2):
+        from eddiebot.geometry import se2_between
+
+        life.process(_scan(truth[k], 10**9 + k), se2_between(truth[0], truth[k]))
+    assert len(life.graph) > n0
+    assert not life.active_mask().all()  # the old scans of the revisited stretch retired
+    assert np.hypot(*(life.node_poses()[-1, :2] - truth[18, :2])) < 0.05
+
+
+def test_corrupt_and_wrong_version_sessions(mapped, tmp_path) -> None:
+    import json
+    import zipfile
+
+    from eddiebot.slam import SessionError, SessionVersionError
+
+    core, *_ = mapped
+    bad = tmp_path / "bad.eslam"
+    bad.write_bytes(b"PK\x03\x04 not really a zip")
+    with pytest.raises(SessionError, match=r"bad\.eslam"):
+        load_session(bad)
+    good = save_session(core, tmp_path / "good.eslam")
+    newer = tmp_path / "newer.eslam"
+    with zipfile.ZipFile(good) as zin, zipfile.ZipFile(newer, "w") as zout:
+        header = json.loads(zin.read("header.json"))
+        header["version"] = 99
+        zout.writestr("header.json", json.dumps(header))
+        zout.writestr("arrays.npz", zin.read("arrays.npz"))
+    with pytest.raises(SessionVersionError, match="version 99"):
+        load_session(newer)
+    # a failed save leaves the previous file intact
+    before = good.read_bytes()
+    with pytest.raises(SessionError):
+        save_session(core, tmp_path / "missing-dir" / "good.eslam")
+    assert good.read_bytes() == before
+    truncated = tmp_path / "truncated.eslam"
+    truncated.write_bytes(before[: len(before) // 2])
+    with pytest.raises(SessionError):
+        load_session(truncated)
+
+
+def test_clear_forgets_everything(mapped) -> None:
+    core = SlamCore(CONFIG)
+    pose = np.array([5.0, 5.0, 0.0])
+    core.process(_scan(pose, 0), pose)
+    core.clear()
+    assert len(core.graph) == 0
+    assert core.nodes == []
+    assert np.allclose(core.map_to_odom, 0.0)
+    assert math.isclose(float(core.process(_scan(pose, 0), pose).map_to_odom[0]), 0.0, abs_tol=1e-9)

@@ -1,0 +1,111 @@
+"""Correlative scan matcher on synthetic scans: offsets, a Kinect-like scan, corridors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from slam_world import CORRIDOR, ROOM, raycast
+
+from eddiebot.geometry import se2_transform_points
+from eddiebot.slam import MatcherParams, build_correlation_grid, match_scan, score_pose
+from eddiebot.slam.scan_matcher import pyramid_levels
+
+
+def _points(
+    pose: np.ndarray, angles: np.ndarray, segments: np.ndarray = ROOM, max_range: float = 30.0
+) -> np.ndarray:
+    r = raycast(segments, pose, angles, max_range)
+    ok = np.isfinite(r)
+    return np.stack([r[ok] * np.cos(angles[ok]), r[ok] * np.sin(angles[ok])], axis=-1)
+
+
+def _grid_for(ref_world: np.ndarray, pts: np.ndarray, prior: np.ndarray, params: MatcherParams):
+    world = se2_transform_points(prior, pts)
+    half = 0.5 * params.search_dimension + 0.1
+    bounds = (
+        world[:, 0].min() - half,
+        world[:, 1].min() - half,
+        world[:, 0].max() + half,
+        world[:, 1].max() + half,
+    )
+    return build_correlation_grid(
+        ref_world, bounds, params.resolution, params.smear_deviation, pyramid_levels(params)
+    )
+
+
+def test_recovers_known_offset() -> None:
+    angles = np.linspace(-math.pi / 2, math.pi / 2, 361)
+    ref_pose = np.array([4.0, 3.5, 0.2])
+    true = np.array([4.3, 3.4, 0.25])
+    ref = se2_transform_points(ref_pose, _points(ref_pose, angles))
+    pts = _points(true, angles)
+    prior = true + np.array([0.15, -0.1, 0.08])  # inside the ±0.25 m / ±20° window
+    params = MatcherParams()  # slam_toolbox's sequential defaults
+    result = match_scan(pts, _grid_for(ref, pts, prior, params), prior, params)
+    err = result.pose - true
+    assert abs(err[0]) < 0.01
+    assert abs(err[1]) < 0.01
+    assert abs(err[2]) < math.radians(0.3)
+    assert result.response > 0.8
+    assert np.all(np.linalg.eigvalsh(result.covariance) > 0)
+
+
+def test_kinect_like_scan() -> None:
+    # 57° field of view, 4 m range, 320 beams: what depthimage_to_laserscan gives Eddie
+    angles = np.linspace(-math.radians(28.5), math.radians(28.5), 320)
+    # looking into the room's lower-right corner from 2.5 m, the reference scan taken nearby
+    ref_pose = np.array([10.2, 2.0, -0.5])
+    true = np.array([10.0, 1.6, -0.45])
+    ref_angles = np.linspace(-math.pi, math.pi, 720, endpoint=False)
+    ref = se2_transform_points(ref_pose, _points(ref_pose, ref_angles, max_range=4.0))
+    pts = _points(true, angles, max_range=4.0)
+    assert pts.shape[0] == 320
+    prior = true + np.array([-0.12, 0.1, -0.06])
+    params = MatcherParams()
+    result = match_scan(pts, _grid_for(ref, pts, prior, params), prior, params)
+    err = result.pose - true
+    assert math.hypot(err[0], err[1]) < 0.02
+    assert abs(err[2]) < math.radians(0.5)
+
+
+def test_wide_window_branch_and_bound_finds_large_offset() -> None:
+    angles = np.linspace(-math.pi / 2, math.pi / 2, 181)
+    true = np.array([8.0, 5.0, 1.9])
+    ref = se2_transform_points(
+        true, _points(true, np.linspace(-math.pi, math.pi, 720, endpoint=False))
+    )
+    pts = _points(true, angles)
+    prior = true + np.array([1.2, -0.9, 0.25])
+    params = MatcherParams(
+        search_dimension=6.0, resolution=0.05, smear_deviation=0.03, penalize=False
+    )
+    grid = _grid_for(ref, pts, prior, params)
+    assert len(grid.levels) > 1  # the pyramid is in use
+    result = match_scan(pts, grid, prior, params)
+    err = result.pose - true
+    assert math.hypot(err[0], err[1]) < 0.03
+    assert abs(err[2]) < math.radians(1.0)
+    assert score_pose(pts, result.pose, grid) > 0.9
+
+
+def test_corridor_covariance_is_long_along_the_corridor() -> None:
+    angles = np.linspace(-math.pi / 2, math.pi / 2, 181)
+    true = np.array([15.0, 1.0, 0.0])
+    ref = se2_transform_points(true, _points(true, angles, CORRIDOR, max_range=6.0))
+    pts = _points(true, angles, CORRIDOR, max_range=6.0)
+    params = MatcherParams()
+    result = match_scan(pts, _grid_for(ref, pts, true, params), true, params)
+    cov = result.covariance
+    assert cov[0, 0] > 5 * cov[1, 1]  # along x (the corridor) far less certain
+    w, v = np.linalg.eigh(cov[:2, :2])
+    assert abs(v[0, -1]) > 0.99  # the weakest direction is the corridor's axis
+    assert abs(result.pose[1] - true[1]) < 0.01
+
+
+def test_empty_inputs_return_prior() -> None:
+    prior = np.array([1.0, 2.0, 0.3])
+    grid = build_correlation_grid(np.zeros((0, 2)), (0.0, 0.0, 2.0, 2.0), 0.05, 0.05)
+    result = match_scan(np.array([[1.0, 0.0]]), grid, prior, MatcherParams())
+    assert np.allclose(result.pose, prior)
+    assert result.response == 0.0
