@@ -1,12 +1,16 @@
 """``eddie slam``: 2D SLAM.
 
+    eddie slam --world office [--rate N | --fast] [--seed S] [--dashboard]
     eddie slam replay FILE [--mode sync|async] [-o DIR] [--params YAML] [--strict]
+
+Without a sub-command it runs the simulator, Eddie's base stack, depthimage_to_laserscan and
+the SLAM node (slam_toolbox's parameters from ``config/slam.yaml``), ready for ``eddie
+teleop`` in another terminal; ``eddie map save NAME`` saves the map.
 
 ``replay`` runs the SLAM core over a CARMEN log (``.clf``, ``.log``, ``.log.gz``) and writes
 the map (nav2 ``.pgm`` + ``.yaml`` and a ``.png`` with the trajectory), the trajectory (TUM,
 one line per processed scan, stamped with the scan's time) and ``report.md``.
-rosbag2 input will come later. Live SLAM in the simulator (``eddie slam --world office``)
-will be a further sub-command beside ``replay``.
+rosbag2 input will come later.
 """
 
 from __future__ import annotations
@@ -22,7 +26,16 @@ HELP = "2D SLAM: replay a CARMEN log into a map, trajectory and report"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    sub = parser.add_subparsers(dest="slam_command", required=True)
+    from eddiebot.cli._stack import add_run_arguments
+
+    parser.add_argument("--world", default="office",
+                        help="simulator world for live SLAM (eddie world list), or a world file")
+    parser.add_argument("--camera", default="320x240@10",
+                        help="Kinect resolution and rate, WxH@HZ (default 320x240@10)")
+    parser.add_argument("--params", dest="live_params", type=Path, default=None,
+                        help="slam_toolbox parameter file (default: the package's config/slam.yaml)")
+    add_run_arguments(parser)
+    sub = parser.add_subparsers(dest="slam_command")
     rep = sub.add_parser("replay", help="run SLAM over a CARMEN log (.clf/.log/.log.gz)")
     rep.add_argument("file", type=Path, help="CARMEN log")
     rep.add_argument(
@@ -124,7 +137,19 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _live(args: argparse.Namespace) -> int:
+    from eddiebot.cli._stack import run_stack
+    from eddiebot.cli.sim import camera_args
+
+    launch_args = {"world": args.world, "seed": str(args.seed), **camera_args(args.camera)}
+    if args.live_params is not None:
+        launch_args["slam_params"] = str(args.live_params)
+    return run_stack(args, "slam", launch_args)
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.slam_command is None:
+        return _live(args)
     if args.slam_command == "replay":
         return _replay(args)
     print(f"eddie slam: unknown sub-command {args.slam_command!r}", file=sys.stderr)
