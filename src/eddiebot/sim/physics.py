@@ -15,6 +15,7 @@ counter increments once per contact (not per blocked step).
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from dataclasses import dataclass, replace
 from functools import lru_cache
 
@@ -276,26 +277,30 @@ class PeopleState:
 
 
 @lru_cache(maxsize=256)
-def _path_geometry(p: Person) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    pts = np.array(p.path + ((p.path[0],) if p.loop else ()), dtype=np.float64)
-    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
-    return pts, cum
+def _path_geometry(p: Person) -> tuple[tuple[tuple[float, float], ...], tuple[float, ...]]:
+    """The path's points (closed when looping) and cumulative arc lengths, as tuples: people
+    are stepped every physics tick, and tiny numpy arrays would cost more than the maths."""
+    pts = tuple((float(x), float(y)) for x, y in (*p.path, *((p.path[0],) if p.loop else ())))
+    cum = [0.0]
+    for (x0, y0), (x1, y1) in zip(pts[:-1], pts[1:]):
+        cum.append(cum[-1] + math.hypot(x1 - x0, y1 - y0))
+    return pts, tuple(cum)
 
 
 def _path_len(p: Person) -> npt.NDArray[np.float64]:
-    return _path_geometry(p)[1]
+    return np.asarray(_path_geometry(p)[1])
 
 
 def _pos_dir(p: Person, s: float) -> tuple[float, float, float, float]:
     """Point at arc length ``s`` and the unit direction of its segment."""
     pts, cum = _path_geometry(p)
-    s = s % cum[-1] if p.loop else min(max(s, 0.0), cum[-1])
-    i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(cum) - 2))
+    total = cum[-1]
+    s = s % total if p.loop else min(max(s, 0.0), total)
+    i = min(max(bisect_right(cum, s) - 1, 0), len(cum) - 2)
     seg = max(cum[i + 1] - cum[i], 1e-12)
     t = (s - cum[i]) / seg
-    a, b = pts[i], pts[i + 1]
-    ux, uy = (b[0] - a[0]) / seg, (b[1] - a[1]) / seg
-    return float(a[0] + t * (b[0] - a[0])), float(a[1] + t * (b[1] - a[1])), float(ux), float(uy)
+    (ax, ay), (bx, by) = pts[i], pts[i + 1]
+    return ax + t * (bx - ax), ay + t * (by - ay), (bx - ax) / seg, (by - ay) / seg
 
 
 def _pos(p: Person, s: float, offset: float = 0.0, direction: int = 1) -> tuple[float, float]:
@@ -333,7 +338,7 @@ def step_people(world: World, state: PeopleState, robot: RobotState, dt: float,
     s_out, d_out, w_out, o_out = [], [], [], []
     offsets = state.offset or (0.0,) * len(world.people)
     for i, p in enumerate(world.people):
-        total = _path_len(p)[-1]
+        total = _path_geometry(p)[1][-1]
         s, d, off = state.s[i], state.direction[i], offsets[i]
         ns = s + d * p.speed * dt
         nd = d

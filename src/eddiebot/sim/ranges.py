@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -163,7 +164,9 @@ def _cast_rays(ox: float, oy: float, oz: float, dirs: npt.NDArray[np.float64],
     return best
 
 
-def _beam(yaw: float, model: RangeModel) -> npt.NDArray[np.float64]:
+@lru_cache(maxsize=64)
+def _beam_at_zero(model: RangeModel) -> npt.NDArray[np.float64]:
+    """Unit ray directions of a round cone pointing along +x (computed once per model)."""
     n = max(1, model.rays)
     half = model.cone / 2
     angles = np.linspace(-half, half, n) if n > 1 else np.zeros(1)
@@ -172,9 +175,19 @@ def _beam(yaw: float, model: RangeModel) -> npt.NDArray[np.float64]:
         for el in angles:
             if az * az + el * el > half * half + 1e-12:
                 continue  # a round cone
-            out.append((math.cos(el) * math.cos(yaw + az), math.cos(el) * math.sin(yaw + az),
-                        math.sin(el)))
+            out.append((math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)))
     return np.array(out, dtype=np.float64)
+
+
+def _beam(yaw: float, model: RangeModel) -> npt.NDArray[np.float64]:
+    """The cone's rays turned to ``yaw`` (rad) about z."""
+    base = _beam_at_zero(model)
+    c, s = math.cos(yaw), math.sin(yaw)
+    out = np.empty_like(base)
+    out[:, 0] = c * base[:, 0] - s * base[:, 1]
+    out[:, 1] = s * base[:, 0] + c * base[:, 1]
+    out[:, 2] = base[:, 2]
+    return out
 
 
 def range_reading(world: World, robot_pose: npt.ArrayLike, mount: RangeMount,
