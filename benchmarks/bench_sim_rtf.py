@@ -16,12 +16,12 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import print_table, write_results  # noqa: E402
+from _common import print_table, write_results
 
-from eddiebot.core import Context, Node, SingleThreadedExecutor  # noqa: E402
-from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file  # noqa: E402
-from eddiebot.msgs.geometry_msgs import Twist  # noqa: E402
-from eddiebot.registry import NODES  # noqa: E402
+from eddiebot.core import Context, Node, SingleThreadedExecutor
+from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
+from eddiebot.msgs.geometry_msgs import Twist
+from eddiebot.registry import NODES
 
 CONFIGS = [
     ("Kinect 640x480 @ 30 Hz", {"camera_width": "640", "camera_height": "480", "camera_rate": "30"}, 2.5),
