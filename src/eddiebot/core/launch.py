@@ -252,6 +252,7 @@ def build_nodes(
     """
     nodes: list[Node] = []
     files: dict[Path, ParameterFile] = {}
+    claimed: set[tuple[Path, str]] = set()
     try:
         for spec in desc.nodes:
             overrides: list[ParameterOverride] = list(extra_overrides or [])
@@ -270,8 +271,18 @@ def build_nodes(
             # match file entries against the name we will get
             probe_name = spec.name or getattr(factory, "default_node_name", None) or spec.type.rsplit(".", 1)[-1]
             fqn = f"{('/' + spec.namespace.strip('/')) if spec.namespace.strip('/') else ''}/{probe_name}"
+            # Nav2's servers own inner nodes (the planner's global_costmap, ...) whose parameters
+            # a Nav2 file gives under their own node key: they become prefixed parameters here
+            nested: dict[str, str] = getattr(factory, "nested_parameter_nodes", {}) or {}
             for f in spec.param_files:
-                overrides.extend(o for o in files[f].overrides if node_matches(o.node_pattern, fqn))
+                for o in files[f].overrides:
+                    if node_matches(o.node_pattern, fqn):
+                        overrides.append(o)
+                    elif o.node_pattern.strip("/") in nested:
+                        prefix = nested[o.node_pattern.strip("/")]
+                        overrides.append(ParameterOverride(o.node_pattern, f"{prefix}.{o.name}", o.value, o.where))
+                for pattern in nested:
+                    claimed.add((f, pattern))
             overrides.extend(
                 ParameterOverride("/**", k, v, f"{spec.where} (inline param)") for k, v in spec.params.items()
             )
@@ -288,8 +299,10 @@ def build_nodes(
                     )
         # every node entry of every file must name a launched node
         fqns = [n.fully_qualified_name for n in nodes]
-        for pf in files.values():
+        for path, pf in files.items():
             for pattern in pf.node_patterns:
+                if (path, pattern.strip("/")) in claimed:
+                    continue
                 if not any(node_matches(pattern, q) for q in fqns):
                     line = next(o.where for o in pf.overrides if o.node_pattern == pattern)
                     raise LaunchError(f"{line}: parameter file names node {pattern!r}, which is not launched "

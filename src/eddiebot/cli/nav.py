@@ -1,0 +1,121 @@
+"""``eddie nav --map FILE.yaml [--world NAME]``: autonomous navigation.
+
+With ``--world`` the simulator, Eddie's base, localization and Nav2's servers run in one
+process on the sim clock (launch ``nav_sim``); without it the navigation alone joins the real
+robot's graph through the transport (launch ``nav``). The parameters file (``--params``,
+default config/nav2.yaml; config/nav2_report.yaml holds the report's values) is resolved
+into ``<run dir>/nav2_params.yaml`` with the costmaps folded into their servers, plus the
+initial pose for AMCL (``--initial-pose``; with ``--world`` the world's start pose by
+default, which is right for maps in the world frame; a map made by SLAM from the start pose
+needs ``--initial-pose 0 0 0``). Send goals with ``eddie goal X Y YAW``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from eddiebot.cli._stack import add_run_arguments, run_stack
+
+__all__ = ["HELP", "add_arguments", "resolve_params", "run"]
+
+HELP = "navigate on a map: the simulator with --world, else the real robot"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--map", required=True, type=Path, help="nav2 map YAML (or a SLAM "
+                        "session with --localization slam)")
+    parser.add_argument("--world", default=None, help="run in the simulator in this world")
+    parser.add_argument("--params", type=Path, default=None,
+                        help="Nav2 parameters file (default config/nav2.yaml)")
+    parser.add_argument("--localization", choices=("amcl", "slam"), default="amcl")
+    parser.add_argument("--initial-pose", type=float, nargs=3, metavar=("X", "Y", "YAW"),
+                        default=None, help="AMCL's initial pose in the map frame")
+    parser.add_argument("--camera", default="160x120@5",
+                        help="simulated Kinect WxH@HZ (default 160x120@5: enough for the scan)")
+    parser.add_argument("--run-dir", type=Path, default=None,
+                        help="where the resolved parameters are written (default a temp dir)")
+    add_run_arguments(parser)
+
+
+def default_params() -> Path:
+    from eddiebot.core.launch import package_share
+
+    return package_share() / "config" / "nav2.yaml"
+
+
+def resolve_params(source: Path, out_dir: Path, initial_pose: tuple[float, float, float] | None
+                   ) -> Path:
+    """Write the Nav2 parameters with the costmaps folded in (and AMCL's initial pose)."""
+    from eddiebot.nav.nodes._common import nest_nav2_params
+
+    doc: Any = yaml.safe_load(source.read_text()) or {}
+    doc = nest_nav2_params(doc)
+    if initial_pose is not None:
+        amcl = doc.setdefault("amcl", {}).setdefault("ros__parameters", {})
+        amcl["set_initial_pose"] = True
+        amcl["initial_pose"] = {"x": initial_pose[0], "y": initial_pose[1], "z": 0.0,
+                                "yaw": initial_pose[2]}
+    out_dir.mkdir(parents=True, exist_ok=True)
+    out = out_dir / "nav2_params.yaml"
+    tmp = out.with_suffix(".yaml.tmp")
+    tmp.write_text(f"# resolved from {source}\n" + yaml.safe_dump(doc, sort_keys=False))
+    tmp.replace(out)
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from eddiebot.cli.sim import camera_args
+
+    if not args.map.exists():
+        print(f"eddie nav: no map file {args.map}", file=sys.stderr)
+        return 2
+    params = args.params or default_params()
+    pose = tuple(args.initial_pose) if args.initial_pose else None
+    if pose is None and args.world is not None and args.localization == "amcl":
+        from eddiebot.sim.worlds import load_world
+
+        pose = tuple(load_world(args.world).start)
+    run_dir = args.run_dir or Path(tempfile.mkdtemp(prefix="eddie_nav_"))
+    try:
+        resolved = resolve_params(params, run_dir, pose)  # type: ignore[arg-type]
+    except (OSError, yaml.YAMLError) as exc:
+        print(f"eddie nav: {params}: {exc}", file=sys.stderr)
+        return 2
+    print(f"parameters: {resolved}", flush=True)
+    launch_args = {"map": str(args.map.resolve()), "params_file": str(resolved),
+                   "localization": args.localization}
+    if args.world is None:
+        return _run_real(args, launch_args)
+    launch_args.update({"world": args.world, "seed": str(args.seed), **camera_args(args.camera)})
+    return run_stack(args, "nav_sim", launch_args)
+
+
+def _run_real(args: argparse.Namespace, launch_args: dict[str, str]) -> int:
+    """The navigation alone, on the wall clock, joined to the robot's graph."""
+    from eddiebot.core.context import Context
+    from eddiebot.core.errors import ParameterError
+    from eddiebot.core.launch import (
+        LaunchError,
+        build_nodes,
+        connect_transport,
+        find_launch_file,
+        parse_launch_file,
+        spin_nodes,
+    )
+    from eddiebot.registry import NODES
+
+    context = Context(use_sim_time=False)
+    try:
+        nodes = build_nodes(parse_launch_file(find_launch_file("nav"), launch_args), context, NODES)
+    except (LaunchError, ParameterError) as exc:
+        print(f"eddie nav: {exc}", file=sys.stderr)
+        return 2
+    if not args.no_transport and not connect_transport(context):
+        print("eddie nav: no transport: cannot reach the robot", file=sys.stderr)
+    return spin_nodes(nodes, context, duration_s=args.duration)

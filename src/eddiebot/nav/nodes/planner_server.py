@@ -1,0 +1,178 @@
+"""nav2_planner: the planner server with its global costmap.
+
+Parameters as Nav2's ``planner_server`` (``planner_plugins`` list, each with ``plugin:``,
+``expected_planner_frequency``) plus the global costmap under the prefix
+``global_costmap.`` (Nav2's separate ``global_costmap/global_costmap`` node, folded in:
+see :func:`eddiebot.nav.nodes._common.nest_nav2_params`). Serves ``compute_path_to_pose``
+and ``compute_path_through_poses`` (nav2_msgs, Jazzy error codes from the typed planner
+failures), publishes ``/plan``, ``/global_costmap/costmap`` and ``costmap_raw``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from eddiebot.core.action import ActionServer, CancelResponse, ServerGoalHandle
+from eddiebot.core.lifecycle import State, TransitionCallbackReturn
+from eddiebot.core.tf import Buffer, TransformException, TransformListener
+from eddiebot.core.time import Duration
+from eddiebot.msgs.nav_msgs import Path
+from eddiebot.nav.costmap import LayeredCostmap, build_costmap
+from eddiebot.nav.errors import NavError, PlannerError, PlannerTFError
+from eddiebot.nav.nodes._common import NavServer, path_to_msg, pose_from_msg
+from eddiebot.nav.nodes._costmap import CostmapHost
+from eddiebot.nav.planners import GlobalPlanner, build_planners, get_planner
+
+__all__ = ["PlannerServer"]
+
+
+class PlannerServer(NavServer):
+    default_node_name = "planner_server"
+    #: parameter-file node entries this server takes in, under a parameter prefix (Nav2 runs
+    #: the costmap as its own node ``/global_costmap/global_costmap`` in this process)
+    nested_parameter_nodes = {"global_costmap/global_costmap": "global_costmap"}
+    PARAMETERS = {"expected_planner_frequency": 1.0, "planner_plugins": ["GridBased"],
+                  "costmap_update_timeout": 1.0}
+
+    def __init__(self, node_name: str = "planner_server", **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        self.planners: dict[str, GlobalPlanner] = {}
+        self.costmap: LayeredCostmap | None = None
+        self.host: CostmapHost | None = None
+        self.tf_buffer = Buffer(node=self)
+        self._listener: TransformListener | None = None
+        self._actions: list[ActionServer] = []
+        self._plan_pub: Any = None
+
+    def on_configure(self, state: State) -> TransitionCallbackReturn:
+        def build() -> None:
+            tree = self.params_tree()
+            cm_params = tree.pop("global_costmap", {}) or {}
+            self.planners = build_planners(tree, server=self.get_name())
+            self.costmap = build_costmap(cm_params, "global_costmap")
+            self.host = CostmapHost(self, self.costmap, "global_costmap", self.tf_buffer)
+            self._plan_pub = self.create_lifecycle_publisher(Path, "/plan", 1)
+        return self.configure_with(build)
+
+    def on_activate(self, state: State) -> TransitionCallbackReturn:
+        from eddiebot.msgs.nav2_msgs import ComputePathThroughPoses, ComputePathToPose
+
+        assert self.host is not None
+        self._listener = TransformListener(self.tf_buffer, self)
+        self.host.activate()
+        accept = self._cancel_ok
+        self._actions = [
+            ActionServer(self, ComputePathToPose, "compute_path_to_pose", self._to_pose,
+                         cancel_callback=accept),
+            ActionServer(self, ComputePathThroughPoses, "compute_path_through_poses",
+                         self._through_poses, cancel_callback=accept),
+        ]
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_deactivate(self, state: State) -> TransitionCallbackReturn:
+        for a in self._actions:
+            a.destroy()
+        self._actions = []
+        if self.host is not None:
+            self.host.deactivate()
+        if self._listener is not None:
+            self._listener.unregister()
+            self._listener = None
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_cleanup(self, state: State) -> TransitionCallbackReturn:
+        if self.host is not None:
+            self.host.destroy()
+        if self._plan_pub is not None:
+            self.destroy_lifecycle_publisher(self._plan_pub)
+        self.host = self.costmap = self._plan_pub = None
+        self.planners = {}
+        return TransitionCallbackReturn.SUCCESS
+
+    @staticmethod
+    def _cancel_ok(_handle: ServerGoalHandle) -> CancelResponse:
+        return CancelResponse.ACCEPT
+
+    # -- planning -----------------------------------------------------------------------------
+    def _in_global(self, pose_stamped: Any) -> npt.NDArray[np.float64]:
+        assert self.host is not None
+        p = pose_from_msg(pose_stamped.pose)
+        frame = pose_stamped.header.frame_id or self.host.global_frame
+        if frame == self.host.global_frame:
+            return p
+        try:
+            x, y, yaw = self.tf_buffer.lookup_pose2d(self.host.global_frame, frame, 0)
+        except TransformException as exc:
+            raise PlannerTFError(f"cannot transform {frame} to {self.host.global_frame}: {exc}") from exc
+        c, s = np.cos(yaw), np.sin(yaw)
+        return np.array([x + c * p[0] - s * p[1], y + s * p[0] + c * p[1], p[2] + yaw])
+
+    def _start(self, goal: Any) -> npt.NDArray[np.float64]:
+        assert self.host is not None
+        if goal.use_start:
+            return self._in_global(goal.start)
+        pose = self.host.robot_pose()
+        if pose is None:
+            raise PlannerTFError(f"no robot pose ({self.host.global_frame} -> {self.host.base_frame})")
+        return pose
+
+    def plan(self, start: npt.ArrayLike, goal: npt.ArrayLike, planner_id: str) -> npt.NDArray[np.float64]:
+        """One plan on the current global costmap (raises the typed planner failures)."""
+        assert self.host is not None and self.costmap is not None
+        planner = get_planner(self.planners, planner_id or next(iter(self.planners)))
+        self.host.update()
+        path = planner.create_plan(np.asarray(start), np.asarray(goal), self.costmap.master)
+        return np.asarray(path, dtype=np.float64).reshape(-1, 3)
+
+    def _finish(self, handle: ServerGoalHandle, result: Any, path: npt.NDArray[np.float64] | None,
+                err: NavError | None, t0: int) -> Any:
+        assert self.host is not None
+        result.planning_time = Duration(nanoseconds=self.now().nanoseconds - t0).to_msg()
+        if err is not None:
+            result.error_code = int(err.result_code or PlannerError.result_code)
+            result.error_msg = str(err)
+            self.get_logger().warning(f"planning failed: {err}")
+            handle.abort()
+            return result
+        assert path is not None
+        msg = path_to_msg(path, self.host.global_frame, self.now().nanoseconds)
+        result.path = msg
+        self._plan_pub.publish(msg)
+        handle.succeed()
+        return result
+
+    def _to_pose(self, handle: ServerGoalHandle) -> Any:
+        from eddiebot.msgs.nav2_msgs import ComputePathToPose
+
+        t0 = self.now().nanoseconds
+        goal = handle.request
+        result = ComputePathToPose.Result()
+        try:
+            path = self.plan(self._start(goal), self._in_global(goal.goal), goal.planner_id)
+        except NavError as err:
+            return self._finish(handle, result, None, err, t0)
+        return self._finish(handle, result, path, None, t0)
+
+    def _through_poses(self, handle: ServerGoalHandle) -> Any:
+        from eddiebot.msgs.nav2_msgs import ComputePathThroughPoses
+
+        t0 = self.now().nanoseconds
+        goal = handle.request
+        result = ComputePathThroughPoses.Result()
+        try:
+            if not goal.goals:
+                raise PlannerError("no goals given")
+            start = self._start(goal)
+            parts: list[npt.NDArray[np.float64]] = []
+            for g in goal.goals:
+                target = self._in_global(g)
+                seg = self.plan(start, target, goal.planner_id)
+                parts.append(seg if not parts else seg[1:])
+                start = target
+            path = np.concatenate(parts, axis=0)
+        except NavError as err:
+            return self._finish(handle, result, None, err, t0)
+        return self._finish(handle, result, path, None, t0)

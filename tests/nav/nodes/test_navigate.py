@@ -1,0 +1,110 @@
+"""The whole navigation stack (servers, velocity chain, BT navigator) around the stub robot."""
+
+import math
+
+from eddiebot.core.action import ActionClient, GoalStatus
+from eddiebot.msgs.nav2_msgs import NavigateToPose
+from eddiebot.nav.nodes._common import pose_stamped
+
+
+def wait_for(stack, future, limit_s=60.0, step=0.1):
+    t = 0.0
+    while not future.done() and t < limit_s:
+        stack.spin(step)
+        t += step
+    assert future.done(), f"no answer within {limit_s} s"
+    return future.result()
+
+
+def navigate(stack, x, y, yaw, limit_s=90.0, feedback=None):
+    client = ActionClient(stack.probe, NavigateToPose, "/navigate_to_pose")
+    handle = wait_for(stack, client.send_goal_async(
+        NavigateToPose.Goal(pose=pose_stamped(x, y, yaw, "map")),
+        feedback_callback=(feedback.append if feedback is not None else None)))
+    assert handle.accepted
+    return handle, wait_for(stack, handle.get_result_async(), limit_s)
+
+
+def test_reaches_goal_with_feedback(make_stack):
+    stack = make_stack()
+    assert stack.manager.system_active
+    fb = []
+    t0 = stack.probe.now().nanoseconds
+    _, res = navigate(stack, 4.5, 4.5, math.pi / 2, feedback=fb)
+    took = (stack.probe.now().nanoseconds - t0) * 1e-9
+    assert res.status == GoalStatus.STATUS_SUCCEEDED, res.result.error_msg
+    x, y, th = stack.robot.pose
+    assert math.hypot(x - 4.5, y - 4.5) < 0.25
+    assert abs(math.remainder(th - math.pi / 2, 2 * math.pi)) < 0.3
+    assert max(f.feedback.distance_remaining for f in fb) > 4.0
+    assert min(f.feedback.distance_remaining for f in fb) < 0.6
+    assert fb[-1].feedback.navigation_time.sec >= 5
+    print(f"reached in {took:.1f} s sim, {len(fb)} feedback messages")
+
+
+def test_goal_in_obstacle_aborts_promptly(make_stack):
+    stack = make_stack()
+    t0 = stack.probe.now().nanoseconds
+    _, res = navigate(stack, 3.0, 3.0, 0.0, limit_s=10.0)  # inside the box
+    took = (stack.probe.now().nanoseconds - t0) * 1e-9
+    assert res.status == GoalStatus.STATUS_ABORTED
+    assert res.result.error_code == 206, res.result.error_msg  # GOAL_OCCUPIED
+    assert took < 2.0
+    assert math.hypot(*(stack.robot.pose[:2] - stack.robot.start[:2])) < 0.05
+
+
+def test_goal_outside_map_aborts_promptly(make_stack):
+    stack = make_stack()
+    _, res = navigate(stack, 9.0, 1.0, 0.0, limit_s=10.0)
+    assert res.status == GoalStatus.STATUS_ABORTED
+    assert res.result.error_code == 204, res.result.error_msg  # GOAL_OUTSIDE_MAP
+    assert "outside" in res.result.error_msg.lower() or "bounds" in res.result.error_msg.lower()
+
+
+def test_cancel_stops_the_robot(make_stack):
+    stack = make_stack()
+    client = ActionClient(stack.probe, NavigateToPose, "/navigate_to_pose")
+    handle = wait_for(stack, client.send_goal_async(
+        NavigateToPose.Goal(pose=pose_stamped(4.5, 4.5, 0.0, "map"))))
+    stack.spin(4.0)
+    moved = math.hypot(*(stack.robot.pose[:2] - stack.robot.start[:2]))
+    assert moved > 0.2
+    cancel = wait_for(stack, handle.cancel_goal_async(), 5.0)
+    assert cancel.return_code == 0
+    res = wait_for(stack, handle.get_result_async(), 5.0)
+    assert res.status == GoalStatus.STATUS_CANCELED
+    stack.spin(2.0)
+    assert stack.robot.cmd == (0.0, 0.0)
+    here = stack.robot.pose.copy()
+    stack.spin(2.0)
+    assert math.hypot(*(stack.robot.pose[:2] - here[:2])) < 1e-6
+
+
+def test_navigate_through_poses(make_stack):
+    from eddiebot.msgs.nav2_msgs import NavigateThroughPoses
+
+    stack = make_stack()
+    client = ActionClient(stack.probe, NavigateThroughPoses, "/navigate_through_poses")
+    fb = []
+    goal = NavigateThroughPoses.Goal(poses=[pose_stamped(2.0, 1.0, 0.0, "map"),
+                                            pose_stamped(2.0, 4.8, 0.0, "map")])
+    handle = wait_for(stack, client.send_goal_async(goal, feedback_callback=fb.append))
+    res = wait_for(stack, handle.get_result_async(), 90.0)
+    assert res.status == GoalStatus.STATUS_SUCCEEDED, res.result.error_msg
+    assert math.hypot(stack.robot.pose[0] - 2.0, stack.robot.pose[1] - 4.8) < 0.25
+    assert max(f.feedback.distance_remaining for f in fb) > 4.0  # 1 m east + 3.8 m north
+
+
+def test_new_goal_preempts_running_one(make_stack):
+    stack = make_stack()
+    client = ActionClient(stack.probe, NavigateToPose, "/navigate_to_pose")
+    first = wait_for(stack, client.send_goal_async(
+        NavigateToPose.Goal(pose=pose_stamped(4.5, 4.5, 0.0, "map"))))
+    stack.spin(3.0)
+    second = wait_for(stack, client.send_goal_async(
+        NavigateToPose.Goal(pose=pose_stamped(2.0, 1.0, 0.0, "map"))))
+    r1 = wait_for(stack, first.get_result_async(), 5.0)
+    assert r1.status == GoalStatus.STATUS_ABORTED
+    r2 = wait_for(stack, second.get_result_async(), 60.0)
+    assert r2.status == GoalStatus.STATUS_SUCCEEDED
+    assert math.hypot(stack.robot.pose[0] - 2.0, stack.robot.pose[1] - 1.0) < 0.25

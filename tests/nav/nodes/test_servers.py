@@ -1,0 +1,118 @@
+"""Single servers: velocity smoother limits, collision monitor, lifecycle errors, lost TF."""
+
+import math
+
+from eddiebot.core import Context, Node, SingleThreadedExecutor
+from eddiebot.core.action import ActionClient, GoalStatus
+from eddiebot.msgs.geometry_msgs import Twist
+from eddiebot.msgs.nav2_msgs import ComputePathToPose, FollowPath
+from eddiebot.nav.nodes._common import pose_stamped
+from eddiebot.nav.nodes.controller_server import ControllerServer
+from eddiebot.nav.nodes.velocity_smoother import VelocitySmootherNode
+
+
+def _twist(vx, wz=0.0):
+    t = Twist()
+    t.linear.x, t.angular.z = vx, wz
+    return t
+
+
+def test_velocity_smoother_obeys_accel_limits():
+    ctx = Context(use_sim_time=True)
+    ex = SingleThreadedExecutor(context=ctx)
+    node = VelocitySmootherNode(context=ctx, remappings={"/cmd_vel": "/cmd_vel_nav"},
+                                parameter_overrides={"max_accel": [0.8, 0.0, 2.0],
+                                                     "max_decel": [-1.0, 0.0, -2.5],
+                                                     "max_velocity": [0.5, 0.0, 1.5],
+                                                     "min_velocity": [-0.3, 0.0, -1.5]})
+    probe = Node("probe", context=ctx)
+    out = []
+    probe.create_subscription(Twist, "/cmd_vel_smoothed", out.append, 100)
+    pub = probe.create_publisher(Twist, "/cmd_vel_nav", 10)
+    for n in (node, probe):
+        ex.add_node(n)
+    assert node.trigger_configure() == 97 and node.trigger_activate() == 97
+    for _ in range(40):  # 2 s of a 1 m/s, 3 rad/s request
+        pub.publish(_twist(1.0, 3.0))
+        ex.spin_for(0.05)
+    vx = [m.linear.x for m in out]
+    wz = [m.angular.z for m in out]
+    assert max(vx) == 0.5 and max(wz) == 1.5  # clamped to max_velocity
+    steps = [b - a for a, b in zip(vx, vx[1:])]
+    assert max(steps) <= 0.8 / 20 + 1e-9  # accel 0.8 m/s² at 20 Hz
+    assert max(b - a for a, b in zip(wz, wz[1:])) <= 2.0 / 20 + 1e-9
+    n = len(out)
+    for _ in range(20):
+        pub.publish(_twist(0.0))
+        ex.spin_for(0.05)
+    down = [m.linear.x for m in out[n - 1:]]
+    assert min(b - a for a, b in zip(down, down[1:])) >= -1.0 / 20 - 1e-9
+    assert down[-1] == 0.0
+    ctx.shutdown()
+
+
+def test_velocity_smoother_warns_about_slow_smoothing():
+    ctx = Context(use_sim_time=True)
+    node = VelocitySmootherNode(context=ctx, parameter_overrides={"smoothing_frequency": 1.0})
+    assert node.trigger_configure() == 97
+    assert any("stale-command timeout 0.5" in w for w in node.warnings)
+    ctx.shutdown()
+
+
+def test_bad_parameter_fails_configure_naming_server_and_key():
+    ctx = Context(use_sim_time=True)
+    node = VelocitySmootherNode(context=ctx, parameter_overrides={"max_decel": [2.5, 0.0, -3.2]})
+    assert node.trigger_configure() == 98  # FAILURE
+    assert node.current_state.label == "unconfigured"
+    assert "velocity_smoother" in node.last_error and "max_decel" in node.last_error
+    ctrl = ControllerServer(context=ctx, parameter_overrides={
+        "controller_plugins": ["FollowPath"], "FollowPath.plugin": "nav2_nope::Nope"})
+    assert ctrl.trigger_configure() == 98
+    assert "controller_server" in ctrl.last_error and "FollowPath.plugin" in ctrl.last_error
+    ctx.shutdown()
+
+
+def test_collision_monitor_stops_before_obstacle(make_stack):
+    # No box: drive straight at the east wall with teleop-like commands into the chain.
+    stack = make_stack(servers=("velocity_smoother", "collision_monitor"), start=(3.0, 3.0, 0.0),
+                       box=None)
+    pub = stack.probe.create_publisher(Twist, "/cmd_vel_nav", 10)
+    for _ in range(150):  # 15 s at 0.4 m/s would cross the wall
+        pub.publish(_twist(0.4))
+        stack.spin(0.1)
+    x = stack.robot.pose[0]
+    wall = 6.0 - 0.1  # inner face of the east wall
+    assert x < wall - 0.23  # the footprint (r 0.23 m) never touched the wall
+    assert wall - x < 0.6  # it drove most of the way first
+    assert stack.nodes["collision_monitor"].last_action == "StopCircle"
+    assert stack.robot.cmd == (0.0, 0.0)
+
+
+def test_lost_tf_makes_the_controller_publish_zero(make_stack):
+    stack = make_stack(servers=("map_server", "planner_server", "controller_server"))
+    cmds = []
+    stack.probe.create_subscription(Twist, "/cmd_vel_nav", cmds.append, 100)
+    plan = ActionClient(stack.probe, ComputePathToPose, "/compute_path_to_pose")
+    follow = ActionClient(stack.probe, FollowPath, "/follow_path")
+    fut = plan.send_goal_async(ComputePathToPose.Goal(goal=pose_stamped(4.5, 1.0, 0.0, "map")))
+    stack.spin(0.5)
+    res = fut.result().get_result_async()
+    stack.spin(0.5)
+    path = res.result().result.path
+    # Drive the stub from the controller directly.
+    stack.robot.destroy_subscription(stack.robot.subscriptions[-1])
+    stack.robot.create_subscription(Twist, "/cmd_vel_nav", stack.robot._on_cmd, 10)
+    h = follow.send_goal_async(FollowPath.Goal(path=path))
+    stack.spin(3.0)
+    assert any(abs(c.linear.x) > 0.1 for c in cmds)
+    stack.robot.publish_tf = False
+    n = len(cmds)
+    stack.spin(1.5)
+    assert cmds[-1].linear.x == 0.0 and cmds[-1].angular.z == 0.0
+    assert len(cmds) > n
+    result = h.result().get_result_async()
+    stack.spin(0.2)
+    assert result.result().status == GoalStatus.STATUS_ABORTED
+    assert result.result().result.error_code == 102  # TF_ERROR
+    assert stack.robot.cmd == (0.0, 0.0)
+    _ = math
