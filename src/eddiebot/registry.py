@@ -24,6 +24,7 @@ NODES: dict[str, str] = {
     "eddiebot.sim.simulator": "eddiebot.sim.node:SimulatorNode",
     "eddiebot.perception.depth_to_scan": "eddiebot.perception.node:DepthToScanNode",
     "eddiebot.perception.depth_to_cloud": "eddiebot.perception.node:DepthToCloudNode",
+    "eddiebot.perception.image_compressor": "eddiebot.perception.compress:ImageCompressorNode",
     "eddiebot.robot.kinect": "eddiebot.robot.kinect:KinectNode",
     # mapping and navigation
     "eddiebot.slam.slam_toolbox": "eddiebot.slam.node:SlamNode",

@@ -72,10 +72,12 @@ def _stage_mapping(out: Path, report: Report, seed: int) -> bool:
     from eddiebot.viz.snapshot import render_map
 
     print("== stage mapping: 2D SLAM of the office world on the Kinect-made scan ==", flush=True)
-    r = run_mapping(out, seed=seed)
+    r = run_mapping(out, seed=seed, dashboard=True)
     print(f"drove {r.distance_m:.1f} m in {r.sim_seconds:.0f} s simulated ({r.wall_seconds:.0f} s wall, "
           f"{r.sim_seconds / max(r.wall_seconds, 1e-9):.1f}× real time); {r.nodes} graph nodes, "
           f"{r.loop_closures} loop closures, {r.collisions} collisions")
+    print(f"wheel odometry drift against ground truth: {r.odom_end_error_m:.3f} m after {r.distance_m:.1f} m "
+          f"({100 * r.odom_end_error_m / max(r.distance_m, 1e-9):.2f} % of distance)")
     print(f"SLAM trajectory error: RMSE {r.ate_rmse_m:.3f} m, max {r.ate_max_m:.3f} m; "
           f"end point: SLAM {r.slam_end_error_m:.3f} m, wheel odometry {r.odom_end_error_m:.3f} m")
     print(f"map agreement with the ground truth (cells both call known): {100 * r.agreement:.1f} % "

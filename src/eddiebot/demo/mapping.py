@@ -102,7 +102,8 @@ def _pose_of(msg: Any) -> tuple[float, float, float]:
 
 def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ...] = OFFICE_ROUTE,
                 seed: int = 0, camera: tuple[int, int, float] = (320, 240, 10.0),
-                record: bool = True, wall_timeout_s: float = 900.0) -> MappingResult:
+                record: bool = True, wall_timeout_s: float = 900.0,
+                dashboard: bool = False) -> MappingResult:
     """Map ``world`` along ``route``; write map, session and bag under ``out_dir``."""
     from eddiebot.sim.ground_truth import cached_ground_truth
     from eddiebot.slam.session import save_session
@@ -132,15 +133,30 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
             import shutil
 
             shutil.rmtree(bag)
+        from eddiebot.perception.compress import ImageCompressorNode
+
+        # RGB-D at 2 Hz, compressed (raw 30 Hz RGB-D would be 46 MB per simulated second)
+        nodes.append(ImageCompressorNode(context=context, parameter_overrides={"max_rate": 2.0}))
         topics = ["/scan", "/odom", "/ground_truth/odom", "/tf", "/tf_static", "/map", "/cmd_vel",
                   "/joint_states", "/eddie/ir/left", "/eddie/ir/center", "/eddie/ir/right",
-                  "/eddie/ping/left", "/eddie/ping/right", "/robot_description", "/sim/collisions"]
+                  "/eddie/ping/left", "/eddie/ping/right", "/robot_description", "/sim/collisions",
+                  "/image_raw/compressed", "/depth/image_raw/compressedDepth", "/camera_info",
+                  "/depth/camera_info"]
         nodes.append(RecorderNode(context=context,
                                   parameter_overrides={"output": str(bag), "topics": topics}))
         result.bag = bag
     executor = SingleThreadedExecutor(context=context)
     for n in nodes:
         executor.add_node(n)
+    handle = None
+    if dashboard:
+        try:
+            from eddiebot.viz.dashboard import start_dashboard
+
+            handle = start_dashboard(context, "127.0.0.1", 0, print_url=False)
+            print(f"watch it live (fast-forward): {handle.url}", flush=True)
+        except Exception as exc:  # the demo goes on without a viewer
+            print(f"(no dashboard: {exc})")
     t0 = time.perf_counter()
     while not driver.done.is_set() and time.perf_counter() - t0 < wall_timeout_s:
         executor.spin_for(1.0)
@@ -186,6 +202,8 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
     result.session = save_session(core, out_dir / "office_session.slam")
     gt_maps = cached_ground_truth(sim.world)
     result.agreement, result.agreement_tolerant = map_agreement(grid, gt_maps.scan, start)
+    if handle is not None:
+        handle.stop()
     for n in reversed(nodes):
         n.destroy_node()
     context.shutdown()
