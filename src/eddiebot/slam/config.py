@@ -104,6 +104,33 @@ class SlamConfig:
     """Polish each correlative match with point-to-line ICP on the reference points."""
     slip_search_dimension: float = 2.0
     """Side (m) of the wide re-search after a weak or window-edge sequential match; 0 = off."""
+    slip_search_maximum_sigmas: float = 0.0
+    """Reject a wide re-search result farther than this many odometry σ (Mahalanobis, under
+    the odometry noise model below) from the odometry prediction, or not well constrained in
+    every direction (variance above ``corridor_covariance_threshold``); 0 = neither check."""
+    odometry_translation_sigma: float = 0.02
+    """Odometry noise model: translation σ (m) per step, plus ``odometry_translation_noise``
+    times the distance travelled."""
+    odometry_translation_noise: float = 0.1
+    """Odometry translation σ per metre travelled (m/m)."""
+    odometry_rotation_sigma: float = 0.02
+    """Odometry heading σ (rad) per step, plus ``odometry_rotation_noise`` times the turn and
+    ``odometry_rotation_noise_per_meter`` times the distance."""
+    odometry_rotation_noise: float = 0.1
+    """Odometry heading σ per radian turned (rad/rad)."""
+    odometry_rotation_noise_per_meter: float = 0.05
+    """Odometry heading σ per metre travelled (rad/m)."""
+    match_coarse_heading_variance: bool = False
+    """Sequential matches take their heading variance from every coarse heading (how well
+    the scan fits several degrees off), not only from the fine steps beside the best."""
+    fuse_odometry: bool = False
+    """Fuse each sequential match with odometry by information (under the noise model above):
+    a match constrains the pose only along the directions it observes well (variance below
+    ``corridor_covariance_threshold``); odometry fills in the rest (e.g. along a corridor).
+    Off: the match alone sets the pose (slam_toolbox's behaviour)."""
+    loop_match_maximum_variance_fine: float = 0.0
+    """Reject a loop closure whose fine match has a position variance (m², along its weakest
+    direction) above this: an aliased corridor match constrains only one direction; 0 = off."""
     lifelong_node_overlap: float = 0.9
     """Lifelong mode retires an old node when this share of its cells is seen by a newer one."""
     extra: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)

@@ -8,7 +8,9 @@ counts if it holds at least ``loop_match_minimum_chain_size`` nodes.
 Verification: a coarse match over the loop search window (``loop_search_space_*``, no
 penalty) must give a response > ``loop_match_minimum_response_coarse`` with x and y variances
 < ``loop_match_maximum_variance_coarse``; a fine match (sequential parameters, no penalty)
-started from the coarse pose must reach ``loop_match_minimum_response_fine``.
+started from the coarse pose must reach ``loop_match_minimum_response_fine`` and, when
+``max_variance_fine`` is set (eddiebot's addition), have a position variance below it along
+every direction.
 """
 
 from __future__ import annotations
@@ -107,6 +109,7 @@ def verify_loop(
     min_response_coarse: float,
     max_variance_coarse: float,
     min_response_fine: float,
+    max_variance_fine: float = 0.0,
 ) -> LoopClosure | None:
     """Match scan ``points`` (sensor frame) against a chain's points; None if rejected.
 
@@ -149,6 +152,11 @@ def verify_loop(
     fine_match = match_scan(points, grid, coarse_match.pose, fine)
     if fine_match.response < min_response_fine:
         return None
+    if max_variance_fine > 0.0:
+        # well constrained in every direction: a corridor match aliases along its length
+        xy = fine_match.covariance[:2, :2]
+        if float(np.linalg.eigvalsh(0.5 * (xy + xy.T))[-1]) > max_variance_fine:
+            return None
     d = np.hypot(
         chain_positions[:, 0] - fine_match.pose[0], chain_positions[:, 1] - fine_match.pose[1]
     )

@@ -156,14 +156,68 @@ def matcher_params(
         minimum_distance_penalty=config.minimum_distance_penalty,
         minimum_angle_penalty=config.minimum_angle_penalty,
         use_response_expansion=config.use_response_expansion,
+        coarse_heading_variance=config.match_coarse_heading_variance,
     )
 
 
-def _odometry_covariance(delta: FloatArray) -> FloatArray:
+def _odometry_covariance(delta: FloatArray, config: SlamConfig | None = None) -> FloatArray:
+    """Covariance (x, y, theta) of an odometry increment under the config's noise model."""
+    cfg = config or SlamConfig()
     d = math.hypot(float(delta[0]), float(delta[1]))
-    sx = 0.02 + 0.1 * d
-    sth = 0.02 + 0.1 * abs(float(delta[2])) + 0.05 * d
+    sx = cfg.odometry_translation_sigma + cfg.odometry_translation_noise * d
+    sth = (
+        cfg.odometry_rotation_sigma
+        + cfg.odometry_rotation_noise * abs(float(delta[2]))
+        + cfg.odometry_rotation_noise_per_meter * d
+    )
     return np.diag([sx * sx, sx * sx, sth * sth])
+
+
+def _rotate_covariance(cov: FloatArray, theta: float) -> FloatArray:
+    """Express a map-frame (x, y, theta) covariance in a frame turned by ``theta``."""
+    rot = np.eye(3)
+    c, s = math.cos(theta), math.sin(theta)
+    rot[:2, :2] = [[c, s], [-s, c]]
+    return np.asarray(rot @ cov @ rot.T)
+
+
+def constrained_information(
+    covariance: FloatArray, max_variance: float
+) -> tuple[FloatArray, int]:
+    """Information matrix of a match keeping only its well-observed position directions.
+
+    The position block's eigen-directions with a variance above ``max_variance`` (m²) carry
+    no information (a corridor match says nothing about the position along the corridor; the
+    correlative search's window only bounds that variance). Returns the (3, 3) information
+    and the number of position directions dropped (0, 1 or 2).
+    """
+    cov = 0.5 * (covariance + covariance.T)
+    w, v = np.linalg.eigh(cov[:2, :2])
+    w = np.maximum(w, 1e-12)
+    keep = w <= max_variance
+    info = np.zeros((3, 3))
+    # position block from the kept directions; the heading kept as Karto reports it (no
+    # cross terms: the search estimates the two separately)
+    info[:2, :2] = (v[:, keep] / w[keep]) @ v[:, keep].T
+    info[2, 2] = 1.0 / max(float(cov[2, 2]), 1e-12)
+    return info, int(np.count_nonzero(~keep))
+
+
+def fuse_increments(
+    z_odom: FloatArray, cov_odom: FloatArray, z_match: FloatArray, info_match: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Information-weighted mean of two measurements of one SE(2) increment (x, y, theta).
+
+    Linearised about the odometry increment; returns the fused increment and its covariance.
+    """
+    info_odom = np.linalg.inv(cov_odom)
+    dz = np.asarray(z_match, dtype=np.float64) - z_odom
+    dz[2] = float(wrap_angle(dz[2]))
+    info = info_odom + info_match
+    cov = np.linalg.inv(info)
+    fused = np.asarray(z_odom, dtype=np.float64) + cov @ (info_match @ dz)
+    fused[2] = float(wrap_angle(fused[2]))
+    return fused, 0.5 * (cov + cov.T)
 
 
 @dataclass
@@ -462,9 +516,15 @@ class SlamCore:
         pose = prior
         running = [i for i in st.running if not self.nodes[i].retired]
         matched = False
+        chain_from_odometry = st.last_processed_odom is not None
+        odo_delta: FloatArray | None = None
+        if chain_from_odometry and st.last_processed_odom is not None:
+            odo_delta = se2_between(st.last_processed_odom, odom)
         if cfg.use_scan_matching and running:
             match = self._match_against(running, points, prior_sensor, self._seq_params)
-            match = self._recover_slip(running, points, prior_sensor, match, warnings, stamp)
+            match = self._recover_slip(
+                running, points, prior_sensor, match, warnings, stamp, odo_delta
+            )
             response, covariance = match.response, match.covariance
             if match.response >= cfg.link_match_minimum_response_fine:
                 pose = se2_compose(match.pose, se2_inverse(self.sensor_offset))
@@ -478,30 +538,32 @@ class SlamCore:
                     f"{cfg.link_match_minimum_response_fine}; using odometry",
                     stamp,
                 )
-        chain_from_odometry = st.last_processed_odom is not None
+        edge: tuple[FloatArray, FloatArray, EdgeKind] | None = None
+        if self.nodes:
+            prev_pose = self.graph.pose(len(self.nodes) - 1)
+            if not chain_from_odometry and not matched:
+                # first scan after loading a session: the odom frames of the two runs are
+                # unrelated, so only a weak link to where the session ended
+                edge = (se2_between(prev_pose, pose), np.diag([1.0, 1.0, 0.5]), EdgeKind.ODOMETRY)
+            elif matched and covariance is not None:
+                delta = se2_between(prev_pose, pose)
+                cov = _rotate_covariance(covariance, float(prev_pose[2]))
+                if cfg.fuse_odometry and odo_delta is not None:
+                    # one edge carrying both measurements: equivalent to an odometry edge plus
+                    # a scan-match edge whose information is the match's restricted to the
+                    # directions the scan observes (a corridor match only across it)
+                    info, _ = constrained_information(cov, cfg.corridor_covariance_threshold)
+                    delta, cov = fuse_increments(
+                        odo_delta, _odometry_covariance(odo_delta, cfg), delta, info
+                    )
+                    pose = se2_compose(prev_pose, delta)
+                edge = (delta, cov, EdgeKind.SCAN_MATCH)
+            elif odo_delta is not None:
+                edge = (odo_delta, _odometry_covariance(odo_delta, cfg), EdgeKind.ODOMETRY)
         idx = self.graph.add_node(pose)
         self.nodes.append(NodeRecord(scan, points, odom.copy()))
-        if idx > 0 and not chain_from_odometry and not matched:
-            # first scan after loading a session: the odom frames of the two runs are
-            # unrelated, so only a weak link to where the session ended
-            prev = len(self.nodes) - 2
-            delta = se2_between(self.graph.pose(prev), pose)
-            self.graph.add_edge(prev, idx, delta, np.diag([1.0, 1.0, 0.5]), kind=EdgeKind.ODOMETRY)
-        elif idx > 0:
-            prev = len(self.nodes) - 2
-            prev_pose = self.graph.pose(prev)
-            delta = se2_between(prev_pose, pose)
-            if matched and covariance is not None:
-                rot = np.eye(3)
-                c, s = math.cos(prev_pose[2]), math.sin(prev_pose[2])
-                rot[:2, :2] = [[c, s], [-s, c]]
-                cov = rot @ covariance @ rot.T
-                self.graph.add_edge(prev, idx, delta, cov, kind=EdgeKind.SCAN_MATCH)
-            else:
-                odo_delta = se2_between(self.nodes[prev].odom_pose, odom)
-                self.graph.add_edge(
-                    prev, idx, odo_delta, _odometry_covariance(odo_delta), kind=EdgeKind.ODOMETRY
-                )
+        if edge is not None:
+            self.graph.add_edge(idx - 1, idx, edge[0], edge[1], kind=edge[2])
         # running buffer
         st.running.append(idx)
         while len(st.running) > cfg.scan_buffer_size:
@@ -541,12 +603,16 @@ class SlamCore:
         match: MatchResult,
         warnings: list[SlamWarning],
         stamp: int,
+        odo_delta: FloatArray | None = None,
     ) -> MatchResult:
         """Re-search a wider window when the match is weak or pinned to the window's edge.
 
         A wheel slip larger than the sequential window (±0.25 m by default) otherwise yields
         a wrong, border-hugging match; eddiebot's addition, off when
-        ``slip_search_dimension`` is 0.
+        ``slip_search_dimension`` is 0. With ``slip_search_maximum_sigmas`` set, the wide
+        result is taken only when it is well constrained in every direction (a corridor
+        aliases along its length) and the odometry increment ``odo_delta`` does not rule the
+        jump out.
         """
         cfg = self.config
         if cfg.slip_search_dimension <= cfg.correlation_search_space_dimension:
@@ -560,7 +626,11 @@ class SlamCore:
             return match
         wide = self._match_against(nodes, points, prior_sensor, self._slip_params)
         fine = self._match_against(nodes, points, wide.pose, self._loop_fine)
-        if fine.response > match.response + 0.05:
+        if (
+            fine.response > match.response + 0.05
+            and (cfg.slip_search_maximum_sigmas <= 0.0 or self._well_constrained(fine.covariance))
+            and not self._odometry_contradicts(prior_sensor, fine.pose, odo_delta)
+        ):
             self._warn(
                 warnings,
                 "slip",
@@ -571,6 +641,26 @@ class SlamCore:
             )
             return fine
         return match
+
+    def _well_constrained(self, covariance: FloatArray) -> bool:
+        """True when a match's position variance is below the corridor threshold everywhere."""
+        w = np.linalg.eigvalsh(0.5 * (covariance[:2, :2] + covariance[:2, :2].T))
+        return bool(w[-1] <= self.config.corridor_covariance_threshold)
+
+    def _odometry_contradicts(
+        self, prior_sensor: FloatArray, pose: FloatArray, odo_delta: FloatArray | None
+    ) -> bool:
+        """True when a jump from the odometry prediction is implausible under its noise model."""
+        gate = self.config.slip_search_maximum_sigmas
+        if gate <= 0.0 or odo_delta is None:
+            return False
+        jump = np.asarray(pose, dtype=np.float64) - prior_sensor
+        jump[2] = float(wrap_angle(jump[2]))
+        cov = _odometry_covariance(odo_delta, self.config)
+        th = float(prior_sensor[2])
+        cov_map = _rotate_covariance(cov, -th)
+        m2 = float(jump @ np.linalg.solve(cov_map, jump))
+        return m2 > gate * gate
 
     def _try_close_loops(
         self, idx: int, points: FloatArray, warnings: list[SlamWarning], stamp: int
@@ -605,6 +695,7 @@ class SlamCore:
                     min_response_coarse=cfg.loop_match_minimum_response_coarse,
                     max_variance_coarse=cfg.loop_match_maximum_variance_coarse,
                     min_response_fine=cfg.loop_match_minimum_response_fine,
+                    max_variance_fine=cfg.loop_match_maximum_variance_fine,
                 )
                 if found is not None:
                     break
@@ -613,10 +704,7 @@ class SlamCore:
             base = se2_compose(found.match.pose, se2_inverse(self.sensor_offset))
             cand_pose = self.graph.pose(found.candidate)
             delta = se2_between(cand_pose, base)
-            rot = np.eye(3)
-            c, s = math.cos(cand_pose[2]), math.sin(cand_pose[2])
-            rot[:2, :2] = [[c, s], [-s, c]]
-            cov = rot @ found.match.covariance @ rot.T
+            cov = _rotate_covariance(found.match.covariance, float(cand_pose[2]))
             self.graph.add_edge(found.candidate, idx, delta, cov, kind=EdgeKind.LOOP, robust=True)
             self.loop_closures.append(found)
             self.graph.optimize(full=True)

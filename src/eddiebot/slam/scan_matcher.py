@@ -74,6 +74,10 @@ class MatcherParams:
     use_response_expansion: bool = True
     refine: bool = True
     """Sub-cell Gauss–Newton refinement after the discrete search."""
+    coarse_heading_variance: bool = False
+    """Heading variance from every coarse heading's best response over the whole window
+    (headings within 0.1 of the best count), not only the fine headings next to the best:
+    a narrow scan can fit nearly as well several degrees off."""
 
 
 @dataclass(frozen=True)
@@ -381,6 +385,43 @@ def _coarse_grid_search(
 
 
 @njit(cache=True)
+def _heading_profile(
+    g0: npt.NDArray[np.float32],
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    dth: npt.NDArray[np.float64],
+    window: int,
+    step: int,
+    res: float,
+    penalize: bool,
+    dvp: float,
+    avp: float,
+    mdp: float,
+    map_: float,
+) -> npt.NDArray[np.float64]:
+    """Best (penalised) response per heading over the window, translations every ``step``."""
+    n = 2 * (window // step) + 1
+    x0 = -(window // step) * step
+    out = np.zeros(px.shape[0])
+    for a in range(px.shape[0]):
+        block = _response_block(g0, px[a], py[a], x0, x0, n, step)
+        best = 0.0
+        for ix in range(n):
+            for iy in range(n):
+                v = block[ix, iy]
+                if v <= best:
+                    continue
+                if penalize:
+                    v *= _penalty(
+                        (x0 + step * ix) * res, (x0 + step * iy) * res, dth[a], dvp, avp, mdp, map_
+                    )
+                if v > best:
+                    best = v
+        out[a] = best
+    return out
+
+
+@njit(cache=True)
 def _exhaustive(
     g0: npt.NDArray[np.float32],
     px: npt.NDArray[np.int64],
@@ -670,6 +711,26 @@ def match_scan(
     cov = np.zeros((3, 3))
     cov[:2, :2] = xy_cov
     cov[2, 2] = th_cov[0, 0]
+    if params.coarse_heading_variance and dth.size > 1:
+        cpx, cpy = _cells_for_angles(coarse_pts, prior, prior[2] + dth, grid)
+        profile = _heading_profile(
+            grid.likelihood,
+            cpx,
+            cpy,
+            dth,
+            window,
+            coarse_step,
+            res,
+            params.penalize,
+            params.distance_variance_penalty,
+            params.angle_variance_penalty,
+            params.minimum_distance_penalty,
+            params.minimum_angle_penalty,
+        )
+        coarse_th = _weighted_covariance(
+            profile, dth[:, None], float(profile.max()), np.array([0.1 * fine * fine])
+        )
+        cov[2, 2] = max(cov[2, 2], float(coarse_th[0, 0]))
     cov /= max(best_resp, 1e-3)
     if params.refine and best_resp > 0.0:
         rx, ry, rth, rscore = _refine(
