@@ -168,8 +168,10 @@ def run(args: argparse.Namespace) -> int:
         results["vslam"] = _stage_vslam(out, report, args.seed)
     path = report.write()
     print(f"\nreport: {path} ({time.perf_counter() - t0:.0f} s in all)")
-    failed = [k for k, ok in results.items() if not ok]
-    if failed:
-        print(f"stages that did not finish: {failed}", file=sys.stderr)
-        return 1
-    return 0
+    # the base and the map are what everything else stands on; navigation and RGB-D SLAM
+    # report their misses (goals not reached, error figures) in the report instead
+    missed = [k for k, ok in results.items() if not ok]
+    if missed:
+        print(f"stages that fell short (see the report): {missed}", file=sys.stderr)
+    required = [k for k in missed if k in ("base", "mapping")]
+    return 1 if required else 0
