@@ -201,3 +201,52 @@ def test_clear_forgets_everything(mapped) -> None:
     assert core.nodes == []
     assert np.allclose(core.map_to_odom, 0.0)
     assert math.isclose(float(core.process(_scan(pose, 0), pose).map_to_odom[0]), 0.0, abs_tol=1e-9)
+
+
+def test_icp_match_covariance_maps_the_loop() -> None:
+    truth = loop_path()
+    odom = drifting_odometry(truth)
+    core = SlamCore(
+        SlamConfig(
+            minimum_travel_distance=0.5,
+            loop_match_minimum_chain_size=6,
+            match_covariance="icp",
+            loop_match_maximum_variance_fine=0.01,
+        )
+    )
+    results = [
+        core.process(_scan(p, k * 100_000_000), o) for k, (p, o) in enumerate(zip(truth, odom))
+    ]
+    added = [k for k, r in enumerate(results) if r.status is ProcessStatus.ADDED]
+    err = np.hypot(*(core.node_poses()[:, :2] - truth[added, :2]).T)
+    assert core.loop_closures
+    assert err.max() < 0.08
+    # sequential matches in the room are well constrained: the covariance is the fit's, floored
+    covs = [r.covariance for r in results if r.covariance is not None]
+    sig = np.sqrt(np.array([np.linalg.eigvalsh(c[:2, :2])[-1] for c in covs]))
+    assert np.median(sig) < 0.02
+    assert sig.min() >= 0.01 - 1e-9
+
+
+def test_unknown_match_covariance_is_a_config_error() -> None:
+    from eddiebot.slam.errors import ConfigError
+
+    with pytest.raises(ConfigError):
+        SlamConfig(match_covariance="hessian").validated()
+
+
+def test_map_max_laser_range_cuts_only_the_grid() -> None:
+    from eddiebot.slam.errors import ConfigError
+
+    truth = loop_path()[:12]
+    full = SlamCore(CONFIG)
+    short = SlamCore(SlamConfig(minimum_travel_distance=0.5, map_max_laser_range=2.0))
+    for k, p in enumerate(truth):
+        full.process(_scan(p, k * 100_000_000), p)
+        short.process(_scan(p, k * 100_000_000), p)
+    assert np.allclose(full.node_poses(), short.node_poses(), atol=1e-6)
+    occ_full = int(np.count_nonzero(full.occupancy_map().data >= 65))
+    occ_short = int(np.count_nonzero(short.occupancy_map().data >= 65))
+    assert occ_short < occ_full
+    with pytest.raises(ConfigError):
+        SlamConfig(map_max_laser_range=-1.0).validated()

@@ -9,7 +9,7 @@ from slam_world import CORRIDOR, ROOM, raycast
 
 from eddiebot.geometry import se2_transform_points
 from eddiebot.slam import MatcherParams, build_correlation_grid, match_scan, score_pose
-from eddiebot.slam.scan_matcher import pyramid_levels
+from eddiebot.slam.scan_matcher import pyramid_levels, refine_icp, refine_icp_with_covariance
 
 
 def _points(
@@ -109,3 +109,30 @@ def test_empty_inputs_return_prior() -> None:
     result = match_scan(np.array([[1.0, 0.0]]), grid, prior, MatcherParams())
     assert np.allclose(result.pose, prior)
     assert result.response == 0.0
+
+
+def test_icp_covariance_long_along_the_corridor_and_tight_across() -> None:
+    angles = np.linspace(-math.pi / 2, math.pi / 2, 181)
+    true = np.array([15.0, 1.0, 0.0])
+    ref = se2_transform_points(true, _points(true, angles, CORRIDOR, max_range=6.0))
+    rng = np.random.default_rng(1)
+    pts = _points(true, angles + 0.004, CORRIDOR, max_range=6.0)
+    pts = pts + rng.normal(0.0, 0.005, pts.shape)
+    pose, share, cov = refine_icp_with_covariance(pts, ref, true + np.array([0.0, 0.03, 0.01]))
+    assert share > 0.9
+    assert cov is not None
+    assert abs(pose[1] - true[1]) < 0.005
+    assert abs(pose[2] - true[2]) < math.radians(0.3)
+    assert cov[1, 1] < 1e-4  # across the corridor: pinned by the walls
+    assert cov[0, 0] > 100 * cov[1, 1]  # along it: nothing to fit
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    # the plain variant returns the same pose
+    pose2, share2 = refine_icp(pts, ref, true + np.array([0.0, 0.03, 0.01]))
+    assert np.allclose(pose, pose2) and share == share2
+
+
+def test_icp_covariance_none_without_pairs() -> None:
+    pts = np.array([[1.0, float(k)] for k in range(20)])
+    ref = pts + 5.0
+    pose, share, cov = refine_icp_with_covariance(pts, ref, np.zeros(3))
+    assert cov is None and share == 0.0 and np.allclose(pose, 0.0)

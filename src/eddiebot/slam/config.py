@@ -28,6 +28,7 @@ __all__ = ["SlamConfig", "SlamMode", "load_slam_config"]
 SlamMode = str  # "mapping" | "localization" | "lifelong"
 _MODES = ("mapping", "localization", "lifelong")
 _OPTIMIZERS = ("isam2", "levenberg_marquardt")
+_MATCH_COVARIANCES = ("response", "icp")
 _KERNELS = ("none", "huber", "cauchy", "dcs")
 
 
@@ -102,6 +103,16 @@ class SlamConfig:
     """Warn when the scan-match variance along the weakest direction exceeds this (m²)."""
     use_icp_refinement: bool = True
     """Polish each correlative match with point-to-line ICP on the reference points."""
+    match_covariance: str = "response"
+    """Where a scan match's covariance comes from: ``response`` (Karto's: the spread of the
+    correlative search's good responses, scaled by 1/response) or ``icp`` (the point-to-line
+    ICP fit's Gauss–Newton covariance, residual-variance scaled, plus the floors below; the
+    response spread where ICP does not converge). ``icp`` needs ``use_icp_refinement``."""
+    icp_covariance_floor_translation: float = 0.01
+    """σ (m) added in quadrature to an ICP match covariance's position (the fit's own
+    covariance ignores errors shared by neighbouring points: map error, range bias)."""
+    icp_covariance_floor_rotation: float = 0.005
+    """σ (rad) added in quadrature to an ICP match covariance's heading."""
     slip_search_dimension: float = 2.0
     """Side (m) of the wide re-search after a weak or window-edge sequential match; 0 = off."""
     slip_search_maximum_sigmas: float = 0.0
@@ -131,6 +142,10 @@ class SlamConfig:
     loop_match_maximum_variance_fine: float = 0.0
     """Reject a loop closure whose fine match has a position variance (m², along its weakest
     direction) above this: an aliased corridor match constrains only one direction; 0 = off."""
+    map_max_laser_range: float = 0.0
+    """Range (m) beyond which beams leave no hit in the occupancy grid (cut there, clearing
+    up to it), when shorter than ``max_laser_range`` (which still bounds scan matching): a
+    depth camera's far returns are too coarse for the map; 0 = ``max_laser_range``."""
     lifelong_node_overlap: float = 0.9
     """Lifelong mode retires an old node when this share of its cells is seen by a newer one."""
     extra: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
@@ -169,7 +184,17 @@ class SlamConfig:
             raise ConfigError(
                 f"parameter 'loop_robust_kernel' must be one of {_KERNELS}, got {out.loop_robust_kernel!r}"
             )
-        for name in ("minimum_travel_distance", "minimum_travel_heading", "max_laser_range"):
+        if out.match_covariance not in _MATCH_COVARIANCES:
+            raise ConfigError(
+                f"parameter 'match_covariance' must be one of {_MATCH_COVARIANCES}, "
+                f"got {out.match_covariance!r}"
+            )
+        for name in (
+            "minimum_travel_distance",
+            "minimum_travel_heading",
+            "max_laser_range",
+            "map_max_laser_range",
+        ):
             value = getattr(out, name)
             if not math.isfinite(value) or value < 0:
                 raise ConfigError(f"parameter '{name}' must be a finite value >= 0, got {value}")

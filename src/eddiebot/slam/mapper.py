@@ -55,7 +55,7 @@ from eddiebot.slam.scan_matcher import (
     match_scan,
     point_normals,
     pyramid_levels,
-    refine_icp,
+    refine_icp_with_covariance,
     score_pose,
 )
 
@@ -268,7 +268,7 @@ class SlamCore:
         self._state = _State()
         self._grid = OccupancyGridBuilder(
             self.config.resolution,
-            self.config.max_laser_range,
+            self.config.map_max_laser_range or self.config.max_laser_range,
             occupancy_threshold=self.config.occupancy_threshold,
             min_pass_through=self.config.min_pass_through,
         )
@@ -477,16 +477,50 @@ class SlamCore:
             and params is not self._slip_params
         ):
             normals = np.concatenate([self._world_normals(i) for i in nodes])
-            refined, share = refine_icp(points, ref, match.pose, reference_normals=normals)
-            moved = float(np.hypot(*(refined[:2] - match.pose[:2])))
-            turned = abs(float(wrap_angle(refined[2] - match.pose[2])))
-            if (
-                share >= 0.5
-                and moved <= 2.0 * params.smear_deviation + params.resolution
-                and turned <= params.coarse_angle_resolution
-            ):
-                match = MatchResult(refined, match.response, match.covariance)
+            match = self._polish(match, points, ref, normals, params)
         return match
+
+    def _polish(
+        self,
+        match: MatchResult,
+        points: FloatArray,
+        ref: FloatArray,
+        normals: FloatArray,
+        params: MatcherParams,
+    ) -> MatchResult:
+        """Point-to-line ICP from a correlative match; its fit's covariance when configured."""
+        refined, share, icp_cov = refine_icp_with_covariance(
+            points, ref, match.pose, reference_normals=normals
+        )
+        moved = float(np.hypot(*(refined[:2] - match.pose[:2])))
+        turned = abs(float(wrap_angle(refined[2] - match.pose[2])))
+        if not (
+            share >= 0.5
+            and moved <= 2.0 * params.smear_deviation + params.resolution
+            and turned <= params.coarse_angle_resolution
+        ):
+            return match
+        cov = match.covariance
+        if self.config.match_covariance == "icp" and icp_cov is not None:
+            cov = self._icp_covariance(icp_cov, match.covariance)
+        return MatchResult(refined, match.response, cov)
+
+    def _icp_covariance(self, icp_cov: FloatArray, response_cov: FloatArray) -> FloatArray:
+        """ICP fit covariance plus the floors; directions the fit leaves unobserved (a
+        corridor's length) are capped at the correlative search's largest spread."""
+        cfg = self.config
+        cov = np.array(icp_cov, dtype=np.float64)
+        cap = float(np.linalg.eigvalsh(0.5 * (response_cov[:2, :2] + response_cov[:2, :2].T))[-1])
+        w, v = np.linalg.eigh(cov[:2, :2])
+        w = np.minimum(np.maximum(w, 0.0), max(cap, 0.0)) + cfg.icp_covariance_floor_translation**2
+        cov[:2, :2] = (v * w) @ v.T
+        cov[2, 2] = min(max(float(cov[2, 2]), 0.0), max(float(response_cov[2, 2]), 0.0))
+        cov[2, 2] += cfg.icp_covariance_floor_rotation**2
+        if float(np.linalg.eigvalsh(cov)[0]) <= 0.0:
+            # a capped direction can leave the heading cross terms inconsistent
+            cov[:2, 2] = 0.0
+            cov[2, :2] = 0.0
+        return cov
 
     def _check_covariance(
         self, match: MatchResult, warnings: list[SlamWarning], stamp: int
@@ -682,6 +716,7 @@ class SlamCore:
             )
             found: LoopClosure | None = None
             sensor = se2_compose(self.graph.pose(idx), self.sensor_offset)
+            icp_cov = cfg.use_icp_refinement and cfg.match_covariance == "icp"
             for chain in chains:
                 ref = np.concatenate([self._world_points(i) for i in chain])
                 found = verify_loop(
@@ -695,8 +730,17 @@ class SlamCore:
                     min_response_coarse=cfg.loop_match_minimum_response_coarse,
                     max_variance_coarse=cfg.loop_match_maximum_variance_coarse,
                     min_response_fine=cfg.loop_match_minimum_response_fine,
-                    max_variance_fine=cfg.loop_match_maximum_variance_fine,
+                    max_variance_fine=0.0 if icp_cov else cfg.loop_match_maximum_variance_fine,
                 )
+                if found is not None and icp_cov:
+                    normals = np.concatenate([self._world_normals(i) for i in chain])
+                    polished = self._polish(found.match, points, ref, normals, self._loop_fine)
+                    found = dataclasses.replace(found, match=polished)
+                    if cfg.loop_match_maximum_variance_fine > 0.0 and (
+                        float(np.linalg.eigvalsh(polished.covariance[:2, :2])[-1])
+                        > cfg.loop_match_maximum_variance_fine
+                    ):
+                        found = None
                 if found is not None:
                     break
             if found is None:

@@ -42,6 +42,7 @@ __all__ = [
     "point_normals",
     "pyramid_levels",
     "refine_icp",
+    "refine_icp_with_covariance",
     "score_pose",
 ]
 
@@ -795,11 +796,41 @@ def refine_icp(
     refined pose and the inlier share (0..1). The correlative search finds the basin; this
     polishes the pose below the search grid's and the smear's resolution.
     """
+    pose_out, share, _ = refine_icp_with_covariance(
+        points,
+        reference,
+        pose,
+        max_distance=max_distance,
+        iterations=iterations,
+        normal_neighbours=normal_neighbours,
+        reference_normals=reference_normals,
+    )
+    return pose_out, share
+
+
+def refine_icp_with_covariance(
+    points: FloatArray,
+    reference: FloatArray,
+    pose: FloatArray,
+    *,
+    max_distance: float = 0.2,
+    iterations: int = 10,
+    normal_neighbours: int = 6,
+    reference_normals: FloatArray | None = None,
+) -> tuple[FloatArray, float, FloatArray | None]:
+    """`refine_icp`, also returning the fit's covariance (3×3, map frame, m², rad²).
+
+    The covariance is the Gauss–Newton one at the final pose: the inverse of the weighted
+    point-to-line Hessian JᵀWJ scaled by the weighted residual variance Σwr²/(Σw − 3). It is
+    small along directions the scan's lines pin down and large along those no line observes
+    (a corridor's length: the Hessian is nearly singular there). None when fewer than 10
+    pairs match.
+    """
     from scipy.spatial import cKDTree
 
     pose = np.asarray(pose, dtype=np.float64).copy()
     if points.shape[0] < 10 or reference.shape[0] < normal_neighbours + 1:
-        return pose, 0.0
+        return pose, 0.0, None
     tree = cKDTree(reference)
     if reference_normals is None:
         normals = point_normals(reference, tree, normal_neighbours)
@@ -808,7 +839,8 @@ def refine_icp(
     planar = np.isfinite(normals[:, 0])
     normals = np.where(planar[:, None], normals, 0.0)
     inlier_share = 0.0
-    for _ in range(iterations):
+    covariance: FloatArray | None = None
+    for it in range(iterations + 1):
         c, s = math.cos(pose[2]), math.sin(pose[2])
         wx = pose[0] + c * points[:, 0] - s * points[:, 1]
         wy = pose[1] + s * points[:, 0] + c * points[:, 1]
@@ -818,6 +850,7 @@ def refine_icp(
         ok[ok] &= planar[idx[ok]]
         inlier_share = float(np.count_nonzero(ok)) / points.shape[0]
         if np.count_nonzero(ok) < 10:
+            covariance = None
             break
         n = normals[idx[ok]]
         q = reference[idx[ok]]
@@ -828,9 +861,16 @@ def refine_icp(
         jac = np.column_stack([n[:, 0], n[:, 1], np.einsum("ij,ij->i", n, dth)])
         w = np.minimum(1.0, 0.05 / np.maximum(np.abs(r), 1e-9))
         h = jac.T @ (jac * w[:, None]) + 1e-9 * np.eye(3)
+        sw = float(w.sum())
+        sigma2 = float(np.sum(w * r * r)) / max(sw - 3.0, 1.0)
+        covariance = sigma2 * np.linalg.inv(h)
+        if it == iterations:
+            break
         delta = -np.linalg.solve(h, jac.T @ (w * r))
         pose += delta
         if abs(delta[0]) < 1e-5 and abs(delta[1]) < 1e-5 and abs(delta[2]) < 1e-6:
             break
     pose[2] = float(wrap_angle(pose[2]))
-    return pose, inlier_share
+    if covariance is not None:
+        covariance = 0.5 * (covariance + covariance.T)
+    return pose, inlier_share, covariance
