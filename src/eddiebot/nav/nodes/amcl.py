@@ -5,12 +5,15 @@ Parameters are Nav2's (``alpha1..5``, ``laser_*``, ``max_particles``, ``update_m
 :class:`eddiebot.nav.amcl.AmclConfig`). Subscribes ``map`` (transient local), ``scan`` and
 ``initialpose``; publishes ``amcl_pose`` (transient local), ``particle_cloud`` and, with
 ``tf_broadcast``, TF ``map → odom`` future-dated by ``transform_tolerance`` as Nav2 does.
-Odometry comes from TF (``odom_frame_id → base_frame_id`` at the scan's stamp).
+Odometry comes from TF (``odom_frame_id → base_frame_id`` at the scan's stamp): as Nav2's
+``tf2_ros::MessageFilter`` (queue of 10), a scan waits until that transform exists, and is
+dropped once it is ``transform_tolerance`` older than the clock without one.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -19,6 +22,7 @@ from eddiebot.core.lifecycle import State, TransitionCallbackReturn
 from eddiebot.core.qos import DurabilityPolicy, QoSProfile, qos_profile_sensor_data
 from eddiebot.core.tf import (
     Buffer,
+    ExtrapolationException,
     TransformBroadcaster,
     TransformException,
     TransformListener,
@@ -34,6 +38,10 @@ from eddiebot.nav.params import from_params
 __all__ = ["AmclNode"]
 
 _LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: scans waiting for their odometry transform (Nav2's laser_scan_filter_ queue size)
+_SCAN_QUEUE = 10
+#: how often queued scans are retried (s)
+_RETRY_PERIOD = 0.01
 
 
 def _se2_compose(a: Any, b: Any) -> np.ndarray:
@@ -64,6 +72,8 @@ class AmclNode(NavServer):
         self._map_to_odom: np.ndarray | None = None
         self._initialised = False
         self._have_map = False
+        self._pending: deque[Any] = deque(maxlen=_SCAN_QUEUE)
+        self._retry_timer: Any = None
 
     def on_configure(self, state: State) -> TransitionCallbackReturn:
         def build() -> None:
@@ -96,12 +106,17 @@ class AmclNode(NavServer):
             self.create_subscription(LaserScan, cfg.scan_topic, self._on_scan, qos_profile_sensor_data),
             self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose, 1),
         ]
+        self._retry_timer = self.create_timer(_RETRY_PERIOD, self._drain)
         return TransitionCallbackReturn.SUCCESS
 
     def on_deactivate(self, state: State) -> TransitionCallbackReturn:
         for s in self._subs:
             self.destroy_subscription(s)
         self._subs = []
+        if self._retry_timer is not None:
+            self.destroy_timer(self._retry_timer)
+            self._retry_timer = None
+        self._pending.clear()
         if self._listener is not None:
             self._listener.unregister()
             self._listener = None
@@ -147,19 +162,47 @@ class AmclNode(NavServer):
 
     def _on_scan(self, msg: Any) -> None:
         assert self.amcl is not None
-        cfg = self.amcl.config
         if not self._have_map or not self._initialised:
             self.get_logger().warning("waiting for a map and an initial pose", once=True)
             return
+        self._pending.append(msg)
+        self._drain()
+
+    def _drain(self) -> None:
+        """Process the queued scans, oldest first, while odometry at their stamps exists."""
+        while self._pending:
+            odom = self._odom_at(self._pending[0])
+            if odom is None:
+                return
+            msg = self._pending.popleft()
+            if odom.size:
+                self._process_scan(msg, odom)
+
+    def _odom_at(self, msg: Any) -> np.ndarray | None:
+        """``odom → base`` at the scan's stamp; None to wait for it, empty to drop the scan."""
+        assert self.amcl is not None
+        cfg = self.amcl.config
         stamp = stamp_to_ns(msg.header.stamp)
         try:
-            odom = np.array(self.tf_buffer.lookup_pose2d(cfg.odom_frame_id, cfg.base_frame_id, stamp))
-        except TransformException:
+            return np.array(self.tf_buffer.lookup_pose2d(cfg.odom_frame_id, cfg.base_frame_id, stamp))
+        except ExtrapolationException as exc:
             try:
-                odom = np.array(self.tf_buffer.lookup_pose2d(cfg.odom_frame_id, cfg.base_frame_id, 0))
-            except TransformException as exc:
-                self.get_logger().warning(f"no odometry transform: {exc}", once=True)
-                return
+                latest = self.tf_buffer.get_latest_common_time(cfg.odom_frame_id,
+                                                               cfg.base_frame_id).nanoseconds
+            except TransformException:
+                latest = -1
+            waited = self.now().nanoseconds - stamp
+            if stamp > latest and waited <= round(cfg.transform_tolerance * 1e9):
+                return None
+            self.get_logger().warning(f"scan dropped, no odometry at its stamp: {exc}", once=True)
+        except TransformException as exc:
+            self.get_logger().warning(f"no odometry transform: {exc}", once=True)
+        return np.zeros(0)
+
+    def _process_scan(self, msg: Any, odom: np.ndarray) -> None:
+        assert self.amcl is not None
+        cfg = self.amcl.config
+        stamp = stamp_to_ns(msg.header.stamp)
         try:
             laser = self.tf_buffer.lookup_pose2d(cfg.base_frame_id, msg.header.frame_id, 0)
         except TransformException as exc:
