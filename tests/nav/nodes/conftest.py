@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -92,3 +93,9 @@ def make_stack(tmp_path):
     yield make
     for s in stacks:
         s.close()
+
+
+@pytest.fixture
+def nav_stub_params() -> Callable[[], dict[str, Any]]:
+    """The stub robot's folded parameters, for tests that edit them before making a stack."""
+    return stub_params

@@ -16,10 +16,8 @@ from eddiebot.msgs.sensor_msgs import Image
 from eddiebot.nav.nodes._common import pose_stamped
 
 
-def test_follows_waypoints_and_saves_photos(make_stack, tmp_path):
-    from conftest import stub_params
-
-    doc = stub_params()
+def test_follows_waypoints_and_saves_photos(make_stack, nav_stub_params, tmp_path):
+    doc = nav_stub_params()
     doc["waypoint_follower"] = {"ros__parameters": {
         "waypoint_task_executor_plugin": "snapshot",
         "snapshot": {"plugin": "nav2_waypoint_follower::PhotoAtWaypoint",
