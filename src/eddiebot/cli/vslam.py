@@ -1,0 +1,359 @@
+"""``eddie vslam``: RGB-D graph SLAM (rtabmap's role).
+
+    eddie vslam [sim] --world office [--rate N | --fast] [--seed S] [--dashboard]
+                      [--database FILE] [--keep-database] [--localization] [--map-topic /map]
+    eddie vslam replay DIR|BAG [-o OUT] [--max-frames N] [--set Group/Name=VALUE ...]
+    eddie vslam loops DIR -o FILE.csv
+    eddie vslam db info FILE
+    eddie vslam db export FILE [--ply OUT.ply] [--poses OUT.tum]
+
+Without a sub-command (or with ``sim``) it runs the simulator, Eddie's base stack and the
+``rtabmap`` node with the report's parameters (``launch/vslam.yaml``); the grid is published on
+``/rtabmap/map``. ``replay`` runs visual odometry + SLAM over a TUM RGB-D folder, or the
+``rtabmap`` node (the report's parameters) over a rosbag2 of our topics (``/image_raw``,
+``/depth/image_raw``, camera infos, ``/tf``, ``/tf_static``, ``/odom``, ``/scan``), writing
+``rtabmap.db`` and ``poses.txt`` (TUM) into OUT. ``loops`` runs appearance-only loop detection over an image folder and writes
+``query,match,score`` rows. ``db`` inspects and exports a session database.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+__all__ = ["HELP", "add_arguments", "run"]
+
+HELP = "RGB-D SLAM: live, replay, loops, database tools"
+
+#: The report's rtabmap parameters (eddiebot rtabmap.launch.py), used for rosbag2 replays of
+#: Eddie's topics unless overridden with --set.
+REPORT_PARAMETERS = {
+    "Reg/Force3DoF": "true", "Vis/MinInliers": "12", "RGBD/ProximityBySpace": "false",
+    "RGBD/AngularUpdate": "0.01", "RGBD/LinearUpdate": "0.01",
+    "RGBD/OptimizeFromGraphEnd": "false",
+}
+
+
+def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
+    from eddiebot.cli._stack import add_run_arguments
+
+    parser.add_argument("--world", default="office",
+                        help="simulator world (eddie world list), or a world file")
+    parser.add_argument("--camera", default="320x240@10",
+                        help="Kinect resolution and rate, WxH@HZ (default 320x240@10)")
+    parser.add_argument("--database", default="~/.local/share/eddiebot/rtabmap.db",
+                        help="session database (default ~/.local/share/eddiebot/rtabmap.db)")
+    parser.add_argument("--keep-database", action="store_true",
+                        help="continue the database's map instead of deleting it (no -d)")
+    parser.add_argument("--localization", action="store_true",
+                        help="localize in the database's map (Mem/IncrementalMemory false)")
+    parser.add_argument("--map-topic", default="/rtabmap/map",
+                        help="occupancy grid topic (default /rtabmap/map; /map to replace 2D SLAM)")
+    parser.add_argument("--rtabmap-args", default="",
+                        help="upstream-style arguments, e.g. \"--Vis/MinInliers 15\"")
+    add_run_arguments(parser)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    _add_sim_arguments(parser)
+    sub = parser.add_subparsers(dest="vslam_command")
+    sim = sub.add_parser("sim", help="simulator + vSLAM (the default)")
+    _add_sim_arguments(sim)
+    rep = sub.add_parser("replay", help="replay a TUM RGB-D folder or a rosbag2 through vSLAM")
+    rep.add_argument("source", type=Path, help="TUM RGB-D folder or rosbag2 (folder/.mcap/.db3)")
+    rep.add_argument("-o", "--output", type=Path, default=None,
+                     help="output folder (default out/vslam/<name>)")
+    rep.add_argument("--max-frames", type=int, default=0, help="stop after N frames (TUM)")
+    rep.add_argument("--set", action="append", default=[], metavar="Group/Name=VALUE",
+                     help="RTAB-Map parameter (repeatable), e.g. --set Reg/Force3DoF=true")
+    loops = sub.add_parser("loops", help="appearance-only loop detection over an image folder")
+    loops.add_argument("folder", type=Path, help="folder of images (numeric order)")
+    loops.add_argument("-o", "--output", type=Path, required=True, help="CSV to write")
+    loops.add_argument("--set", action="append", default=[], metavar="Group/Name=VALUE")
+    db = sub.add_parser("db", help="session database tools")
+    dbsub = db.add_subparsers(dest="db_command")
+    info = dbsub.add_parser("info", help="summary of a session database")
+    info.add_argument("file", type=Path)
+    info.add_argument("--json", action="store_true", help="print JSON")
+    exp = dbsub.add_parser("export", help="export cloud (PLY) and/or optimised poses (TUM)")
+    exp.add_argument("file", type=Path)
+    exp.add_argument("--ply", type=Path, default=None, help="assembled point cloud, map frame")
+    exp.add_argument("--poses", type=Path, default=None, help="optimised node poses, TUM format")
+    exp.add_argument("--voxel", type=float, default=0.05, help="cloud voxel size (m)")
+
+
+def _settings(items: list[str]) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in items:
+        if "=" not in item:
+            raise ValueError(f"--set expects Group/Name=VALUE, got {item!r}")
+        k, v = item.split("=", 1)
+        out[k.strip()] = v.strip()
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    cmd = getattr(args, "vslam_command", None)
+    try:
+        if cmd in (None, "sim"):
+            return _sim(args)
+        if cmd == "replay":
+            return _replay(args)
+        if cmd == "loops":
+            return _loops(args)
+        if cmd == "db":
+            if args.db_command == "info":
+                return _db_info(args)
+            if args.db_command == "export":
+                return _db_export(args)
+            print("eddie vslam db: choose info or export", file=sys.stderr)
+            return 2
+    except ValueError as exc:
+        print(f"eddie vslam: {exc}", file=sys.stderr)
+        return 2
+    print(f"eddie vslam: unknown command {cmd!r}", file=sys.stderr)
+    return 2
+
+
+# -- sim ------------------------------------------------------------------------------------
+def _sim(args: argparse.Namespace) -> int:
+    from eddiebot.cli._stack import run_stack
+
+    try:
+        size, rate = args.camera.split("@")
+        width, height = size.lower().split("x")
+        float(rate)
+        int(width)
+        int(height)
+    except ValueError:
+        print(f"eddie vslam: --camera expects WxH@HZ, got {args.camera!r}", file=sys.stderr)
+        return 2
+    launch_args = {
+        "world": args.world, "seed": str(args.seed), "camera_width": width,
+        "camera_height": height, "camera_rate": rate, "database_path": args.database,
+        "delete_db_on_start": "false" if (args.keep_database or args.localization) else "true",
+        "localization": "true" if args.localization else "false",
+        "map_topic": args.map_topic, "rtabmap_args": args.rtabmap_args,
+    }
+    return run_stack(args, "vslam", launch_args)
+
+
+# -- replay ---------------------------------------------------------------------------------
+def _is_bag(path: Path) -> bool:
+    if path.suffix in (".mcap", ".db3"):
+        return True
+    return path.is_dir() and ((path / "metadata.yaml").exists()
+                              or any(path.glob("*.mcap")) or any(path.glob("*.db3")))
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from eddiebot.vslam.errors import VslamError
+
+    src: Path = args.source
+    if not src.exists():
+        print(f"eddie vslam replay: {src}: no such file or folder", file=sys.stderr)
+        return 2
+    out = args.output or Path("out") / "vslam" / src.name.split(".")[0]
+    params = _settings(args.set)
+    try:
+        if _is_bag(src):
+            summary = replay_bag(src, out, params)
+        else:
+            from dataclasses import asdict
+
+            from eddiebot.vslam.replay import replay_tum
+
+            summary = asdict(replay_tum(src, out, params or None, max_frames=args.max_frames))
+    except (VslamError, OSError) as exc:
+        print(f"eddie vslam replay: {exc}", file=sys.stderr)
+        return 1
+    for k, v in summary.items():
+        print(f"{k:16s} {v}")
+    print(f"wrote {out}")
+    return 0
+
+
+def replay_bag(bag: Path, out_dir: Path, parameters: dict[str, str] | None = None
+               ) -> dict[str, Any]:
+    """Run the ``rtabmap`` node over a rosbag2 of our topics on the bag's clock; writes
+    ``rtabmap.db`` and ``poses.txt`` (base poses, map frame, TUM) into ``out_dir``."""
+    from eddiebot.core.context import Context
+    from eddiebot.core.executors import SingleThreadedExecutor
+    from eddiebot.core.node import Node
+    from eddiebot.core.qos import qos_profile_latched
+    from eddiebot.viz.bag import BagReader
+    from eddiebot.vslam.node import RtabmapNode
+    from eddiebot.vslam.tum import write_tum_trajectory
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    topics = ["/image_raw", "/camera_info", "/depth/image_raw", "/depth/camera_info", "/tf",
+              "/tf_static", "/odom", "/scan"]
+    context = Context(use_sim_time=True)
+    with BagReader(bag) as reader:
+        present = {c.topic for c in reader.connections}
+        overrides: dict[str, Any] = {
+            "use_sim_time": True, "database_path": str(out_dir / "rtabmap.db"),
+            "delete_db_on_start": True, "subscribe_scan": "/scan" in present,
+        }
+        overrides.update(REPORT_PARAMETERS)
+        overrides.update(parameters or {})
+        slam = RtabmapNode(context=context, parameter_overrides=overrides)
+        player = Node("vslam_bag_player", context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(slam)
+        executor.add_node(player)
+        pubs: dict[str, Any] = {}
+        n = 0
+        for msg in reader.messages(topics=[t for t in topics if t in present]):
+            obj = msg.decode()
+            if msg.topic not in pubs:
+                qos = qos_profile_latched if msg.topic == "/tf_static" else 50
+                pubs[msg.topic] = player.create_publisher(type(obj), msg.topic, qos)
+            if msg.timestamp > context.sim_clock.now_ns():
+                executor.spin_until(msg.timestamp)
+            pubs[msg.topic].publish(obj)
+            executor.spin_until_idle()
+            n += 1
+        executor.spin_for(1.0)
+    stamps, poses = slam.trajectory()
+    write_tum_trajectory(out_dir / "poses.txt", [t / 1e9 for t in stamps], list(poses))
+    summary = {"messages": n, "frames": slam.frames_processed, "nodes": len(stamps),
+               "loop_closures": slam.loop_closures, "database": str(out_dir / "rtabmap.db")}
+    slam.destroy_node()
+    player.destroy_node()
+    context.shutdown()
+    (out_dir / "report.json").write_text(json.dumps(summary, indent=2))
+    return summary
+
+
+# -- loops ----------------------------------------------------------------------------------
+def _loops(args: argparse.Namespace) -> int:
+    from eddiebot.vslam.errors import VslamError
+    from eddiebot.vslam.loops import detect_loops, write_loop_rows
+
+    try:
+        rows = detect_loops(args.folder, _settings(args.set) or None)
+    except VslamError as exc:
+        print(f"eddie vslam loops: {exc}", file=sys.stderr)
+        return 1
+    write_loop_rows(rows, args.output)
+    found = sum(1 for r in rows if r[1])
+    print(f"{len(rows)} images, {found} loop closures; wrote {args.output}")
+    return 0
+
+
+# -- db -------------------------------------------------------------------------------------
+def database_info(path: Path) -> dict[str, Any]:
+    """Counts, sessions, link types, graph length and parameters of a session database."""
+    import sqlite3
+    from collections import Counter
+
+    import numpy as np
+
+    from eddiebot.vslam.database import SessionDatabase
+    from eddiebot.vslam.memory import LinkType
+
+    with SessionDatabase(path) as db:
+        nodes = db.nodes()
+        links = db.links()
+        opt = db.optimized_poses()
+        params = db.last_parameters()
+        conn: sqlite3.Connection = db._conn
+        words = int(conn.execute("SELECT COUNT(*) FROM Word").fetchone()[0])
+        features = int(conn.execute("SELECT COUNT(*) FROM Feature").fetchone()[0])
+        sessions = int(conn.execute("SELECT COUNT(*) FROM Info").fetchone()[0])
+    kinds = Counter(LinkType(lk.type).name.lower() for lk in links)
+    poses = [opt.get(n.id, n.odom_pose) for n in nodes]
+    length = float(sum(np.linalg.norm(b[:3, 3] - a[:3, 3]) for a, b in zip(poses, poses[1:])))
+    stamps = [n.stamp_ns for n in nodes]
+    return {
+        "file": str(path), "size_bytes": path.stat().st_size, "sessions": sessions,
+        "maps": len({n.map_id for n in nodes}), "nodes": len(nodes), "links": len(links),
+        "link_types": dict(sorted(kinds.items())), "words": words, "features": features,
+        "optimized_poses": len(opt), "path_length_m": round(length, 3),
+        "duration_s": round((max(stamps) - min(stamps)) / 1e9, 3) if stamps else 0.0,
+        "parameters": len(params),
+        "Reg/Force3DoF": params.get("Reg/Force3DoF", ""),
+    }
+
+
+def _db_info(args: argparse.Namespace) -> int:
+    from eddiebot.vslam.errors import DatabaseError
+
+    try:
+        info = database_info(args.file)
+    except (DatabaseError, OSError) as exc:
+        print(f"eddie vslam db info: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps(info, indent=2))
+    else:
+        for k, v in info.items():
+            print(f"{k + ':':20s}{v}")
+    return 0
+
+
+def _db_export(args: argparse.Namespace) -> int:
+    from eddiebot.vslam.database import SessionDatabase
+    from eddiebot.vslam.errors import DatabaseError, VslamError
+    from eddiebot.vslam.export import write_ply
+    from eddiebot.vslam.rtabmap import Rtabmap
+    from eddiebot.vslam.tum import write_tum_trajectory
+
+    if args.ply is None and args.poses is None:
+        print("eddie vslam db export: give --ply and/or --poses", file=sys.stderr)
+        return 2
+    try:
+        with SessionDatabase(args.file) as db:
+            params = db.last_parameters()
+            # read-only use: load the map without starting a new session
+            from eddiebot.vslam.parameters import RtabmapParameters
+
+            p = RtabmapParameters.from_dict(params, strict=False).replace(
+                {"Mem/IncrementalMemory": "false", "Mem/InitWMWithAllNodes": "true"})
+            core = Rtabmap(p, database=db)
+            stamps = {n.id: n.stamp_ns for n in db.nodes()}
+            poses, _ = core.graph()
+            if args.poses is not None:
+                ids = sorted(i for i in poses if i in stamps)
+                write_tum_trajectory(args.poses, [stamps[i] / 1e9 for i in ids],
+                                     [poses[i] for i in ids])
+                print(f"wrote {len(ids)} poses to {args.poses}")
+            if args.ply is not None:
+                xyz, rgb = _cloud_from_db(db, core, args.voxel)
+                write_ply(args.ply, xyz, rgb)
+                print(f"wrote {xyz.shape[0]} points to {args.ply}")
+    except (DatabaseError, VslamError, OSError) as exc:
+        print(f"eddie vslam db export: {exc}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _cloud_from_db(db: Any, core: Any, voxel: float) -> tuple[Any, Any]:
+    """Clouds re-made from the stored images (loaded nodes carry no cloud) at the optimised
+    poses."""
+    import numpy as np
+
+    from eddiebot.vslam.database import camera_from_json
+    from eddiebot.vslam.occupancy import assemble_cloud, depth_cloud
+
+    poses = core.optimized_poses
+    clouds = {}
+    rows = db._conn.execute("SELECT id, calibration FROM Data").fetchall()
+    p = core.params
+    for node_id, calib in rows:
+        if node_id not in poses or not calib:
+            continue
+        rgb, depth = db.image(node_id)
+        if rgb is None or depth is None:
+            continue
+        cam = camera_from_json(calib)
+        xyz, colors = depth_cloud(depth, cam, p.grid_depth_decimation, p.grid_range_min,
+                                  p.grid_range_max, rgb)
+        clouds[node_id] = (xyz, colors)
+    if not clouds:
+        return np.zeros((0, 3)), np.zeros((0, 3), np.uint8)
+    return assemble_cloud(clouds, poses, voxel)

@@ -1,0 +1,277 @@
+"""Demo stage: Eddie maps a world with RGB-D graph SLAM (the ``rtabmap`` node) on wheel odometry.
+
+The simulator, the base stack, depthimage_to_laserscan and the vSLAM node (the report's
+parameters, ``launch/vslam.yaml``) run in one process on a simulated clock, as fast as the CPU
+allows, while `RouteDriver` drives the route. The vSLAM node poses are taken to the world by the
+start pose (the map frame starts at the robot's start) and compared with the simulator's ground
+truth at the node stamps: ATE RMSE and max, and the end-point error of wheel odometry alone.
+Writes ``rtabmap.db`` (the session), ``vslam_trajectory.tum`` and ``groundtruth.tum`` (world
+frame) and ``result.json`` under ``out_dir``.
+
+Optionally (``visual_odometry=True``) frame-to-map visual odometry runs on every camera frame
+beside it, for the VO-only drift figure.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from eddiebot.core.context import Context
+from eddiebot.core.executors import SingleThreadedExecutor
+from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
+from eddiebot.core.node import Node
+from eddiebot.core.time import stamp_to_ns
+from eddiebot.demo.route import OFFICE_ROUTE, RouteDriver, Waypoint
+from eddiebot.geometry import quaternion_to_yaw, se2_compose
+from eddiebot.msgs.nav_msgs import Odometry
+from eddiebot.registry import NODES
+
+__all__ = ["CORRIDOR_ROUTE", "VslamResult", "run_vslam"]
+
+#: Down the ``corridor`` world (40 × 2.2 m) and back, looking around at both ends and again at
+#: the start: about 34 m, the return leg revisits every place of the outward one.
+CORRIDOR_ROUTE: tuple[Waypoint, ...] = (
+    Waypoint(2.5, 1.1, spin=2 * math.pi),
+    Waypoint(18.0, 1.1, spin=2 * math.pi),
+    Waypoint(2.5, 1.1, spin=2 * math.pi),
+)
+
+
+@dataclass
+class VslamResult:
+    """Figures of one `run_vslam` (lengths in m, times in s; NaN when not measured)."""
+
+    world: str
+    finished: bool = False
+    sim_seconds: float = 0.0
+    wall_seconds: float = 0.0
+    distance_m: float = 0.0
+    frames: int = 0
+    nodes: int = 0
+    loop_closures: int = 0
+    ate_rmse_m: float = math.nan
+    ate_max_m: float = math.nan
+    slam_end_error_m: float = math.nan
+    odom_end_error_m: float = math.nan
+    odom_ate_rmse_m: float = math.nan
+    vo_end_error_m: float = math.nan
+    vo_drift_percent: float = math.nan
+    vo_lost_frames: int = 0
+    frame_ms_median: float = math.nan
+    frame_ms_p95: float = math.nan
+    database: Path | None = None
+    trajectory: Path | None = None
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    slam_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    truth: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready figures (no arrays)."""
+        out = {k: v for k, v in asdict(self).items() if k not in ("slam_world", "truth")}
+        for k in ("database", "trajectory"):
+            out[k] = str(out[k]) if out[k] is not None else None
+        return out
+
+
+def _pose_of(msg: Any) -> tuple[float, float, float]:
+    p = msg.pose.pose
+    q = p.orientation
+    return (p.position.x, p.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))
+
+
+def _write_tum(path: Path, stamps_ns: np.ndarray, xyt: np.ndarray) -> None:
+    lines = []
+    for t, (x, y, th) in zip(stamps_ns, xyt):
+        lines.append(f"{t / 1e9:.9f} {x:.6f} {y:.6f} 0.000000 0.000000 0.000000 "
+                     f"{math.sin(th / 2):.9f} {math.cos(th / 2):.9f}")
+    path.write_text("\n".join(lines) + ("\n" if lines else ""))
+
+
+class _VoProbe(Node):
+    """Visual odometry on every synchronised RGB + registered depth frame (VO-only drift)."""
+
+    def __init__(self, slam: Any, **kwargs: Any) -> None:
+        from eddiebot.msgs.sensor_msgs import Image
+        from eddiebot.vslam.odometry import VisualOdometry
+        from eddiebot.vslam.parameters import RtabmapParameters
+
+        super().__init__("vo_probe", **kwargs)
+        self.slam = slam
+        self.vo = VisualOdometry(RtabmapParameters.from_dict({"Reg/Force3DoF": "true"}))
+        self.depth: dict[int, Any] = {}
+        self.rgb: dict[int, Any] = {}
+        self.poses: list[tuple[int, np.ndarray]] = []
+        self.lost = 0
+        self.create_subscription(Image, "/depth/image_raw", self._on_depth, 5)
+        self.create_subscription(Image, "/image_raw", self._on_rgb, 5)
+
+    def _on_depth(self, msg: Any) -> None:
+        t = stamp_to_ns(msg.header.stamp)
+        self.depth = {t: msg}
+        if t in self.rgb:
+            self._pair(self.rgb.pop(t), msg, t)
+
+    def _on_rgb(self, msg: Any) -> None:
+        t = stamp_to_ns(msg.header.stamp)
+        self.rgb = {t: msg}
+        if t in self.depth:
+            self._pair(msg, self.depth.pop(t), t)
+
+    def _pair(self, msg: Any, d: Any, t: int) -> None:
+        from eddiebot.vslam.camera import CameraIntrinsics
+
+        slam = self.slam
+        info = slam._info_for(slam._rgb_info, t, msg.header.frame_id)
+        if info is None:
+            return
+        rgb_frame = str(info.header.frame_id)
+        depth = slam._depth_array(d, info, rgb_frame, t)
+        lt = slam._static_tf(slam.frame_id, rgb_frame)
+        if depth is None or lt is None:
+            return
+        rgb = np.asarray(msg.data, np.uint8).reshape(int(msg.height), int(msg.width), 3)
+        cam = CameraIntrinsics.from_k(info.k, int(info.width), int(info.height), lt)
+        r = self.vo.process(rgb, depth, cam, t)
+        if r.pose is None:
+            self.lost += 1
+            return
+        self.poses.append((t, r.pose))
+
+
+def run_vslam(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ...] = OFFICE_ROUTE,
+              seed: int = 0, camera: tuple[int, int, float] = (320, 240, 10.0),
+              parameters: dict[str, Any] | None = None, visual_odometry: bool = False,
+              wall_timeout_s: float = 1800.0) -> VslamResult:
+    """Map ``world`` along ``route`` with the vSLAM node; write database and trajectory under
+    ``out_dir``. ``parameters`` are extra node parameters (RTAB-Map ``Group/Name`` strings or the
+    node's own, e.g. ``odom_stamp_offset``)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    result = VslamResult(world)
+    db_path = out_dir / "rtabmap.db"
+    context = Context(use_sim_time=True)
+    args = {"world": world, "seed": str(seed), "camera_width": str(camera[0]),
+            "camera_height": str(camera[1]), "camera_rate": str(camera[2]),
+            "database_path": str(db_path), "delete_db_on_start": "true"}
+    desc = parse_launch_file(find_launch_file("vslam"), args)
+    if parameters:
+        spec = next(n for n in desc.nodes if n.type == "eddiebot.vslam.rtabmap")
+        spec.params.update(parameters)
+    nodes: list[Node] = build_nodes(desc, context, NODES)
+    from eddiebot.vslam.node import RtabmapNode
+
+    slam = next(n for n in nodes if isinstance(n, RtabmapNode))
+    sim = context.resources["simulator"]
+    result.start = tuple(float(v) for v in sim.world.start)  # type: ignore[assignment]
+    driver = RouteDriver(route, context=context)
+    nodes.append(driver)
+    truth: dict[int, tuple[float, float, float]] = {}
+    odom: list[tuple[int, tuple[float, float, float]]] = []
+    probe = Node("vslam_probe", context=context)
+    probe.create_subscription(
+        Odometry, "/ground_truth/odom",
+        lambda m: truth.__setitem__(stamp_to_ns(m.header.stamp), _pose_of(m)), 50)
+    probe.create_subscription(
+        Odometry, "/odom", lambda m: odom.append((stamp_to_ns(m.header.stamp), _pose_of(m))), 50)
+    nodes.append(probe)
+    vo_probe = _VoProbe(slam, context=context) if visual_odometry else None
+    if vo_probe is not None:
+        nodes.append(vo_probe)
+    frame_ms: list[float] = []
+    process = slam.core.process
+
+    def timed(*a: Any, **k: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return process(*a, **k)
+        finally:
+            frame_ms.append((time.perf_counter() - t0) * 1e3)
+
+    slam.core.process = timed  # type: ignore[method-assign]
+    executor = SingleThreadedExecutor(context=context)
+    for n in nodes:
+        executor.add_node(n)
+    t0 = time.perf_counter()
+    try:
+        while not driver.done.is_set() and time.perf_counter() - t0 < wall_timeout_s:
+            executor.spin_for(1.0)
+        executor.spin_for(2.0)  # settle: the last frames in
+        result.wall_seconds = time.perf_counter() - t0
+        result.sim_seconds = context.sim_clock.now_ns() / 1e9
+        result.finished = driver.done.is_set() and not driver.failed
+        result.distance_m = driver.distance
+        result.frames = slam.frames_processed
+        result.loop_closures = slam.loop_closures
+        if frame_ms:
+            result.frame_ms_median = float(np.median(frame_ms))
+            result.frame_ms_p95 = float(np.percentile(frame_ms, 95))
+        _score(result, slam, truth, odom, vo_probe, out_dir)
+    finally:
+        for n in reversed(nodes):
+            n.destroy_node()  # the vSLAM node closes (and completes) its database
+        context.shutdown()
+    result.database = db_path
+    (out_dir / "result.json").write_text(json.dumps(result.summary(), indent=2))
+    return result
+
+
+def _nearest(stamps: np.ndarray, values: np.ndarray, query: np.ndarray) -> np.ndarray:
+    idx = np.clip(np.searchsorted(stamps, query), 1, len(stamps) - 1)
+    left = np.abs(query - stamps[idx - 1]) <= np.abs(stamps[idx] - query)
+    return values[np.where(left, idx - 1, idx)]
+
+
+def _score(result: VslamResult, slam: Any, truth: dict[int, tuple[float, float, float]],
+           odom: list[tuple[int, tuple[float, float, float]]], vo_probe: _VoProbe | None,
+           out_dir: Path) -> None:
+    start = np.array(result.start)
+    stamps, poses = slam.trajectory()
+    result.nodes = len(stamps)
+    if len(truth) < 2:
+        return
+    truth_t = np.array(sorted(truth), dtype=np.int64)
+    truth_p = np.array([truth[t] for t in truth_t])
+    final_truth = truth_p[-1]
+    if odom:
+        o_t = np.array([t for t, _ in odom], dtype=np.int64)
+        o_p = np.array([p for _, p in odom])
+        o_w = se2_compose(np.broadcast_to(start, o_p.shape), o_p)
+        result.odom_end_error_m = float(np.hypot(*(o_w[-1, :2] - final_truth[:2])))
+        gt_o = _nearest(truth_t, truth_p, o_t)
+        result.odom_ate_rmse_m = float(np.sqrt(np.mean(np.sum((o_w[:, :2] - gt_o[:, :2]) ** 2, 1))))
+        # the map-frame estimate of the end: map→odom × last odometry
+        m2o = slam.core.map_to_odom
+        last = np.array(odom[-1][1])
+        m2o_xyt = np.array([m2o[0, 3], m2o[1, 3], math.atan2(m2o[1, 0], m2o[0, 0])])
+        end = se2_compose(start, se2_compose(m2o_xyt, last))
+        result.slam_end_error_m = float(np.hypot(*(end[:2] - final_truth[:2])))
+    if len(stamps):
+        xyt = np.stack([poses[:, 0, 3], poses[:, 1, 3], np.arctan2(poses[:, 1, 0], poses[:, 0, 0])], 1)
+        est = se2_compose(np.broadcast_to(start, xyt.shape), xyt)
+        gt = _nearest(truth_t, truth_p, stamps)
+        err = np.hypot(est[:, 0] - gt[:, 0], est[:, 1] - gt[:, 1])
+        result.ate_rmse_m = float(np.sqrt(np.mean(err**2)))
+        result.ate_max_m = float(err.max())
+        result.slam_world, result.truth = est, gt
+        result.trajectory = out_dir / "vslam_trajectory.tum"
+        _write_tum(result.trajectory, stamps, est)
+        _write_tum(out_dir / "groundtruth.tum", stamps, gt)
+    if vo_probe is not None and vo_probe.poses:
+        result.vo_lost_frames = vo_probe.lost
+        t_first, first = vo_probe.poses[0]
+        t_last, last_vo = vo_probe.poses[-1]
+        rel = np.linalg.inv(first) @ last_vo
+        rel_xyt = np.array([rel[0, 3], rel[1, 3], math.atan2(rel[1, 0], rel[0, 0])])
+        g0 = _nearest(truth_t, truth_p, np.array([t_first]))[0]
+        g1 = _nearest(truth_t, truth_p, np.array([t_last]))[0]
+        est_end = se2_compose(g0, rel_xyt)
+        result.vo_end_error_m = float(np.hypot(*(est_end[:2] - g1[:2])))
+        if result.distance_m > 0:
+            result.vo_drift_percent = 100.0 * result.vo_end_error_m / result.distance_m

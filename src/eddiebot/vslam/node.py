@@ -1,0 +1,701 @@
+"""rtabmap_ros's ``rtabmap`` node on the `Rtabmap` core: RGB-D (+ scan) + TF odometry → graph,
+``map → odom``, occupancy grid, session database.
+
+Parameters are rtabmap_ros's: ``frame_id`` (base_footprint), ``map_frame_id``, ``odom_frame_id``,
+``subscribe_depth``, ``subscribe_scan``, ``approx_sync``, ``sync_queue_size`` (``queue_size`` is
+the deprecated alias), ``wait_for_transform`` (s), ``tf_delay``/``tf_tolerance``,
+``odom_tf_linear_variance``/``odom_tf_angular_variance``, ``database_path``,
+``odom_stamp_offset`` (s, not upstream: TF odometry is read at the image stamp plus this, to
+compensate a known odometry latency; default 0),
+``delete_db_on_start`` (``-d``), ``localization`` (``Mem/IncrementalMemory`` false and
+``Mem/InitWMWithAllNodes`` true). Every RTAB-Map ``Group/Name`` parameter is accepted as a string
+parameter under that name (``Reg/Force3DoF: "true"`` under ``ros__parameters``; the nested YAML form
+``Reg: {Force3DoF: true}`` arrives as ``Reg.Force3DoF`` and is accepted too), and
+``rtabmap_args`` takes upstream's command line (``-d --Reg/Force3DoF true``). Without ``-d`` the
+database's last session parameters are re-applied unless set explicitly, as upstream.
+
+Input: ``/image_raw`` + ``/camera_info``, ``/depth/image_raw`` + ``/depth/camera_info`` (depth in
+another frame than the RGB camera is registered to it first, as the Kinect publishes it
+unregistered), ``/scan``, ``/odom`` (only to notice lost odometry). Sets are paired by stamp
+(``approx_sync``: within ``approx_sync_max_interval``, default 0.05 s), throttled by
+``Rtabmap/DetectionRate`` and wait up to ``wait_for_transform`` for TF ``odom → frame_id`` at the
+image stamp; the camera's and the laser's poses in ``frame_id`` come from TF.
+
+Output: TF ``map → odom`` every ``tf_delay``; ``map_topic`` (default ``/rtabmap/map``, latched;
+``/map`` to replace 2D SLAM); ``~/mapGraph`` (MarkerArray: nodes, neighbour and loop links);
+``~/cloud_map`` (PointCloud2, on ``~/publish_map``). Services (std_srvs/Empty unless named):
+``~/reset`` (empties memory and database), ``~/pause``, ``~/resume``, ``~/publish_map``,
+``~/set_mode_localization``, ``~/set_mode_mapping``, ``~/save_map`` (nav2_msgs/SaveMap:
+map_server files at ``map_url``), ``~/export_cloud`` (slam_toolbox/SaveMap: a PLY file at
+``name``).
+
+Bad input (an image without depth or camera_info, mismatched sizes, unsupported encodings, time
+going backwards, missing odometry, lost odometry) is skipped with one warning per kind; a frame
+is never processed with a made-up pose.
+"""
+
+from __future__ import annotations
+
+import re
+import shlex
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from eddiebot.core.node import Node
+from eddiebot.core.parameters import ParameterDescriptor
+from eddiebot.core.qos import qos_profile_latched, qos_profile_sensor_data
+from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, make_transform
+from eddiebot.core.time import stamp_to_ns
+from eddiebot.geometry import matrix_to_quaternion, se3_from_tq
+from eddiebot.maps import map_to_msg, save_map
+from eddiebot.msgs.geometry_msgs import Point
+from eddiebot.msgs.nav2_msgs import SaveMap as Nav2SaveMap
+from eddiebot.msgs.nav_msgs import OccupancyGrid, Odometry
+from eddiebot.msgs.sensor_msgs import CameraInfo, Image, LaserScan, PointCloud2, PointField
+from eddiebot.msgs.slam_toolbox import SaveMap as PathRequest
+from eddiebot.msgs.std_msgs import Header
+from eddiebot.msgs.std_srvs import Empty
+from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
+from eddiebot.vslam.camera import CameraIntrinsics
+from eddiebot.vslam.database import SessionDatabase
+from eddiebot.vslam.errors import DatabaseError
+from eddiebot.vslam.errors import ParameterError as VslamParameterError
+from eddiebot.vslam.export import write_ply
+from eddiebot.vslam.memory import LinkType
+from eddiebot.vslam.occupancy import Scan2D
+from eddiebot.vslam.parameters import RtabmapParameters, parameter_names
+from eddiebot.vslam.rtabmap import ProcessResult, Rtabmap
+
+__all__ = ["DEFAULT_DATABASE_PATH", "RtabmapNode", "parse_rtabmap_args"]
+
+DEFAULT_DATABASE_PATH = "~/.local/share/eddiebot/rtabmap.db"
+_RGB_ENCODINGS = ("rgb8", "bgr8", "mono8")
+_DEPTH_ENCODINGS = ("16UC1", "32FC1")
+_SEC = 1_000_000_000
+_RTABMAP_NAME = re.compile(r"^[A-Z][A-Za-z0-9]*[/.][A-Z][A-Za-z0-9_/]*$")
+
+
+def parse_rtabmap_args(text: str) -> tuple[dict[str, str], bool, list[str]]:
+    """Upstream's ``rtabmap_args``: ``(-d|--delete_db_on_start) --Group/Name value ...`` →
+    (parameters, delete_db_on_start, ignored tokens)."""
+    tokens = shlex.split(text or "")
+    params: dict[str, str] = {}
+    ignored: list[str] = []
+    delete = False
+    k = 0
+    while k < len(tokens):
+        tok = tokens[k]
+        if tok in ("-d", "--delete_db_on_start"):
+            delete = True
+        elif tok.startswith("--") and "/" in tok:
+            name, _, inline = tok[2:].partition("=")
+            if inline:
+                value = inline
+            elif k + 1 < len(tokens):
+                k += 1
+                value = tokens[k]
+            else:
+                ignored.append(tok)
+                break
+            if _RTABMAP_NAME.match(name):
+                params[name] = value
+            else:
+                ignored.append(tok)
+        else:
+            ignored.append(tok)
+        k += 1
+    return params, delete, ignored
+
+
+def _as_text(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)
+
+
+def _tf_matrix(tf: Any) -> np.ndarray:
+    t = tf.transform.translation
+    q = tf.transform.rotation
+    return se3_from_tq((t.x, t.y, t.z), (q.x, q.y, q.z, q.w))
+
+
+def _image_array(msg: Any, accepted: tuple[str, ...]) -> np.ndarray:
+    from eddiebot.perception._image import image_to_array
+
+    return image_to_array(msg, accepted)
+
+
+class RtabmapNode(Node):
+    """The ``rtabmap`` node (mapping or localization) on `Rtabmap`."""
+
+    default_node_name = "rtabmap"
+
+    def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+
+        def p(name: str, default: Any) -> Any:
+            return self.declare_parameter(name, default).value
+
+        self.frame_id = str(p("frame_id", "base_footprint"))
+        self.map_frame_id = str(p("map_frame_id", "map"))
+        self.odom_frame_id = str(p("odom_frame_id", "odom"))
+        self.subscribe_depth = bool(p("subscribe_depth", True))
+        self.subscribe_scan = bool(p("subscribe_scan", False))
+        self.subscribe_odom = bool(p("subscribe_odom", True))
+        self.approx_sync = bool(p("approx_sync", True))
+        self.approx_sync_max_interval = float(p("approx_sync_max_interval", 0.05))
+        queue_size = int(p("queue_size", 0))
+        self.sync_queue_size = int(p("sync_queue_size", 10))
+        if queue_size > 0:
+            self.get_logger().warning(
+                "parameter 'queue_size' is deprecated, use 'sync_queue_size' (copied)")
+            self.sync_queue_size = queue_size
+        self.wait_for_transform = float(p("wait_for_transform", 0.2))
+        self.tf_delay = float(p("tf_delay", 0.05))
+        self.tf_tolerance = float(p("tf_tolerance", 0.1))
+        self.publish_tf = bool(p("publish_tf", True))
+        # not upstream: odometry latency compensation (s), TF odometry is read at stamp + this
+        self.odom_stamp_offset = float(p("odom_stamp_offset", 0.0))
+        self.odom_tf_linear_variance = float(p("odom_tf_linear_variance", 0.001))
+        self.odom_tf_angular_variance = float(p("odom_tf_angular_variance", 0.001))
+        self.map_topic = str(p("map_topic", "/rtabmap/map"))
+        self.map_update_interval = float(p("map_update_interval", 1.0))
+        self.cloud_voxel_size = float(p("cloud_voxel_size", 0.05))
+        self.database_path = str(p("database_path", DEFAULT_DATABASE_PATH))
+        self.delete_db_on_start = bool(p("delete_db_on_start", False))
+        self.localization = bool(p("localization", False))
+        self.rtabmap_args = str(p("rtabmap_args", ""))
+        rgb_topic = str(p("rgb_topic", "/image_raw"))
+        rgb_info_topic = str(p("rgb_camera_info_topic", "/camera_info"))
+        depth_topic = str(p("depth_topic", "/depth/image_raw"))
+        depth_info_topic = str(p("depth_camera_info_topic", "/depth/camera_info"))
+        scan_topic = str(p("scan_topic", "/scan"))
+        odom_topic = str(p("odom_topic", "/odom"))
+
+        self._warned: set[str] = set()
+        self.explicit_parameters = self._explicit_rtabmap_parameters()
+        args, delete, ignored = parse_rtabmap_args(self.rtabmap_args)
+        if ignored:
+            self.get_logger().warning(f"rtabmap_args: ignored {' '.join(ignored)}")
+        self.explicit_parameters.update(args)
+        self.delete_db_on_start = self.delete_db_on_start or delete
+
+        self.paused = False
+        self.frames_processed = 0
+        self.loop_closures = 0
+        self.last_result: ProcessResult | None = None
+        self.node_stamps: dict[int, int] = {}
+        self._rgb: deque[Any] = deque(maxlen=max(1, self.sync_queue_size))
+        self._depth: deque[Any] = deque(maxlen=max(1, self.sync_queue_size))
+        self._scans: deque[Any] = deque(maxlen=max(1, self.sync_queue_size))
+        self._odom: deque[Any] = deque(maxlen=max(10, 4 * self.sync_queue_size))
+        self._rgb_info: deque[Any] = deque(maxlen=5)
+        self._depth_info: deque[Any] = deque(maxlen=5)
+        self._pending: deque[tuple[int, Any, Any | None]] = deque(maxlen=max(1, self.sync_queue_size))
+        self._last_set_ns: int | None = None
+        self._last_processed_ns: int | None = None
+        self._static: dict[tuple[str, str], np.ndarray] = {}
+        self._map_dirty = True
+
+        self.db: SessionDatabase | None = None
+        self.core = self._make_core(self.delete_db_on_start)
+
+        self.tf_buffer = Buffer(10.0, node=self)
+        self.tf_listener = TransformListener(self.tf_buffer, self)
+        self.tf_broadcaster = TransformBroadcaster(self)
+        self.map_pub = self.create_publisher(OccupancyGrid, self.map_topic, qos_profile_latched)
+        self.graph_pub = self.create_publisher(MarkerArray, "~/mapGraph", qos_profile_latched)
+        self.cloud_pub = self.create_publisher(PointCloud2, "~/cloud_map", qos_profile_latched)
+        sensor = qos_profile_sensor_data
+        self.create_subscription(Image, rgb_topic, self._on_rgb, sensor)
+        self.create_subscription(CameraInfo, rgb_info_topic, self._rgb_info.append, sensor)
+        if self.subscribe_depth:
+            self.create_subscription(Image, depth_topic, self._on_depth, sensor)
+            self.create_subscription(CameraInfo, depth_info_topic, self._depth_info.append, sensor)
+        if self.subscribe_scan:
+            self.create_subscription(LaserScan, scan_topic, self._on_scan, sensor)
+        if self.subscribe_odom:
+            self.create_subscription(Odometry, odom_topic, self._odom.append, 50)
+        if self.publish_tf:
+            self.create_timer(self.tf_delay, self._publish_tf)
+        self.create_timer(0.02, self._drain)
+        self.create_timer(self.map_update_interval, self._publish_map)
+        self.create_service(Empty, "~/reset", self._srv_reset)
+        self.create_service(Empty, "~/pause", self._srv_pause)
+        self.create_service(Empty, "~/resume", self._srv_resume)
+        self.create_service(Empty, "~/publish_map", self._srv_publish_map)
+        self.create_service(Empty, "~/set_mode_localization", self._srv_localization)
+        self.create_service(Empty, "~/set_mode_mapping", self._srv_mapping)
+        self.create_service(Nav2SaveMap, "~/save_map", self._srv_save_map)
+        self.create_service(PathRequest, "~/export_cloud", self._srv_export_cloud)
+        mode = "localization" if self.core.localization_mode else "mapping"
+        where = self.db.path if self.db is not None else "no database"
+        self.get_logger().info(
+            f"rtabmap in {mode} mode ({len(self.core.memory.nodes)} nodes loaded from {where}), "
+            f"Reg/Force3DoF {self.core.params.reg_force_3dof}")
+
+    # -- parameters & core -----------------------------------------------------------------
+    def _explicit_rtabmap_parameters(self) -> dict[str, str]:
+        """Declare every ``Group/Name`` parameter (string, unset by default); return those set.
+
+        Names this implementation does not use are accepted (declared, so launch files written
+        for upstream still load) and reported once."""
+        names = parameter_names()
+        out: dict[str, str] = {}
+        desc = ParameterDescriptor(description="RTAB-Map parameter (string)", dynamic_typing=True)
+        for name in names:
+            value = self.declare_parameter(name, None, desc).value
+            if value is not None:
+                out[name] = _as_text(value)
+        dotted = {n.replace("/", "."): n for n in names}
+        for o in self.undeclared_overrides():
+            if o.name in dotted:
+                out[dotted[o.name]] = _as_text(o.value)
+                self.declare_parameter(o.name, None, desc)
+            elif _RTABMAP_NAME.match(o.name):
+                name = o.name.replace(".", "/", 1) if "/" not in o.name else o.name
+                self.declare_parameter(o.name, None, desc)
+                out[name] = _as_text(o.value)
+        return out
+
+    def effective_parameters(self, stored: dict[str, str]) -> dict[str, str]:
+        """Defaults the ROS node forces < database's last session < explicit < mode; only
+        names this implementation knows, each value checked (a bad one is dropped, reported)."""
+        values: dict[str, str] = {"RGBD/CreateOccupancyGrid": "true"}
+        if self.subscribe_scan:
+            values["Grid/Sensor"] = "0"
+        known = set(parameter_names())
+        values.update({k: v for k, v in stored.items() if k in known})
+        unused = sorted(k for k in self.explicit_parameters if k not in known)
+        if unused:
+            self._warn_once("unused_parameters",
+                            f"RTAB-Map parameters not used by this implementation: {', '.join(unused)}")
+        for k, v in self.explicit_parameters.items():
+            if k not in known:
+                continue
+            try:
+                RtabmapParameters.from_dict({k: v})
+            except VslamParameterError as exc:
+                self.get_logger().error(f"{exc}: default kept")
+                continue
+            values[k] = v
+        if self.localization:
+            values["Mem/IncrementalMemory"] = "false"
+            values["Mem/InitWMWithAllNodes"] = "true"
+        return values
+
+    def _make_core(self, delete: bool) -> Rtabmap:
+        stored: dict[str, str] = {}
+        self.db = None
+        if self.database_path:
+            path = Path(self.database_path).expanduser()
+            try:
+                path.parent.mkdir(parents=True, exist_ok=True)
+                self.db = SessionDatabase(path, delete_on_start=delete)
+                stored = self.db.last_parameters()
+            except (DatabaseError, OSError) as exc:
+                self.get_logger().error(f"database {path}: {exc}; running without a database")
+                self.db = None
+        params = RtabmapParameters.from_dict(self.effective_parameters(stored))
+        core = Rtabmap(params, database=self.db)
+        self.node_stamps = {n.id: n.stamp_ns for n in core.memory.nodes.values()}
+        return core
+
+    def _close_db(self) -> None:
+        if self.db is not None:
+            try:
+                self.db.close(self.core)
+            except Exception as exc:  # a failing close must not hide the shutdown
+                self.get_logger().error(f"closing the database failed: {exc}")
+            self.db = None
+
+    def destroy_node(self) -> None:
+        self._close_db()
+        super().destroy_node()
+
+    # -- warnings --------------------------------------------------------------------------
+    def _warn_once(self, kind: str, text: str) -> None:
+        if kind not in self._warned:
+            self._warned.add(kind)
+            self.get_logger().warning(f"{text} (further '{kind}' warnings suppressed)")
+
+    # -- synchronisation -------------------------------------------------------------------
+    @property
+    def _odom_offset_ns(self) -> int:
+        return round(self.odom_stamp_offset * _SEC)
+
+    @property
+    def _tolerance_ns(self) -> int:
+        return round(self.approx_sync_max_interval * _SEC) if self.approx_sync else 0
+
+    def _on_rgb(self, msg: Any) -> None:
+        if self.paused:
+            return
+        self._rgb.append(msg)
+        self._sync()
+
+    def _on_depth(self, msg: Any) -> None:
+        if self.paused:
+            return
+        self._depth.append(msg)
+        self._sync()
+
+    def _on_scan(self, msg: Any) -> None:
+        self._scans.append(msg)
+
+    def _sync(self) -> None:
+        tol = self._tolerance_ns
+        rate = self.core.params.rtabmap_detection_rate
+        period = round(_SEC / rate) if rate > 0 else 0
+        while self._rgb:
+            img = self._rgb[0]
+            t = stamp_to_ns(img.header.stamp)
+            depth = None
+            if self.subscribe_depth:
+                if not self._depth:
+                    return
+                best = min(self._depth, key=lambda d: abs(stamp_to_ns(d.header.stamp) - t))
+                if abs(stamp_to_ns(best.header.stamp) - t) > tol:
+                    if stamp_to_ns(self._depth[-1].header.stamp) > t + tol:
+                        self._rgb.popleft()
+                        self._warn_once("no_depth", "an image has no depth image within "
+                                        f"{tol / 1e9:.3f} s of its stamp: skipped")
+                        continue
+                    return  # its depth may still come
+                depth = best
+                while self._depth and stamp_to_ns(self._depth[0].header.stamp) <= stamp_to_ns(
+                        best.header.stamp):
+                    self._depth.popleft()
+            self._rgb.popleft()
+            if self._last_set_ns is not None and t < self._last_set_ns:
+                self._warn_once("time_backwards",
+                                "image time went backwards (bag restarted?): skipped")
+                continue
+            # Rtabmap/DetectionRate: drop sets closer than 1/rate to the last kept one
+            if self._last_set_ns is not None and period and t - self._last_set_ns < period * 0.999:
+                continue
+            self._last_set_ns = t
+            self._pending.append((t, img, depth))
+
+    def _drain(self) -> None:
+        now = self.get_clock().now_ns()
+        wait = round(self.wait_for_transform * _SEC)
+        while self._pending:
+            t, img, depth = self._pending[0]
+            ready = self.tf_buffer.can_transform(self.odom_frame_id, self.frame_id,
+                                                 t + self._odom_offset_ns)
+            scan = self._match_scan(t) if self.subscribe_scan else None
+            if not ready or (self.subscribe_scan and scan is None):
+                if now - t <= wait:
+                    return  # wait for newer odometry (or the scan)
+                if not ready:
+                    self._pending.popleft()
+                    self._warn_once("no_odom_tf",
+                                    f"no transform {self.odom_frame_id} → {self.frame_id} at an "
+                                    f"image's time within {self.wait_for_transform} s: frame dropped")
+                    continue
+                self._warn_once("no_scan", "no scan near an image's time: processed without it")
+            self._pending.popleft()
+            try:
+                self._process(t, img, depth, scan)
+            except Exception as exc:  # one bad frame must not stop the node
+                self._warn_once(f"error_{type(exc).__name__}", f"frame skipped: {exc}")
+
+    def _match_scan(self, t: int) -> Any | None:
+        if not self._scans:
+            return None
+        best = min(self._scans, key=lambda s: abs(stamp_to_ns(s.header.stamp) - t))
+        if abs(stamp_to_ns(best.header.stamp) - t) <= max(self._tolerance_ns, 1):
+            return best
+        return None
+
+    # -- processing ------------------------------------------------------------------------
+    def _static_tf(self, target: str, source: str) -> np.ndarray | None:
+        key = (target, source)
+        if key not in self._static:
+            try:
+                self._static[key] = _tf_matrix(self.tf_buffer.lookup_transform(target, source, 0))
+            except Exception as exc:
+                self._warn_once(f"no_tf_{source}", f"no transform {target} → {source}: {exc}")
+                return None
+        return self._static[key]
+
+    def _info_for(self, infos: deque[Any], t: int, frame: str) -> Any | None:
+        cands = [i for i in infos if not frame or i.header.frame_id == frame] or list(infos)
+        if not cands:
+            return None
+        return min(cands, key=lambda i: abs(stamp_to_ns(i.header.stamp) - t))
+
+    def _odometry_lost(self, t: int) -> bool:
+        """True if the /odom message nearest `t` says the odometry is lost (null pose or
+        covariance 9999, as rtabmap_odom publishes it)."""
+        if not self._odom:
+            return False
+        msg = min(self._odom, key=lambda m: abs(stamp_to_ns(m.header.stamp) - t))
+        if abs(stamp_to_ns(msg.header.stamp) - t) > _SEC // 2:
+            return False
+        q = msg.pose.pose.orientation
+        cov = np.asarray(msg.pose.covariance, dtype=np.float64)
+        null = q.x == 0.0 and q.y == 0.0 and q.z == 0.0 and q.w == 0.0
+        return bool(null or (cov.size and cov[0] >= 9999.0))
+
+    def _process(self, t: int, img: Any, depth_msg: Any | None, scan_msg: Any | None) -> None:
+        from eddiebot.perception.errors import ImageSizeError, UnsupportedEncodingError
+
+        if self._last_processed_ns is not None:
+            if t <= self._last_processed_ns:
+                self._warn_once("time_backwards",
+                                "image time went backwards (bag restarted?): skipped")
+                return
+            gap = (t - self._last_processed_ns) / _SEC
+            if gap > 30.0:
+                self._warn_once("time_jump", f"time jumped {gap:.1f} s forward")
+        rgb_info = self._info_for(self._rgb_info, t, img.header.frame_id)
+        if rgb_info is None:
+            self._warn_once("no_camera_info", "an image arrived without camera_info: skipped")
+            return
+        try:
+            rgb = _image_array(img, _RGB_ENCODINGS)
+        except (UnsupportedEncodingError, ImageSizeError) as exc:
+            self._warn_once("bad_rgb", f"RGB image skipped: {exc}")
+            return
+        if (int(img.width), int(img.height)) != (int(rgb_info.width), int(rgb_info.height)):
+            self._warn_once("size_mismatch", f"RGB image {img.width}x{img.height} does not match "
+                            f"camera_info {rgb_info.width}x{rgb_info.height}: skipped")
+            return
+        if rgb.ndim == 2:
+            rgb = np.repeat(rgb[:, :, None], 3, axis=2)
+        elif img.encoding == "bgr8":
+            rgb = np.ascontiguousarray(rgb[:, :, ::-1])
+        rgb_frame = str(rgb_info.header.frame_id or img.header.frame_id)
+        if depth_msg is None:
+            self._warn_once("no_depth", "no depth image (subscribe_depth false): skipped")
+            return
+        depth = self._depth_array(depth_msg, rgb_info, rgb_frame, t)
+        if depth is None:
+            return
+        if depth.shape[:2] != rgb.shape[:2]:
+            fy, fx = rgb.shape[0] / depth.shape[0], rgb.shape[1] / depth.shape[1]
+            if fx != fy or fx < 1 or fx != int(fx):
+                self._warn_once("size_mismatch", f"depth {depth.shape[1]}x{depth.shape[0]} and "
+                                f"RGB {rgb.shape[1]}x{rgb.shape[0]} differ: skipped")
+                return
+            depth = np.repeat(np.repeat(depth, int(fx), axis=0), int(fx), axis=1)
+        cam_pose = self._static_tf(self.frame_id, rgb_frame)
+        if cam_pose is None:
+            return
+        camera = CameraIntrinsics.from_k(rgb_info.k, int(rgb_info.width), int(rgb_info.height),
+                                         cam_pose)
+        if self._odometry_lost(t):
+            self._warn_once("odom_lost", "odometry is lost at an image's time: skipped")
+            return
+        try:
+            odom = _tf_matrix(self.tf_buffer.lookup_transform(
+                self.odom_frame_id, self.frame_id, t + self._odom_offset_ns))
+        except Exception as exc:
+            self._warn_once("no_odom_tf", f"no odometry at an image's time: {exc}")
+            return
+        scan = self._scan(scan_msg) if scan_msg is not None else None
+        lin, ang = self.odom_tf_linear_variance, self.odom_tf_angular_variance
+        cov = np.diag([lin, lin, lin, ang, ang, ang])
+        result = self.core.process(rgb, depth, camera, odom, t, scan, odom_covariance=cov)
+        self._last_processed_ns = t
+        self.frames_processed += 1
+        self.last_result = result
+        if result.pose is None:
+            self._warn_once("rejected", f"frame rejected: {result.rejection_reason}")
+            return
+        if result.added:
+            self.node_stamps[result.node_id] = t
+            self._map_dirty = True
+        if result.loop_closure_id or result.proximity_id:
+            self.loop_closures += 1
+            self._map_dirty = True
+            self.get_logger().info(
+                f"loop closure {result.node_id} → {result.loop_closure_id or result.proximity_id}")
+
+    def _depth_array(self, depth_msg: Any, rgb_info: Any, rgb_frame: str, t: int
+                     ) -> np.ndarray | None:
+        from eddiebot.perception.errors import ImageSizeError, UnsupportedEncodingError
+        from eddiebot.perception.register import register_depth
+
+        depth_frame = str(depth_msg.header.frame_id)
+        try:
+            if depth_frame and depth_frame != rgb_frame:
+                depth_info = self._info_for(self._depth_info, t, depth_frame)
+                if depth_info is None:
+                    self._warn_once("no_depth_info",
+                                    "unregistered depth without depth camera_info: skipped")
+                    return None
+                t_rgb_depth = self._static_tf(rgb_frame, depth_frame)
+                if t_rgb_depth is None:
+                    return None
+                depth_msg = register_depth(depth_msg, depth_info, rgb_info, t_rgb_depth)
+            return _image_array(depth_msg, _DEPTH_ENCODINGS)
+        except UnsupportedEncodingError as exc:
+            self._warn_once("bad_depth", f"depth image skipped: {exc}")
+        except ImageSizeError as exc:
+            self._warn_once("size_mismatch", f"depth image skipped: {exc}")
+        return None
+
+    def _scan(self, msg: Any) -> Scan2D | None:
+        lt = self._static_tf(self.frame_id, str(msg.header.frame_id))
+        if lt is None:
+            return None
+        return Scan2D(np.asarray(msg.ranges, dtype=np.float32), float(msg.angle_min),
+                      float(msg.angle_increment), float(msg.range_min), float(msg.range_max), lt)
+
+    # -- outputs ---------------------------------------------------------------------------
+    def _publish_tf(self) -> None:
+        m = self.core.map_to_odom
+        q = matrix_to_quaternion(m[:3, :3])
+        stamp = self.get_clock().now_ns() + round(self.tf_tolerance * _SEC)
+        self.tf_broadcaster.sendTransform(make_transform(
+            self.map_frame_id, self.odom_frame_id, stamp, float(m[0, 3]), float(m[1, 3]),
+            float(m[2, 3]), *(float(v) for v in q)))
+
+    def _publish_map(self, force: bool = False) -> None:
+        if not (self._map_dirty or force) and self.map_pub.sequence > 0:
+            return
+        grid = self.core.occupancy_grid()
+        if grid is None:
+            return
+        msg = map_to_msg(grid.to_occupancy_map(self.map_frame_id), frame_id=self.map_frame_id,
+                         stamp_ns=self.get_clock().now_ns())
+        self.map_pub.publish(msg)
+        self._map_dirty = False
+        self._publish_graph()
+
+    def _publish_graph(self) -> None:
+        poses, links = self.core.graph()
+        header = Header(frame_id=self.map_frame_id)
+        nodes = Marker(header=header, ns="rtabmap_nodes", id=0, type=Marker.SPHERE_LIST,
+                       action=Marker.ADD)
+        nodes.scale.x = nodes.scale.y = nodes.scale.z = 0.06
+        nodes.color.r, nodes.color.g, nodes.color.b, nodes.color.a = 1.0, 0.5, 0.0, 1.0
+        nodes.pose.orientation.w = 1.0
+        nodes.points = [Point(x=float(t[0, 3]), y=float(t[1, 3]), z=float(t[2, 3]))
+                        for t in poses.values()]
+        out = [nodes]
+        for k, (name, kinds, rgb) in enumerate((
+                ("rtabmap_neighbor_links", {LinkType.NEIGHBOR}, (0.0, 0.6, 1.0)),
+                ("rtabmap_loop_links", None, (1.0, 0.0, 0.0)))):
+            m = Marker(header=header, ns=name, id=k + 1, type=Marker.LINE_LIST, action=Marker.ADD)
+            m.scale.x = 0.02
+            m.color.r, m.color.g, m.color.b, m.color.a = (*rgb, 1.0)
+            m.pose.orientation.w = 1.0
+            pts = []
+            for lk in links:
+                is_kind = lk.type in kinds if kinds is not None else lk.type != LinkType.NEIGHBOR
+                if not is_kind or lk.from_id not in poses or lk.to_id not in poses:
+                    continue
+                a, b = poses[lk.from_id], poses[lk.to_id]
+                pts += [Point(x=float(a[0, 3]), y=float(a[1, 3]), z=float(a[2, 3])),
+                        Point(x=float(b[0, 3]), y=float(b[1, 3]), z=float(b[2, 3]))]
+            m.points = pts
+            out.append(m)
+        self.graph_pub.publish(MarkerArray(markers=out))
+
+    def cloud_message(self) -> Any:
+        """The assembled cloud (map frame) as PointCloud2 with x, y, z and packed rgb."""
+        xyz, colors = self.core.point_cloud(self.cloud_voxel_size)
+        n = int(xyz.shape[0])
+        packed = np.zeros((n, 4), np.float32)
+        packed[:, :3] = xyz
+        if n:
+            c = np.asarray(colors, np.uint32).reshape(n, 3)
+            packed[:, 3] = ((c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]).view(np.float32)
+        fields = [PointField(name=name, offset=4 * k, datatype=PointField.FLOAT32, count=1)
+                  for k, name in enumerate(("x", "y", "z", "rgb"))]
+        header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.map_frame_id)
+        return PointCloud2(header=header, height=1, width=n, fields=fields, is_bigendian=False,
+                           point_step=16, row_step=16 * n, data=packed.view(np.uint8).reshape(-1),
+                           is_dense=True)
+
+    # -- services --------------------------------------------------------------------------
+    def _srv_reset(self, req: Any, res: Any) -> Any:
+        self._close_db()
+        self.core = self._make_core(True)
+        self._pending.clear()
+        self._last_set_ns = self._last_processed_ns = None
+        self._map_dirty = True
+        self.get_logger().info("map reset (memory and database emptied)")
+        return res
+
+    def _srv_pause(self, req: Any, res: Any) -> Any:
+        self.paused = True
+        self.get_logger().info("paused")
+        return res
+
+    def _srv_resume(self, req: Any, res: Any) -> Any:
+        self.paused = False
+        self._last_set_ns = None
+        self.get_logger().info("resumed")
+        return res
+
+    def _srv_publish_map(self, req: Any, res: Any) -> Any:
+        self._publish_map(force=True)
+        self.cloud_pub.publish(self.cloud_message())
+        return res
+
+    def _switch_mode(self, localization: bool) -> None:
+        if localization == self.core.localization_mode:
+            return
+        self.localization = localization
+        if not localization:
+            for k in ("Mem/IncrementalMemory", "Mem/InitWMWithAllNodes"):
+                self.explicit_parameters.pop(k, None)
+        self._close_db()
+        self.core = self._make_core(False)
+        self._map_dirty = True
+        self.get_logger().info("localization mode" if localization else "mapping mode")
+
+    def _srv_localization(self, req: Any, res: Any) -> Any:
+        self._switch_mode(True)
+        return res
+
+    def _srv_mapping(self, req: Any, res: Any) -> Any:
+        self._switch_mode(False)
+        return res
+
+    def _srv_save_map(self, req: Any, res: Any) -> Any:
+        grid = self.core.occupancy_grid()
+        name = str(req.map_url) or "map"
+        if grid is None:
+            self.get_logger().error("save_map: no map yet")
+            res.result = False
+            return res
+        try:
+            save_map(grid.to_occupancy_map(self.map_frame_id), Path(name).expanduser())
+            res.result = True
+            self.get_logger().info(f"saved the map to {name}.yaml / {name}.pgm")
+        except Exception as exc:
+            self.get_logger().error(f"save_map {name!r} failed: {exc}")
+            res.result = False
+        return res
+
+    def _srv_export_cloud(self, req: Any, res: Any) -> Any:
+        name = str(req.name.data) or str(Path(self.database_path).expanduser().with_suffix(".ply"))
+        try:
+            xyz, colors = self.core.point_cloud(self.cloud_voxel_size)
+            write_ply(Path(name).expanduser(), xyz, colors)
+            res.result = PathRequest.Response.RESULT_SUCCESS
+            self.get_logger().info(f"exported {xyz.shape[0]} points to {name}")
+        except Exception as exc:
+            self.get_logger().error(f"export_cloud {name!r} failed: {exc}")
+            res.result = PathRequest.Response.RESULT_UNDEFINED_FAILURE
+        return res
+
+    # -- helpers for callers in the same process -------------------------------------------
+    def trajectory(self) -> tuple[np.ndarray, np.ndarray]:
+        """(stamps ns (N,), optimised base poses in the map frame (N, 4, 4)) of the kept nodes."""
+        poses, _ = self.core.graph()
+        ids = sorted(i for i in poses if i in self.node_stamps)
+        if not ids:
+            return np.zeros(0, np.int64), np.zeros((0, 4, 4))
+        return (np.array([self.node_stamps[i] for i in ids], np.int64),
+                np.stack([poses[i] for i in ids]))
+
