@@ -45,7 +45,6 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("dashboard", "eddiebot.cli.dashboard", "web dashboard: map, robot, scan, camera, teleop"),
     ("foxglove", "eddiebot.cli.foxglove", "Foxglove WebSocket bridge"),
     ("view", "eddiebot.cli.view", "render a map, bag or trajectory to PNG"),
-    ("bench", "eddiebot.cli.bench", "run the benchmarks"),
 ]
 
 
