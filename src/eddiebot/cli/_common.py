@@ -43,13 +43,19 @@ def message_from_yaml(type_name: str, text: str | None) -> Any:
     """A message of ``type_name`` with the fields given as YAML (``"{data: hi}"``)."""
     from eddiebot.msgs import get_message
 
-    cls = get_message(type_name)
-    values = yaml.safe_load(text) if text and text.strip() else None
-    msg = cls()
+    return fill_from_yaml(get_message(type_name)(), text)
+
+
+def fill_from_yaml(msg: Any, text: str | None) -> Any:
+    """Set ``msg``'s fields from YAML text (a mapping); ValueError names what is wrong."""
+    try:
+        values = yaml.safe_load(text) if text and text.strip() else None
+    except yaml.YAMLError as exc:
+        raise ValueError(f"malformed YAML {text!r}: {exc}") from exc
     if values is None:
         return msg
     if not isinstance(values, dict):
-        raise ValueError(f"the message values must be a YAML mapping, got {text!r}")
+        raise ValueError(f"the values must be a YAML mapping, got {text!r}")
     set_fields(msg, values)
     return msg
 

@@ -12,7 +12,7 @@ import sys
 import uuid
 from typing import Any
 
-from eddiebot.cli._common import cli_session, discovery_wait_s, message_to_yaml, set_fields
+from eddiebot.cli._common import cli_session, discovery_wait_s, fill_from_yaml, message_to_yaml
 
 __all__ = ["add_arguments", "run"]
 
@@ -61,7 +61,6 @@ def _send_goal(s: Any, args: argparse.Namespace) -> int:
     import time
 
     import numpy as np
-    import yaml
 
     from eddiebot.core import SingleThreadedExecutor
     from eddiebot.msgs import get_action
@@ -69,16 +68,11 @@ def _send_goal(s: Any, args: argparse.Namespace) -> int:
     action = get_action(args.action_type)
     name = args.action_name if args.action_name.startswith("/") else "/" + args.action_name
     goal = action.Goal()
-    values = yaml.safe_load(args.goal) if args.goal.strip() else None
-    if values:
-        if not isinstance(values, dict):
-            print("eddie action send_goal: the goal must be a YAML mapping", file=sys.stderr)
-            return 2
-        try:
-            set_fields(goal, values)
-        except ValueError as exc:
-            print(f"eddie action send_goal: {exc}", file=sys.stderr)
-            return 2
+    try:
+        fill_from_yaml(goal, args.goal)
+    except ValueError as exc:
+        print(f"eddie action send_goal: {exc}", file=sys.stderr)
+        return 2
     node = s.node
     send = node.create_client(action.SendGoal, f"{name}/_action/send_goal")
     result_client = node.create_client(action.GetResult, f"{name}/_action/get_result")

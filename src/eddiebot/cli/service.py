@@ -6,7 +6,7 @@ import argparse
 import sys
 import time
 
-from eddiebot.cli._common import cli_session, discovery_wait_s, message_to_yaml, set_fields
+from eddiebot.cli._common import cli_session, discovery_wait_s, fill_from_yaml, message_to_yaml
 
 __all__ = ["add_arguments", "run"]
 
@@ -60,7 +60,6 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _call(s: object, args: argparse.Namespace) -> int:
-    import yaml
 
     from eddiebot.core.errors import ServiceCallTimeoutError, ServiceUnavailableError
     from eddiebot.msgs import get_service
@@ -69,16 +68,11 @@ def _call(s: object, args: argparse.Namespace) -> int:
     srv_type = get_service(args.service_type)
     name = args.service_name if args.service_name.startswith("/") else "/" + args.service_name
     request = srv_type.Request()
-    values = yaml.safe_load(args.values) if args.values.strip() else None
-    if values:
-        if not isinstance(values, dict):
-            print("eddie service call: the request values must be a YAML mapping", file=sys.stderr)
-            return 2
-        try:
-            set_fields(request, values)
-        except ValueError as exc:
-            print(f"eddie service call: {exc}", file=sys.stderr)
-            return 2
+    try:
+        fill_from_yaml(request, args.values)
+    except ValueError as exc:
+        print(f"eddie service call: {exc}", file=sys.stderr)
+        return 2
     node = s.node  # type: ignore[attr-defined]
     client = node.create_client(srv_type, name)
     if not client.wait_for_service(timeout_sec=args.timeout):
