@@ -71,3 +71,21 @@ def test_speed_limit_and_disable() -> None:
     assert plant.mode is ControlMode.DISABLED
     plant.advance_to(2.5)
     assert plant.wheel_velocities == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("period_s", [0.05, 0.033, 0.1])
+def test_repeating_the_same_gospd_does_not_slow_the_wheels(period_s: float) -> None:
+    # A driver re-sends GOSPD at its own rate, out of phase with the 50 Hz loop: the wheels
+    # must still turn at the set speed (each restart of the reference is at the next tick).
+    once = DrivePlant()
+    once.set_velocity(15, -15)
+    once.advance_to(5.0)
+    repeated = DrivePlant()
+    t = 0.0
+    while t < 5.0:
+        repeated.set_velocity(15, -15)
+        t = min(5.0, t + period_s)
+        repeated.advance_to(t)
+    assert repeated.wheel_positions[0] == pytest.approx(once.wheel_positions[0], abs=0.05)
+    assert repeated.wheel_positions[1] == pytest.approx(once.wheel_positions[1], abs=0.05)
+    assert repeated.wheel_velocities[0] == pytest.approx(15.0)
