@@ -95,3 +95,35 @@ def evo_ape_rmse(stamps: FloatArray, est: FloatArray, ref: FloatArray) -> float 
     ape = metrics.APE(metrics.PoseRelation.translation_part)
     ape.process_data((t_ref, t_est))
     return float(ape.get_statistic(metrics.StatisticsType.rmse))
+
+
+def scan_consistency(
+    poses: FloatArray, points: list[FloatArray], window: int = 10, cap: float = 0.15
+) -> dict[str, float]:
+    """How well a trajectory's scans agree with each other, without any reference.
+
+    Each scan's end points (sensor frame) are placed by ``poses`` (sensor poses, map frame)
+    and compared with the ``window`` scans before it, placed the same way: the mean distance
+    from each end point to the nearest earlier end point, counting only distances below
+    ``cap`` m (farther points see parts of the room the earlier scans did not). Returns the
+    mean and median over scans (m); lower means a sharper, more self-consistent map.
+    """
+    from scipy.spatial import cKDTree
+
+    from eddiebot.geometry import se2_transform_points
+
+    per_scan = []
+    for k in range(window, len(poses)):
+        ref = np.concatenate(
+            [se2_transform_points(poses[j], points[j]) for j in range(k - window, k)]
+        )
+        if ref.shape[0] == 0 or points[k].shape[0] == 0:
+            continue
+        d, _ = cKDTree(ref).query(se2_transform_points(poses[k], points[k]))
+        d = d[d < cap]
+        if d.size:
+            per_scan.append(float(d.mean()))
+    if not per_scan:
+        return {"scans": 0}
+    v = np.array(per_scan)
+    return {"scans": int(v.size), "mean_m": float(v.mean()), "median_m": float(np.median(v))}

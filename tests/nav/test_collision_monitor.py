@@ -1,4 +1,5 @@
-"""Collision monitor: stop, slowdown, limit and approach zones; source handling."""
+"""Collision monitor: stop, slowdown, limit and approach zones; circles, polygons, velocity
+polygons and dynamic shapes; source handling."""
 
 from __future__ import annotations
 
@@ -9,9 +10,11 @@ import pytest
 
 from eddiebot.nav.collision_monitor import (
     ActionType,
+    VelocitySubPolygon,
     build_collision_monitor,
     cloud_source_points,
     points_in_polygon,
+    polygon_source_points,
     range_source_points,
     scan_source_points,
 )
@@ -107,7 +110,9 @@ def test_sources_to_points() -> None:
     assert cloud.tolist() == [[1.0, 0.0]]
     arc = range_source_points(0.5, 0.02, 3.0, 0.4, (0.2, 0.0, 0.0), obstacles_angle=0.1)
     assert np.allclose(np.hypot(arc[:, 0] - 0.2, arc[:, 1]), 0.5)
-    assert range_source_points(3.0, 0.02, 3.0, 0.4, (0.0, 0.0, 0.0)).shape == (0, 2)
+    assert range_source_points(3.01, 0.02, 3.0, 0.4, (0.0, 0.0, 0.0)).shape == (0, 2)
+    assert range_source_points(3.0, 0.02, 3.0, 0.4, (0.0, 0.0, 0.0)).shape[0] > 0  # inclusive
+    assert range_source_points(math.inf, 0.02, 3.0, 0.4, (0.0, 0.0, 0.0)).shape == (0, 2)
     inside = points_in_polygon(np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float),
                                np.array([[0.5, 0.5], [1.5, 0.5]]))
     assert inside.tolist() == [True, False]
@@ -120,3 +125,116 @@ def test_bad_config_is_named() -> None:
     with pytest.raises(ParameterError) as exc:
         _monitor(P={"type": "polygon", "points": "[[0, 0], [1, 1]]", "action_type": "stop"})
     assert exc.value.key == "points"
+
+
+def _vel_monitor(holonomic: bool = False):
+    slow = "[[0.4, 0.3], [0.4, -0.3], [-0.3, -0.3], [-0.3, 0.3]]"
+    fast = "[[1.0, 0.3], [1.0, -0.3], [-0.3, -0.3], [-0.3, 0.3]]"
+    back = "[[0.3, 0.3], [0.3, -0.3], [-0.8, -0.3], [-0.8, 0.3]]"
+    return _monitor(VP={
+        "type": "velocity_polygon", "action_type": "stop", "min_points": 1,
+        "holonomic": holonomic, "velocity_polygons": ["slow", "fast", "back"],
+        "slow": {"points": slow, "linear_min": 0.0, "linear_max": 0.3,
+                 "theta_min": -1.0, "theta_max": 1.0},
+        "fast": {"points": fast, "linear_min": 0.3, "linear_max": 1.0,
+                 "theta_min": -1.0, "theta_max": 1.0},
+        "back": {"points": back, "linear_min": -1.0, "linear_max": 0.0,
+                 "theta_min": -1.0, "theta_max": 1.0},
+    })
+
+
+def test_velocity_polygon_selects_sub_polygon_by_velocity() -> None:
+    m = _vel_monitor()
+    ahead = _pts((0.7, 0.0))
+    # slow (vx 0.2): the 0.4 m box misses the point 0.7 m ahead
+    out = m.process(Twist2D(0.2, 0, 0), ahead, 0)
+    assert out.action == ActionType.DO_NOTHING and m.zones[0].active_sub_polygon == "slow"
+    # fast (vx 0.5): the 1.0 m box holds it -> stop
+    out = m.process(Twist2D(0.5, 0, 0), ahead, 0)
+    assert out.action == ActionType.STOP and out.polygon_name == "VP"
+    assert m.zones[0].active_sub_polygon == "fast"
+    # first match in list order: vx 0.3 is in both slow and fast -> slow
+    m.process(Twist2D(0.3, 0, 0), ahead, 0)
+    assert m.zones[0].active_sub_polygon == "slow"
+    # reversing: the box reaches behind
+    out = m.process(Twist2D(-0.2, 0, 0), _pts((-0.6, 0.0)), 0)
+    assert out.action == ActionType.STOP and m.zones[0].active_sub_polygon == "back"
+    # no sub-polygon covers wz = 2: the previous one (back) stays
+    out = m.process(Twist2D(0.5, 0, 2.0), _pts((-0.6, 0.0)), 0)
+    assert out.action == ActionType.STOP and m.zones[0].active_sub_polygon == "back"
+
+
+def test_velocity_polygon_without_a_match_yet_has_no_shape() -> None:
+    m = _vel_monitor()
+    out = m.process(Twist2D(0.0, 0, 3.0), _pts((0.0, 0.0)), 0)  # wz out of every range
+    assert out.action == ActionType.DO_NOTHING and not m.zones[0].shape_set
+
+
+def test_holonomic_direction_ranges() -> None:
+    sub = VelocitySubPolygon("left", ((0, 0), (1, 0), (1, 1)), -1.0, 1.0, -1.0, 1.0,
+                             direction_end_angle=2.0, direction_start_angle=1.0)
+    assert sub.in_range(Twist2D(0.0, 0.3, 0.0), holonomic=True)  # atan2 = pi/2
+    assert not sub.in_range(Twist2D(0.3, 0.0, 0.0), holonomic=True)  # atan2 = 0
+    assert sub.in_range(Twist2D(0.3, 0.0, 0.0), holonomic=False)  # direction ignored
+    wrap = VelocitySubPolygon("rear", ((0, 0), (1, 0), (1, 1)), -1.0, 1.0, -1.0, 1.0,
+                              direction_end_angle=-2.5, direction_start_angle=2.5)
+    assert wrap.in_range(Twist2D(-0.3, 0.01, 0.0), holonomic=True)  # near +pi
+    assert wrap.in_range(Twist2D(-0.3, -0.01, 0.0), holonomic=True)  # near -pi
+    assert not wrap.in_range(Twist2D(0.0, 0.3, 0.0), holonomic=True)
+
+
+def test_velocity_polygon_bad_config_is_named() -> None:
+    with pytest.raises(ParameterError) as exc:
+        _monitor(VP={"type": "velocity_polygon", "action_type": "stop",
+                     "velocity_polygons": ["a"], "a": {"points": SQUARE, "linear_min": 0.0}})
+    assert exc.value.key == "a.linear_max"
+    with pytest.raises(ParameterError) as exc:
+        _monitor(VP={"type": "velocity_polygon", "action_type": "stop"})
+    assert exc.value.key == "velocity_polygons"
+
+
+def test_dynamic_polygon_waits_for_its_shape() -> None:
+    m = _monitor(Dyn={"type": "polygon", "action_type": "stop", "min_points": 1,
+                      "polygon_sub_topic": "stop_shape"},
+                 App={"type": "polygon", "action_type": "approach", "min_points": 1})
+    assert m.zone("Dyn").dynamic_topic == "stop_shape"
+    assert m.zone("App").dynamic_topic == "local_costmap/published_footprint"
+    out = m.process(Twist2D(0.3, 0, 0), _pts((0.1, 0.0)), 0)
+    assert out.action == ActionType.DO_NOTHING  # no shape yet: skipped
+    m.zone("Dyn").set_polygon([[0.3, 0.3], [0.3, -0.3], [-0.3, -0.3], [-0.3, 0.3]])
+    out = m.process(Twist2D(0.3, 0, 0), _pts((0.1, 0.0)), 0)
+    assert out.action == ActionType.STOP and out.polygon_name == "Dyn"
+    with pytest.raises(ParameterError):
+        _monitor(P={"type": "polygon", "action_type": "stop"})  # no points, no topic
+
+
+def test_min_points_counts_across_sources_of_the_zone() -> None:
+    params = {"polygons": ["Stop"], "observation_sources": ["scan", "ir"],
+              "Stop": {"type": "circle", "radius": 0.5, "action_type": "stop", "min_points": 3,
+                       "sources_names": ["scan", "ir"]}}
+    m = build_collision_monitor(params)
+    two = {"scan": np.array([[0.1, 0.0], [0.2, 0.0]]), "ir": np.zeros((0, 2))}
+    assert m.process(Twist2D(0.2, 0, 0), two, 0).action == ActionType.DO_NOTHING
+    three = {"scan": two["scan"], "ir": np.array([[0.3, 0.1]])}
+    assert m.process(Twist2D(0.2, 0, 0), three, 0).action == ActionType.STOP
+    # a zone listening to the scan only ignores the IR point
+    params["Stop"]["sources_names"] = ["scan"]
+    m = build_collision_monitor(params)
+    assert m.process(Twist2D(0.2, 0, 0), three, 0).action == ActionType.DO_NOTHING
+
+
+def test_stop_reason_overrides_and_is_reported() -> None:
+    m = _monitor(Slow={"type": "circle", "radius": 0.5, "action_type": "slowdown", "min_points": 1})
+    out = m.process(Twist2D(0.3, 0, 0), _pts((2.0, 0.0)), 0, stop_reason="localization lost")
+    assert out.publish == Twist2D() and out.action == ActionType.STOP
+    assert out.polygon_name == "localization lost" and out.state_changed
+    out = m.process(Twist2D(0.3, 0, 0), _pts((2.0, 0.0)), 1)
+    assert out.publish == Twist2D(0.3, 0, 0) and out.state_changed and out.polygon_name == ""
+
+
+def test_polygon_source_samples_outlines() -> None:
+    pts = polygon_source_points([[[0, 0], [1, 0], [1, 0.25]]], sampling_distance=0.1)
+    # edges of 1.0, 0.25 and hypot(1, 0.25) m: 10, 3 and 11 steps, both ends included
+    assert pts.shape == (11 + 4 + 12, 2)
+    assert np.allclose(pts[:11, 1], 0.0) and np.allclose(pts[:11, 0], np.linspace(0, 1, 11))
+    assert polygon_source_points([], 0.1).shape == (0, 2)

@@ -14,6 +14,8 @@ from eddiebot.slam.io import build_pose_graph, read_g2o, read_pose_graph, read_t
 
 ODO_COV = np.diag([0.05**2, 0.05**2, 0.02**2])
 LOOP_COV = np.diag([0.01**2, 0.01**2, 0.005**2])
+# honest about the 0.02 rad/step heading drift of `_drifting_graph` (2.5σ after 39 steps)
+DRIFT_COV = np.diag([0.05**2, 0.05**2, 0.05**2])
 
 
 def _square() -> np.ndarray:
@@ -27,7 +29,9 @@ def _square() -> np.ndarray:
     return np.array(poses[:-1])
 
 
-def _drifting_graph(truth: np.ndarray, **kwargs: object) -> PoseGraph:
+def _drifting_graph(
+    truth: np.ndarray, odo_cov: np.ndarray = ODO_COV, **kwargs: object
+) -> PoseGraph:
     graph = PoseGraph(**kwargs)  # type: ignore[arg-type]
     est = truth[0].copy()
     graph.add_node(est)
@@ -35,7 +39,7 @@ def _drifting_graph(truth: np.ndarray, **kwargs: object) -> PoseGraph:
         z = se2_between(truth[k - 1], truth[k]) + np.array([0.0, 0.0, 0.02])  # heading drift
         est = se2_compose(est, z)
         graph.add_node(est)
-        graph.add_edge(k - 1, k, z, ODO_COV, kind=EdgeKind.ODOMETRY)
+        graph.add_edge(k - 1, k, z, odo_cov, kind=EdgeKind.ODOMETRY)
         graph.optimize()
     return graph
 
@@ -60,10 +64,11 @@ def test_loop_closure_removes_square_drift(optimizer: str) -> None:
 
 
 def test_robust_kernel_rejects_false_loop() -> None:
+    """Without the gate, the kernel alone holds a false closure off; without either, it drags."""
     truth = _square()
     results = {}
     for kernel in ("none", "cauchy"):
-        graph = _drifting_graph(truth, robust_kernel=kernel)
+        graph = _drifting_graph(truth, robust_kernel=kernel, gate_probability=None)
         last = len(truth) - 1
         graph.add_edge(
             last, 0, se2_between(truth[last], truth[0]), LOOP_COV, kind=EdgeKind.LOOP, robust=True
@@ -76,6 +81,136 @@ def test_robust_kernel_rejects_false_loop() -> None:
         results[kernel] = float(np.max(np.hypot(*(graph.poses[:, :2] - clean[:, :2]).T)))
     assert results["cauchy"] < 0.1
     assert results["none"] > 1.0
+
+
+def _loop(graph: PoseGraph, truth: np.ndarray, i: int, j: int) -> int:
+    graph.add_edge(i, j, se2_between(truth[i], truth[j]), LOOP_COV, kind=EdgeKind.LOOP, robust=True)
+    return len(graph.edges) - 1
+
+
+def test_gate_holds_a_surprising_loop_until_a_neighbour_confirms_it() -> None:
+    truth = _square()
+    graph = _drifting_graph(truth, DRIFT_COV)  # gate on, support required (defaults)
+    drifted = graph.poses.copy()
+    first = _loop(graph, truth, 39, 0)
+    graph.optimize()
+    # far beyond the gate on its own covariance, plausible under the drift: waits
+    assert graph.held == [first]
+    assert np.allclose(graph.poses, drifted)
+    second = _loop(graph, truth, 38, 1)
+    graph.optimize()
+    assert graph.held == [] and graph.rejected == []
+    assert graph.marginal_queries >= 2
+    assert _error(graph, truth) < 0.5
+    clean = graph.poses.copy()
+    # a false closure far outside the (now small) uncertainty: rejected, nothing moves
+    false = len(graph.edges)
+    graph.add_edge(20, 0, np.array([0.3, 0.0, 0.1]), LOOP_COV, kind=EdgeKind.LOOP, robust=True)
+    graph.optimize()
+    assert graph.rejected == [false]
+    assert float(np.max(np.abs(graph.poses - clean))) < 1e-6
+    assert graph.half_chi2(include_rejected=False) < 0.01 * graph.half_chi2()
+    del second
+
+
+def test_gate_without_support_takes_a_single_plausible_loop() -> None:
+    truth = _square()
+    graph = _drifting_graph(truth, DRIFT_COV, require_support=False)
+    _loop(graph, truth, 39, 0)
+    graph.optimize()
+    assert graph.rejected == [] and graph.held == []
+    assert graph.marginal_queries == 1
+    assert _error(graph, truth) < 0.5
+
+
+def test_lazy_single_pose_matches_full_estimate() -> None:
+    truth = _square()
+    graph = _drifting_graph(truth, DRIFT_COV)
+    _loop(graph, truth, 39, 0)
+    _loop(graph, truth, 38, 1)
+    graph.optimize()
+    singles = np.array([graph.pose(k) for k in range(len(graph))])
+    assert np.allclose(singles, graph.poses, atol=1e-9)
+
+
+def _two_laps(seed: int) -> tuple[np.ndarray, list[tuple[int, int, np.ndarray, np.ndarray, bool]]]:
+    """Two drifting laps of the square; each second-lap node closes onto the first lap, plus
+    8 false closures between random nodes (random relative poses)."""
+    rng = np.random.default_rng(seed)
+    lap = _square()
+    truth = np.concatenate([lap, lap])
+    n = len(truth)
+    edges = []
+    for k in range(1, n):
+        z = se2_between(truth[k - 1], truth[k]) + rng.normal(0.0, [0.02, 0.02, 0.01])
+        edges.append((k - 1, k, z, ODO_COV, False))
+    for k in range(len(lap), n):
+        edges.append((k - len(lap), k, se2_between(truth[k - len(lap)], truth[k]), LOOP_COV, True))
+    for _ in range(8):
+        i, j = sorted(rng.choice(n, size=2, replace=False))
+        z = np.array([rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-0.5, 0.5)])
+        edges.append((int(i), int(j), z, LOOP_COV, True))
+    edges.sort(key=lambda e: max(e[0], e[1]))
+    return truth, edges
+
+
+def _chained(truth: np.ndarray, edges: list, **kwargs: object) -> PoseGraph:
+    graph = PoseGraph(**kwargs)  # type: ignore[arg-type]
+    graph.add_node(truth[0])
+    for k in range(1, len(truth)):
+        graph.add_node(
+            se2_compose(graph.pose(k - 1), edges[[e[:2] for e in edges].index((k - 1, k))][2])
+        )
+    for i, j, z, cov, robust in edges:
+        graph.add_edge(
+            i, j, z, cov, kind=EdgeKind.LOOP if robust else EdgeKind.ODOMETRY, robust=robust
+        )
+    return graph
+
+
+def test_false_loops_batch_and_incremental_stay_at_the_clean_optimum() -> None:
+    truth, edges = _two_laps(3)
+    clean_graph = _chained(
+        truth,
+        [e for e in edges if not (e[4] and e[1] - e[0] != len(truth) // 2)],
+        optimizer="levenberg_marquardt",
+        gate_probability=None,
+        robust_kernel="none",
+    )
+    clean_graph.optimize()
+    clean = clean_graph.poses
+    # batch from chained odometry: swept node by node through the gate, then polished
+    batch = _chained(truth, edges, optimizer="levenberg_marquardt")
+    batch.optimize()
+    assert len(batch.rejected) == 8
+    assert float(np.max(np.hypot(*(batch.poses[:, :2] - clean[:, :2]).T))) < 0.01
+    # without the gate the same start is dragged off
+    plain = _chained(
+        truth, edges, optimizer="levenberg_marquardt", gate_probability=None, robust_kernel="none"
+    )
+    plain.optimize()
+    assert float(np.max(np.hypot(*(plain.poses[:, :2] - clean[:, :2]).T))) > 0.5
+    # node by node through iSAM2, as the SLAM front end feeds it
+    inc = PoseGraph()
+    by_last: dict[int, list] = {}
+    for e in edges:
+        by_last.setdefault(max(e[0], e[1]), []).append(e)
+    inc.add_node(truth[0])
+    for k in range(1, len(truth)):
+        odo = next(e for e in by_last[k] if not e[4])
+        inc.add_node(se2_compose(inc.pose(k - 1), odo[2]))
+        for i, j, z, cov, robust in by_last[k]:
+            inc.add_edge(
+                i, j, z, cov, kind=EdgeKind.LOOP if robust else EdgeKind.ODOMETRY, robust=robust
+            )
+        inc.optimize()
+    assert len(inc.rejected) + len(inc.held) >= 8
+    assert float(np.max(np.hypot(*(inc.poses[:, :2] - clean[:, :2]).T))) < 0.01
+
+
+def test_gate_parameters_are_checked() -> None:
+    with pytest.raises(ValueError, match="gate_probability"):
+        PoseGraph(gate_probability=1.5)
 
 
 def test_edges_and_neighbours() -> None:

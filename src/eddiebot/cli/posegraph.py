@@ -1,10 +1,13 @@
 """``eddie posegraph``: pose-graph tools.
 
-    eddie posegraph optimize FILE [--optimizer lm|isam2] [--robust KERNEL] [-o OUT.g2o]
+    eddie posegraph optimize FILE [--optimizer lm|isam2] [--robust KERNEL] [--gate P|none]
+                                  [-o OUT.g2o]
 
 ``optimize`` reads a 2D g2o (``VERTEX_SE2``/``EDGE_SE2``) or TORO (``VERTEX2``/``EDGE2``) file,
 initialises from its vertices (or by chaining odometry edges when there are none), optimises
-with GTSAM and prints the initial and final ½χ² and the time taken.
+with GTSAM and prints the initial and final ½χ² and the time taken. With ``--robust``, loop edges
+(j != i + 1) are treated as possibly false: χ²-gated at ``--gate`` (see
+`eddiebot.slam.pose_graph`) and given the kernel; the number rejected is printed.
 """
 
 from __future__ import annotations
@@ -37,6 +40,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     opt.add_argument("--kernel-width", type=float, default=1.0)
     opt.add_argument(
+        "--gate",
+        default="0.999",
+        help="χ² gate probability for robust loop edges, or 'none' (default 0.999)",
+    )
+    opt.add_argument(
         "-o", "--output", type=Path, default=None, help="write the optimised graph (g2o)"
     )
 
@@ -59,8 +67,10 @@ def run(args: argparse.Namespace) -> int:
     if args.posegraph_command != "optimize":
         print(f"eddie posegraph: unknown sub-command {args.posegraph_command!r}", file=sys.stderr)
         return 2
-    from eddiebot.slam import PoseGraphFormatError
-    from eddiebot.slam.io import build_pose_graph, read_pose_graph
+    import numpy as np
+
+    from eddiebot.slam import EdgeKind, PoseGraph, PoseGraphFormatError
+    from eddiebot.slam.io import read_pose_graph
 
     try:
         data = read_pose_graph(args.file)
@@ -68,14 +78,35 @@ def run(args: argparse.Namespace) -> int:
         print(f"eddie posegraph: {exc}", file=sys.stderr)
         return 1
     optimizer = "levenberg_marquardt" if args.optimizer == "lm" else "isam2"
+    try:
+        gate = None if str(args.gate).lower() == "none" else float(args.gate)
+        if gate is not None and not 0.0 < gate < 1.0:
+            raise ValueError
+    except ValueError:
+        print(
+            f"eddie posegraph: --gate must be in (0, 1) or 'none', got {args.gate!r}",
+            file=sys.stderr,
+        )
+        return 2
     t0 = time.perf_counter()
-    graph = build_pose_graph(
-        data,
+    graph = PoseGraph(
         optimizer=optimizer,
         robust_kernel=args.robust,
         kernel_width=args.kernel_width,
-        robust_loops=args.robust != "none",
+        gate_probability=gate,
     )
+    for pose in data.poses:
+        graph.add_node(pose)
+    for (i, j), z, info in zip(data.edge_index, data.measurements, data.information):
+        loop = int(j) != int(i) + 1
+        graph.add_edge(
+            int(i),
+            int(j),
+            z,
+            np.linalg.inv(info),
+            kind=EdgeKind.LOOP if loop else EdgeKind.ODOMETRY,
+            robust=loop and args.robust != "none",
+        )
     initial = graph.half_chi2()
     t1 = time.perf_counter()
     graph.optimize()
@@ -88,6 +119,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"initial 1/2 chi2: {initial:.6g}")
     print(f"final   1/2 chi2: {final:.6g}")
     print(f"optimize time:    {t2 - t1:.3f} s ({optimizer}; load+build {t1 - t0:.3f} s)")
+    if graph.rejected:
+        print(
+            f"rejected loops:   {len(graph.rejected)} (1/2 chi2 of the rest {graph.half_chi2(include_rejected=False):.6g})"
+        )
     if args.output is not None:
         _write_g2o(args.output, data, graph.poses)
         print(f"written {args.output}")

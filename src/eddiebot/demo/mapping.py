@@ -4,7 +4,8 @@ The simulator, the whole base stack, depthimage_to_laserscan and the SLAM node r
 process on a simulated clock, as fast as the CPU allows; a scripted operator drives the
 route. Afterwards the map is saved (nav2 map_server files) and judged against the world's
 ground truth: trajectory error of the SLAM poses and agreement with the scan-height
-ground-truth map on the cells both call known.
+ground-truth map on the cells both call known. The benchmark
+(``benchmarks/bench_slam_sim.py``) runs the same stage on other worlds and longer routes.
 """
 
 from __future__ import annotations
@@ -54,6 +55,15 @@ class MappingResult:
     odom_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     grid: OccupancyMap | None = None
     start: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    scan_cpu_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """CPU time the SLAM core spent on each processed scan (ms, the node's thread)."""
+    map_update_cpu_ms: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    low_feature_episodes: int = 0
+    """Low-feature warnings logged (once per episode)."""
+    low_feature_matches: int = 0
+    """Scan matches whose variance along their weakest direction exceeded the threshold."""
+    odom_ate_rmse_m: float = math.nan
+    """Wheel odometry's position RMSE at the SLAM nodes' times (the same start alignment)."""
 
 
 def map_agreement(slam: OccupancyMap, truth: OccupancyMap, world_from_map: np.ndarray,
@@ -103,8 +113,14 @@ def _pose_of(msg: Any) -> tuple[float, float, float]:
 def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ...] = OFFICE_ROUTE,
                 seed: int = 0, camera: tuple[int, int, float] = (320, 240, 10.0),
                 record: bool = True, wall_timeout_s: float = 900.0,
-                dashboard: bool = False) -> MappingResult:
-    """Map ``world`` along ``route``; write map, session and bag under ``out_dir``."""
+                dashboard: bool = False, slam_params: Path | None = None,
+                record_topics: list[str] | None = None) -> MappingResult:
+    """Map ``world`` along ``route``; write map, session and bag under ``out_dir``.
+
+    ``slam_params``: a slam_toolbox parameter file instead of the package's config/slam.yaml.
+    ``record_topics``: record only these topics (no compressed RGB-D) when ``record``.
+    Files are named after the world (``office_map.yaml``, ``office_session.slam``).
+    """
     from eddiebot.sim.ground_truth import cached_ground_truth
     from eddiebot.slam.session import save_session
 
@@ -112,6 +128,8 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
     context = Context(use_sim_time=True)
     args = {"world": world, "seed": str(seed), "camera_width": str(camera[0]),
             "camera_height": str(camera[1]), "camera_rate": str(camera[2])}
+    if slam_params is not None:
+        args["slam_params"] = str(slam_params)
     nodes: list[Node] = build_nodes(parse_launch_file(find_launch_file("slam"), args), context, NODES)
     slam: Any = next(n for n in nodes if n.get_name() == "slam_toolbox")
     sim = context.resources["simulator"]
@@ -123,7 +141,8 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
     probe = Node("demo_probe", context=context)
     probe.create_subscription(Odometry, "/ground_truth/odom",
                               lambda m: truth.__setitem__(probe.get_clock().now_ns(), _pose_of(m)), 50)
-    probe.create_subscription(Odometry, "/odom", lambda m: odom.append((0, _pose_of(m))), 50)
+    probe.create_subscription(Odometry, "/odom",
+                              lambda m: odom.append((probe.get_clock().now_ns(), _pose_of(m))), 50)
     nodes.append(probe)
     if record:
         from eddiebot.viz.bag import RecorderNode
@@ -135,13 +154,15 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
             shutil.rmtree(bag)
         from eddiebot.perception.compress import ImageCompressorNode
 
-        # RGB-D at 2 Hz, compressed (raw 30 Hz RGB-D would be 46 MB per simulated second)
-        nodes.append(ImageCompressorNode(context=context, parameter_overrides={"max_rate": 2.0}))
-        topics = ["/scan", "/odom", "/ground_truth/odom", "/tf", "/tf_static", "/map", "/cmd_vel",
+        topics = record_topics or ["/scan", "/odom", "/ground_truth/odom", "/tf", "/tf_static", "/map", "/cmd_vel",
                   "/joint_states", "/eddie/ir/left", "/eddie/ir/center", "/eddie/ir/right",
                   "/eddie/ping/left", "/eddie/ping/right", "/robot_description", "/sim/collisions",
                   "/image_raw/compressed", "/depth/image_raw/compressedDepth", "/camera_info",
                   "/depth/camera_info"]
+        if record_topics is None:
+            # RGB-D at 2 Hz, compressed (raw 30 Hz RGB-D would be 46 MB per simulated second)
+            nodes.append(ImageCompressorNode(context=context,
+                                             parameter_overrides={"max_rate": 2.0}))
         nodes.append(RecorderNode(context=context,
                                   parameter_overrides={"output": str(bag), "topics": topics}))
         result.bag = bag
@@ -183,6 +204,13 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
         result.ate_rmse_m = float(np.sqrt(np.mean(err**2)))
         result.ate_max_m = float(err.max())
         result.slam_world, result.truth = est, truth_p
+        if odom:
+            odom_t = np.array([t for t, _ in odom], dtype=np.int64)
+            at = np.clip(np.searchsorted(odom_t, stamps), 0, len(odom) - 1)
+            o_est = se2_compose(np.broadcast_to(start, (len(at), 3)),
+                                np.array([odom[k][1] for k in at]))
+            o_err = np.hypot(o_est[:, 0] - gt[:, 0], o_est[:, 1] - gt[:, 1])
+            result.odom_ate_rmse_m = float(np.sqrt(np.mean(o_err**2)))
         # end-point errors: wheel odometry alone vs SLAM
         final_truth = truth_p[-1]
         if odom:
@@ -194,12 +222,17 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
         last_odom = np.array(odom[-1][1]) if odom else np.zeros(3)
         s_end = se2_compose(start, se2_compose(m2o, last_odom))
         result.slam_end_error_m = float(math.hypot(s_end[0] - final_truth[0], s_end[1] - final_truth[1]))
+    result.scan_cpu_ms = 1e3 * np.array(slam.scan_cpu_s, dtype=np.float64)
+    result.map_update_cpu_ms = 1e3 * np.array(slam.map_update_cpu_s, dtype=np.float64)
+    result.low_feature_episodes = int(slam.low_feature_episodes)
+    result.low_feature_matches = int(slam.low_feature_matches)
     core.update_map()
     grid = core.occupancy_map()
     result.grid = grid
     out_dir.mkdir(parents=True, exist_ok=True)
-    result.map_yaml = save_map(grid, out_dir / "office_map")
-    result.session = save_session(core, out_dir / "office_session.slam")
+    name = Path(world).stem
+    result.map_yaml = save_map(grid, out_dir / f"{name}_map")
+    result.session = save_session(core, out_dir / f"{name}_session.slam")
     gt_maps = cached_ground_truth(sim.world)
     result.agreement, result.agreement_tolerant = map_agreement(grid, gt_maps.scan, start)
     if handle is not None:

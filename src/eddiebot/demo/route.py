@@ -19,7 +19,7 @@ from eddiebot.geometry import quaternion_to_yaw, wrap_angle
 from eddiebot.msgs.geometry_msgs import Twist
 from eddiebot.msgs.nav_msgs import Odometry
 
-__all__ = ["OFFICE_ROUTE", "RouteDriver", "Waypoint"]
+__all__ = ["OFFICE_LONG_ROUTE", "OFFICE_ROUTE", "WAREHOUSE_ROUTE", "RouteDriver", "Waypoint"]
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,48 @@ OFFICE_ROUTE: tuple[Waypoint, ...] = (
     Waypoint(12.5, 7.6),
     Waypoint(3.0, 7.5),
     Waypoint(1.5, 7.5, spin=math.pi),
+)
+
+#: The benchmark's office route (about 10 simulated minutes): `OFFICE_ROUTE`, then the three
+#: other open rooms (south-west, north-west with the meeting table, south-east) from the
+#: corridor, revisiting the corridor and the start twice more: about 85 m and nine spins.
+OFFICE_LONG_ROUTE: tuple[Waypoint, ...] = (
+    *OFFICE_ROUTE,
+    Waypoint(2.45, 7.5),
+    Waypoint(2.45, 5.0, spin=2 * math.pi),
+    Waypoint(2.45, 7.5),
+    Waypoint(3.45, 7.5),
+    Waypoint(3.45, 9.7, spin=2 * math.pi),
+    Waypoint(3.45, 7.5),
+    Waypoint(17.45, 7.5),
+    Waypoint(17.45, 5.0, spin=2 * math.pi),
+    Waypoint(17.45, 7.5),
+    Waypoint(3.0, 7.5),
+    Waypoint(1.5, 7.5, spin=math.pi),
+)
+
+#: The benchmark's warehouse route (30 × 20 m; about 10 simulated minutes): along the south
+#: wall, up the middle cross aisle, east down the central aisle to the far wall, back west to
+#: the pallet by the west wall, down the west side to the start, and round again through the
+#: aisle between the first two shelf rows (its pillars passed on the south side), closing
+#: the loop twice at the start.
+WAREHOUSE_ROUTE: tuple[Waypoint, ...] = (
+    Waypoint(2.5, 2.0, spin=2 * math.pi),
+    Waypoint(15.2, 2.0),
+    Waypoint(15.2, 11.0, spin=2 * math.pi),
+    Waypoint(27.5, 11.0, spin=2 * math.pi),
+    Waypoint(15.2, 11.0),
+    Waypoint(5.6, 11.0, spin=2 * math.pi),
+    Waypoint(4.8, 12.0),
+    Waypoint(2.0, 12.0),
+    Waypoint(2.0, 3.0),
+    Waypoint(2.5, 2.0, spin=2 * math.pi),
+    Waypoint(15.2, 2.0),
+    Waypoint(15.2, 6.3),
+    Waypoint(5.8, 6.3, spin=2 * math.pi),
+    Waypoint(2.0, 6.3),
+    Waypoint(2.0, 3.0),
+    Waypoint(2.5, 2.0, spin=math.pi),
 )
 
 

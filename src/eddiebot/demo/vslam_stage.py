@@ -33,11 +33,22 @@ from eddiebot.geometry import quaternion_to_yaw, se2_compose
 from eddiebot.msgs.nav_msgs import Odometry
 from eddiebot.registry import NODES
 
-__all__ = ["CORRIDOR_ROUTE", "VslamResult", "run_vslam"]
+__all__ = ["CORRIDOR_LONG_ROUTE", "CORRIDOR_ROUTE", "VslamResult", "replay_vo_frames", "run_vslam"]
 
 #: Down the ``corridor`` world (40 × 2.2 m) and back, looking around at both ends and again at
 #: the start: about 34 m, the return leg revisits every place of the outward one.
 CORRIDOR_ROUTE: tuple[Waypoint, ...] = (
+    Waypoint(2.5, 1.1, spin=2 * math.pi),
+    Waypoint(18.0, 1.1, spin=2 * math.pi),
+    Waypoint(2.5, 1.1, spin=2 * math.pi),
+)
+
+#: About ten simulated minutes in the ``corridor`` world: to the far end (past both doors, to
+#: the cabinet) and back, then half-way and back, a full spin at every turn-around and at the
+#: start: about 94 m, five spins, every place revisited at least once.
+CORRIDOR_LONG_ROUTE: tuple[Waypoint, ...] = (
+    Waypoint(2.5, 1.1, spin=2 * math.pi),
+    Waypoint(34.0, 1.1, spin=2 * math.pi),
     Waypoint(2.5, 1.1, spin=2 * math.pi),
     Waypoint(18.0, 1.1, spin=2 * math.pi),
     Waypoint(2.5, 1.1, spin=2 * math.pi),
@@ -109,6 +120,8 @@ class _VoProbe(Node):
         self.rgb: dict[int, Any] = {}
         self.poses: list[tuple[int, np.ndarray]] = []
         self.lost = 0
+        #: (stamp, features, camera) of every frame, when recording for offline VO replays
+        self.recorded: list[tuple[int, Any, Any]] | None = None
         self.create_subscription(Image, "/depth/image_raw", self._on_depth, 5)
         self.create_subscription(Image, "/image_raw", self._on_rgb, 5)
 
@@ -139,6 +152,8 @@ class _VoProbe(Node):
         rgb = np.asarray(msg.data, np.uint8).reshape(int(msg.height), int(msg.width), 3)
         cam = CameraIntrinsics.from_k(info.k, int(info.width), int(info.height), lt)
         r = self.vo.process(rgb, depth, cam, t)
+        if self.recorded is not None:
+            self.recorded.append((t, r.frame_features, cam))
         if r.pose is None:
             self.lost += 1
             return
@@ -148,10 +163,12 @@ class _VoProbe(Node):
 def run_vslam(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ...] = OFFICE_ROUTE,
               seed: int = 0, camera: tuple[int, int, float] = (320, 240, 10.0),
               parameters: dict[str, Any] | None = None, visual_odometry: bool = False,
-              wall_timeout_s: float = 1800.0) -> VslamResult:
+              wall_timeout_s: float = 1800.0, record_vo: bool = False) -> VslamResult:
     """Map ``world`` along ``route`` with the vSLAM node; write database and trajectory under
     ``out_dir``. ``parameters`` are extra node parameters (RTAB-Map ``Group/Name`` strings or the
-    node's own, e.g. ``odom_stamp_offset``)."""
+    node's own, e.g. ``odom_stamp_offset``). ``record_vo`` (with ``visual_odometry``) also writes
+    the visual odometry's input — every frame's features, camera and ground truth — to
+    ``vo_frames.npz`` for offline odometry replays (`replay_vo_frames`)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     result = VslamResult(world)
@@ -184,6 +201,8 @@ def run_vslam(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ..
     vo_probe = _VoProbe(slam, context=context) if visual_odometry else None
     if vo_probe is not None:
         nodes.append(vo_probe)
+        if record_vo:
+            vo_probe.recorded = []
     frame_ms: list[float] = []
     process = slam.core.process
 
@@ -213,6 +232,9 @@ def run_vslam(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ..
             result.frame_ms_median = float(np.median(frame_ms))
             result.frame_ms_p95 = float(np.percentile(frame_ms, 95))
         _score(result, slam, truth, odom, vo_probe, out_dir)
+        if vo_probe is not None and vo_probe.recorded:
+            _save_vo_frames(out_dir / "vo_frames.npz", vo_probe.recorded, truth,
+                            result.distance_m)
     finally:
         for n in reversed(nodes):
             n.destroy_node()  # the vSLAM node closes (and completes) its database
@@ -220,6 +242,64 @@ def run_vslam(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ..
     result.database = db_path
     (out_dir / "result.json").write_text(json.dumps(result.summary(), indent=2))
     return result
+
+
+_FEATURE_FIELDS = ("uv", "responses", "sizes", "angles", "octaves", "descriptors", "points")
+
+
+def _save_vo_frames(path: Path, recorded: list[tuple[int, Any, Any]],
+                    truth: dict[int, tuple[float, float, float]], distance_m: float) -> None:
+    """Every VO frame's features (concatenated, with per-frame counts), the camera, and the
+    ground truth at the frame stamps (world x, y, θ)."""
+    stamps = np.array([t for t, _, _ in recorded], np.int64)
+    counts = np.array([len(f) for _, f, _ in recorded], np.int64)
+    arrays: dict[str, Any] = {name: np.concatenate([getattr(f, name) for _, f, _ in recorded])
+              for name in _FEATURE_FIELDS}
+    cam = recorded[0][2]
+    truth_t = np.array(sorted(truth), dtype=np.int64)
+    truth_p = np.array([truth[t] for t in truth_t])
+    np.savez_compressed(
+        path, stamps=stamps, counts=counts, k=cam.matrix, size=np.array([cam.width, cam.height]),
+        local_transform=cam.local_transform, truth=_nearest(truth_t, truth_p, stamps),
+        distance=np.array(distance_m), **arrays)
+
+
+def replay_vo_frames(path: Path, parameters: dict[str, str] | None = None) -> dict[str, float]:
+    """Run `VisualOdometry` offline on frames written by ``record_vo``: end-point drift (% of
+    the distance driven), frames lost, CPU seconds."""
+    from eddiebot.vslam.camera import CameraIntrinsics
+    from eddiebot.vslam.features import FrameFeatures
+    from eddiebot.vslam.odometry import VisualOdometry
+    from eddiebot.vslam.parameters import RtabmapParameters
+
+    data = np.load(path)
+    w, h = (int(v) for v in data["size"])
+    cam = CameraIntrinsics.from_k(data["k"].ravel(), w, h, data["local_transform"])
+    vo = VisualOdometry(RtabmapParameters.from_dict({"Reg/Force3DoF": "true",
+                                                     **(parameters or {})}))
+    offsets = np.concatenate([[0], np.cumsum(data["counts"])])
+    fields = {name: data[name] for name in _FEATURE_FIELDS}
+    poses: list[tuple[int, np.ndarray]] = []
+    lost = 0
+    c0 = time.process_time()
+    for i, t in enumerate(data["stamps"]):
+        a, b = offsets[i], offsets[i + 1]
+        feats = FrameFeatures(*(fields[name][a:b] for name in _FEATURE_FIELDS))
+        r = vo.process_features(feats, cam, int(t))
+        if r.pose is None:
+            lost += 1
+        else:
+            poses.append((i, r.pose))
+    cpu = time.process_time() - c0
+    truth = data["truth"]
+    i0, first = poses[0]
+    i1, last = poses[-1]
+    rel = np.linalg.inv(first) @ last
+    end = se2_compose(truth[i0], np.array([rel[0, 3], rel[1, 3], math.atan2(rel[1, 0], rel[0, 0])]))
+    err = float(np.hypot(*(end[:2] - truth[i1][:2])))
+    dist = float(data["distance"])
+    return {"frames": float(len(data["stamps"])), "lost": float(lost), "end_error_m": err,
+            "drift_percent": 100.0 * err / dist if dist > 0 else math.nan, "cpu_s": cpu}
 
 
 def _nearest(stamps: np.ndarray, values: np.ndarray, query: np.ndarray) -> np.ndarray:

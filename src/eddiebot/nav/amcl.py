@@ -1,5 +1,7 @@
 """Adaptive Monte Carlo localisation core (``nav2_amcl``): KLD-sampling particle filter,
-differential-drive odometry motion model, likelihood-field laser model.
+differential-drive odometry motion model, likelihood-field laser models (``likelihood_field``:
+Nav2's sum of cubed beam probabilities; ``likelihood_field_prob``: the product of beam
+probabilities with optional beam skipping, ``do_beamskip``).
 
 Pure core: the caller passes odometry poses (odom frame), laser scans with the laser's pose
 in the base frame, and reads back the pose estimate (map frame) with its covariance.
@@ -72,13 +74,16 @@ class AmclConfig:
     initial_pose_y: float = 0.0
     initial_pose_z: float = 0.0
     initial_pose_yaw: float = 0.0
+    #: eddiebot's addition: "multinomial" (Nav2's pf) or "systematic" (lower resampling noise)
+    resample_method: str = "multinomial"
 
     def validate(self, server: str = "amcl") -> None:
         require(self.min_particles > 0, server, "min_particles", self.min_particles, "must be > 0")
         require(self.max_particles >= self.min_particles, server, "max_particles",
                 self.max_particles, "must be >= min_particles")
-        require(self.laser_model_type == "likelihood_field", server, "laser_model_type",
-                self.laser_model_type, "only likelihood_field is implemented")
+        require(self.laser_model_type in LASER_MODELS, server, "laser_model_type",
+                self.laser_model_type, f"must be one of {list(LASER_MODELS)} (beam is not "
+                "implemented)")
         require(self.robot_model_type.replace("/", "::").endswith("DifferentialMotionModel"),
                 server, "robot_model_type", self.robot_model_type,
                 "only the differential motion model is implemented")
@@ -87,10 +92,27 @@ class AmclConfig:
                 self.resample_interval, "must be >= 1")
         require(0.0 < self.pf_err < 1.0, server, "pf_err", self.pf_err, "must be in (0, 1)")
         require(self.sigma_hit > 0.0, server, "sigma_hit", self.sigma_hit, "must be > 0")
+        require(self.laser_likelihood_max_dist > 0.0, server, "laser_likelihood_max_dist",
+                self.laser_likelihood_max_dist, "must be > 0")
+        require(0.0 <= self.beam_skip_threshold <= 1.0, server, "beam_skip_threshold",
+                self.beam_skip_threshold, "must be in [0, 1]")
+        require(self.resample_method in ("multinomial", "systematic"), server, "resample_method",
+                self.resample_method, "must be multinomial or systematic")
+        require(self.update_min_d >= 0.0, server, "update_min_d", self.update_min_d, "must be >= 0")
+        require(self.update_min_a >= 0.0, server, "update_min_a", self.update_min_a, "must be >= 0")
 
 
-#: Initial covariance used when none is given (ROS amcl's initial_cov_xx/yy/aa).
+#: ``laser_model_type`` values implemented
+LASER_MODELS = ("likelihood_field", "likelihood_field_prob")
+
+#: Initial covariance of :meth:`Amcl.initialize` called without one (ROS 1 amcl's
+#: initial_cov_xx/yy/aa). Nav2's ``initialpose`` and ``set_initial_pose`` pass theirs as
+#: given: an all-zero covariance puts every particle on the pose.
 DEFAULT_INITIAL_COV = np.diag([0.5 * 0.5, 0.5 * 0.5, (math.pi / 12.0) ** 2])
+
+#: ``pf->dist_threshold``: the filter has converged when every particle is within this of
+#: the mean in x and in y (m).
+CONVERGED_DIST = 0.5
 
 # KD-tree bin size of the KLD bound (pf_kdtree: 0.5 m, 0.5 m, 10 deg).
 _BIN = (0.5, 0.5, math.radians(10.0))
@@ -148,6 +170,48 @@ def _laser_weights(
     return total
 
 
+@njit(cache=True)
+def _laser_beam_probs(
+    particles: np.ndarray, ranges: np.ndarray, bearings: np.ndarray,
+    lx: float, ly: float, lyaw: float, dist: np.ndarray, ox: float, oy: float, res: float,
+    max_occ_dist: float, range_max: float, z_hit: float, z_rand: float, sigma_hit: float,
+    beam_skip_distance: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """LikelihoodFieldModelProb's per-beam probabilities ``pz`` (particles x beams; 1.0 for
+    beams it ignores: max range, NaN) and per beam the number of particles whose endpoint lies
+    within ``beam_skip_distance`` of an obstacle."""
+    h, w = dist.shape
+    n, m = particles.shape[0], ranges.shape[0]
+    denom = 2.0 * sigma_hit * sigma_hit
+    rand_mult = 1.0 / range_max
+    max_dist_prob = math.exp(-(max_occ_dist * max_occ_dist) / denom)
+    pz = np.ones((n, m))
+    count = np.zeros(m, dtype=np.int64)
+    for k in range(n):
+        c = math.cos(particles[k, 2])
+        s = math.sin(particles[k, 2])
+        px = particles[k, 0] + c * lx - s * ly
+        py = particles[k, 1] + s * lx + c * ly
+        pth = particles[k, 2] + lyaw
+        for i in range(m):
+            r = ranges[i]
+            if r >= range_max or r != r:
+                continue
+            hx = px + r * math.cos(pth + bearings[i])
+            hy = py + r * math.sin(pth + bearings[i])
+            mi = math.floor((hx - ox) / res)
+            mj = math.floor((hy - oy) / res)
+            if mi < 0 or mj < 0 or mi >= w or mj >= h:
+                p = z_hit * max_dist_prob
+            else:
+                z = dist[mj, mi]
+                if z < beam_skip_distance:
+                    count[i] += 1
+                p = z_hit * math.exp(-(z * z) / denom)
+            pz[k, i] = p + z_rand * rand_mult
+    return pz, count
+
+
 def _resample_limit(k: int, pf_err: float, pf_z: float, n_min: int, n_max: int) -> int:
     """``pf_resample_limit``: KLD bound on the particle count for k occupied bins."""
     if k <= 1:
@@ -180,11 +244,16 @@ class Amcl:
         self.w_fast = 0.0
         self._estimate = np.zeros(3)
         self._cov = np.zeros((3, 3))
+        self.converged = False
+        #: beams left out by the last beam-skipping update (0 when it was not used)
+        self.skipped_beams = 0
         if occupancy_map is not None:
             self.set_map(occupancy_map)
         if self.config.set_initial_pose:
             c = self.config
-            self.initialize((c.initial_pose_x, c.initial_pose_y, c.initial_pose_yaw))
+            # Nav2 sends these as a PoseWithCovarianceStamped with a zero covariance
+            self.initialize((c.initial_pose_x, c.initial_pose_y, c.initial_pose_yaw),
+                            np.zeros((3, 3)))
 
     # --- setup ----------------------------------------------------------------------------
     def set_map(self, occupancy_map: OccupancyMap) -> None:
@@ -201,12 +270,17 @@ class Amcl:
         mean = np.asarray(pose, dtype=np.float64)[:3]
         cov_m = DEFAULT_INITIAL_COV if cov is None else np.asarray(cov, dtype=np.float64)
         n = self.config.max_particles
-        self.particles = self.rng.multivariate_normal(mean, cov_m, size=n)
+        # pf_pdf_gaussian_sample: mean + eigenvectors * sqrt(eigenvalues) * N(0, 1); a zero
+        # covariance gives n copies of the mean.
+        vals, vecs = np.linalg.eigh(0.5 * (cov_m + cov_m.T))
+        scale = vecs * np.sqrt(np.maximum(vals, 0.0))
+        self.particles = mean + self.rng.standard_normal((n, 3)) @ scale.T
         self.particles[:, 2] = _angle_diff(self.particles[:, 2], 0.0)
         self.weights = np.full(n, 1.0 / n)
         self.w_slow = self.w_fast = 0.0
         self._force_update = True
         self._odom_last = None
+        self._update_converged()
         self._compute_estimate()
 
     def initialize_global(self) -> None:
@@ -215,6 +289,7 @@ class Amcl:
         self.particles = self._random_poses(n)
         self.weights = np.full(n, 1.0 / n)
         self._force_update = True
+        self._update_converged()
         self._compute_estimate()
 
     def _random_poses(self, n: int) -> npt.NDArray[np.float64]:
@@ -263,15 +338,19 @@ class Amcl:
         rmax = min(rmax, range_max) if cfg.laser_max_range > 0 else range_max
         r[~np.isfinite(r) | (r <= rmin)] = rmax
         bearings = angle_min + angle_increment * np.arange(r.shape[0])
-        step = max(1, (r.shape[0] - 1) // (cfg.max_beams - 1))
-        sel = np.arange(0, r.shape[0], step)
         m = self._map
-        total = _laser_weights(
-            self.particles, self.weights, np.ascontiguousarray(r[sel]),
-            np.ascontiguousarray(bearings[sel]), float(laser_pose[0]), float(laser_pose[1]),
-            float(laser_pose[2]), self._dist, m.origin[0], m.origin[1], m.resolution,
-            cfg.laser_likelihood_max_dist, rmax, cfg.z_hit, cfg.z_rand, cfg.sigma_hit,
-        )
+        self.skipped_beams = 0
+        if cfg.laser_model_type == "likelihood_field":
+            step = max(1, (r.shape[0] - 1) // (cfg.max_beams - 1))
+            sel = np.arange(0, r.shape[0], step)
+            total = _laser_weights(
+                self.particles, self.weights, np.ascontiguousarray(r[sel]),
+                np.ascontiguousarray(bearings[sel]), float(laser_pose[0]), float(laser_pose[1]),
+                float(laser_pose[2]), self._dist, m.origin[0], m.origin[1], m.resolution,
+                cfg.laser_likelihood_max_dist, rmax, cfg.z_hit, cfg.z_rand, cfg.sigma_hit,
+            )
+        else:
+            total = self._prob_weights(r, np.asarray(bearings, dtype=np.float64), rmax, laser_pose)
         n = self.weights.shape[0]
         if total > 0.0:
             w_avg = total / n
@@ -287,8 +366,52 @@ class Amcl:
         else:
             self.weights[:] = 1.0 / n
 
+    def _prob_weights(self, r: npt.NDArray[np.float64], bearings: npt.NDArray[np.float64],
+                      rmax: float, laser_pose: tuple[float, float, float]) -> float:
+        """``LikelihoodFieldModelProb::sensorFunction``: weight *= prod(pz) over the beams
+        (every ``ceil(n / max_beams)``-th). With ``do_beamskip`` once the filter has
+        converged, a beam counts only when more than ``beam_skip_threshold`` of the particles
+        put its endpoint within ``beam_skip_distance`` of an obstacle (the others see
+        something the map lacks: a person, a moved chair); if ``beam_skip_error_threshold``
+        or more of the beams would be skipped, the pose is probably wrong and all count."""
+        cfg = self.config
+        assert self._map is not None
+        m = self._map
+        step = max(1, math.ceil(r.shape[0] / cfg.max_beams))
+        sel = np.arange(0, r.shape[0], step)
+        pz, count = _laser_beam_probs(
+            self.particles, np.ascontiguousarray(r[sel]), np.ascontiguousarray(bearings[sel]),
+            float(laser_pose[0]), float(laser_pose[1]), float(laser_pose[2]), self._dist,
+            m.origin[0], m.origin[1], m.resolution, cfg.laser_likelihood_max_dist, rmax,
+            cfg.z_hit, cfg.z_rand, cfg.sigma_hit, cfg.beam_skip_distance)
+        logp = np.log(pz)
+        if cfg.do_beamskip and self.converged:
+            n = self.particles.shape[0]
+            use = count / n > cfg.beam_skip_threshold
+            # upstream counts every one of max_beams slots, including unused ones
+            skipped = int(np.count_nonzero(~use)) + max(0, cfg.max_beams - sel.shape[0])
+            if skipped < cfg.max_beams * cfg.beam_skip_error_threshold:
+                logp = logp[:, use]
+                self.skipped_beams = skipped
+        self.weights *= np.exp(logp.sum(axis=1))
+        return float(self.weights.sum())
+
+    def _update_converged(self) -> bool:
+        """``pf_update_converged``: every particle within CONVERGED_DIST of the (unweighted)
+        mean in x and in y."""
+        p = self.particles
+        if p.shape[0] == 0:
+            self.converged = False
+        else:
+            dev = np.abs(p[:, :2] - p[:, :2].mean(axis=0))
+            self.converged = bool(np.all(dev <= CONVERGED_DIST))
+        return self.converged
+
     def resample(self) -> None:
-        """``pf_update_resample``: KLD-adaptive count, random-pose injection when w_fast < w_slow."""
+        """``pf_update_resample``: KLD-adaptive count, random-pose injection when w_fast < w_slow.
+        The count comes from Nav2's sample-by-sample KLD bound (multinomial draws); with
+        ``resample_method`` "systematic" the kept particles are then drawn by systematic
+        resampling instead of those multinomial draws."""
         cfg = self.config
         w_diff = 0.0
         if self.w_slow > 0.0:
@@ -299,6 +422,7 @@ class Amcl:
         draws = np.searchsorted(cum, self.rng.random(n_max), side="right")
         draws = np.minimum(draws, self.particles.shape[0] - 1)
         new = self.particles[draws].copy()
+        inject = np.zeros(n_max, dtype=bool)
         if w_diff > 0.0:
             inject = self.rng.random(n_max) < w_diff
             if inject.any():
@@ -315,10 +439,22 @@ class Amcl:
         lim_of_k = dict(zip(np.unique(k).tolist(), limits.tolist()))
         over = np.nonzero(np.arange(1, n_max + 1) > np.array([lim_of_k[v] for v in k.tolist()]))[0]
         count = int(over[0]) + 1 if over.size else n_max
+        if cfg.resample_method == "systematic":
+            # Same size, drawn with one random offset on an even comb over the cumulative
+            # weights: each particle gets floor or ceil of count * weight copies, so equal
+            # weights reproduce the set instead of letting its mean wander.
+            comb = (self.rng.random() + np.arange(count)) / count
+            idx = np.minimum(np.searchsorted(cum, comb, side="right"), self.particles.shape[0] - 1)
+            kept = self.particles[idx].copy()
+            if w_diff > 0.0 and inject.any():
+                sel = inject[:count]
+                kept[sel] = new[:count][sel]
+            new = self.rng.permutation(kept)
         self.particles = new[:count]
         self.weights = np.full(count, 1.0 / count)
         if w_diff > 0.0:
             self.w_slow = self.w_fast = 0.0
+        self._update_converged()
 
     def update(
         self,
@@ -393,4 +529,51 @@ class Amcl:
         return self._estimate.copy(), self._cov.copy()
 
 
-__all__ = ["DEFAULT_INITIAL_COV", "Amcl", "AmclConfig", "likelihood_field"]
+@dataclass(frozen=True)
+class LocalizationLimits:
+    """When a localization source can no longer be trusted to drive on (eddiebot's addition;
+    Nav2 leaves it to the user). ``max_xy_std`` (m) and ``max_yaw_std`` (rad): largest
+    standard deviation of the published pose (``amcl_pose``'s covariance); ``tf_timeout`` (s):
+    largest age of the newest ``map → odom`` transform (AMCL future-dates it by its
+    ``transform_tolerance``, so the age counts from that stamp). A static transform (stamp 0)
+    never goes stale. Zero or negative disables a limit."""
+
+    max_xy_std: float = 0.5
+    max_yaw_std: float = 0.5
+    tf_timeout: float = 1.0
+
+
+def localization_problem(limits: LocalizationLimits, now_ns: int,
+                         cov: npt.ArrayLike | None = None,
+                         tf_stamp_ns: int | None = None) -> str:
+    """Why the robot must not drive on its localization, or "" when it may.
+
+    ``cov``: the last published pose covariance (3 x 3 over x, y, yaw, or the 6 x 6 /
+    36-element ROS layout), None when no pose was published yet (not checked);
+    ``tf_stamp_ns``: stamp of the newest ``map → odom``, None when there is none at all."""
+    if tf_stamp_ns is None:
+        return "no map -> odom transform (localization not running)"
+    if limits.tf_timeout > 0.0 and tf_stamp_ns != 0:
+        age = (now_ns - tf_stamp_ns) * 1e-9
+        if age > limits.tf_timeout:
+            return f"map -> odom is stale ({age:.2f} s old > {limits.tf_timeout:g} s)"
+    if cov is not None:
+        c = np.asarray(cov, dtype=np.float64)
+        if c.size == 36:
+            c6 = c.reshape(6, 6)
+            c = np.array([[c6[0, 0], c6[0, 1], 0.0], [c6[1, 0], c6[1, 1], 0.0],
+                          [0.0, 0.0, c6[5, 5]]])
+        c = c.reshape(3, 3)
+        if not np.all(np.isfinite(c)):
+            return "localization covariance is not finite"
+        xy = math.sqrt(max(float(np.linalg.eigvalsh(c[:2, :2]).max()), 0.0))
+        yaw = math.sqrt(max(float(c[2, 2]), 0.0))
+        if limits.max_xy_std > 0.0 and xy > limits.max_xy_std:
+            return f"localization lost: position std {xy:.2f} m > {limits.max_xy_std:g} m"
+        if limits.max_yaw_std > 0.0 and yaw > limits.max_yaw_std:
+            return f"localization lost: heading std {yaw:.2f} rad > {limits.max_yaw_std:g} rad"
+    return ""
+
+
+__all__ = ["CONVERGED_DIST", "DEFAULT_INITIAL_COV", "LASER_MODELS", "Amcl", "AmclConfig",
+           "LocalizationLimits", "likelihood_field", "localization_problem"]

@@ -1,9 +1,13 @@
-"""Nav2 collision monitor core (``nav2_collision_monitor``): stop / slowdown / limit / approach
-zones over obstacle points from scan, point-cloud and range sources.
+"""Nav2 collision monitor core (``nav2_collision_monitor``, Jazzy): stop / slowdown / limit /
+approach zones over obstacle points from scan, point-cloud, range and polygon sources.
 
-Points are 2-D in the robot base frame (m). :class:`CollisionMonitor.process` takes the
-incoming command and the current points of every source (``None`` = no valid recent data)
-and returns what to publish, following upstream's order of operations.
+Zones are ``polygon`` (static ``points``, or a shape received on ``polygon_sub_topic`` / the
+footprint topic for approach), ``circle`` (``radius``) and ``velocity_polygon`` (sub-polygons
+chosen by the commanded velocity: ``linear_min/max``, ``theta_min/max`` and, with
+``holonomic``, ``direction_start_angle/direction_end_angle``). Points are 2-D in the robot base
+frame (m). :class:`CollisionMonitor.process` takes the incoming command and the current points
+of every source (``None`` = no valid recent data) and returns what to publish, following
+upstream's order of operations.
 """
 
 from __future__ import annotations
@@ -39,9 +43,18 @@ _ACTIONS = {"stop": ActionType.STOP, "slowdown": ActionType.SLOWDOWN,
             "none": ActionType.DO_NOTHING}
 
 
+#: ``type`` values of a zone
+ZONE_TYPES = ("polygon", "circle", "velocity_polygon")
+#: ``type`` values of an observation source
+SOURCE_TYPES = ("scan", "pointcloud", "range", "polygon")
+#: polygon name reported when an enabled source has no valid recent data
+INVALID_SOURCE = "invalid source"
+
+
 @dataclass(frozen=True)
 class CollisionMonitorConfig:
-    """Node parameters (Jazzy code defaults)."""
+    """Node parameters (Jazzy code defaults; ``use_realtime_priority`` is accepted and
+    ignored: there is no real-time scheduling here)."""
 
     cmd_vel_in_topic: str = "cmd_vel_smoothed"
     cmd_vel_out_topic: str = "cmd_vel"
@@ -54,6 +67,7 @@ class CollisionMonitorConfig:
     stop_pub_timeout: float = 1.0
     polygons: tuple[str, ...] = ()
     observation_sources: tuple[str, ...] = ()
+    use_realtime_priority: bool = False
 
     def validate(self, server: str = "collision_monitor") -> None:
         require(len(self.polygons) > 0, server, "polygons", list(self.polygons),
@@ -65,7 +79,9 @@ class CollisionMonitorConfig:
 @dataclass(frozen=True)
 class PolygonConfig:
     """Per-polygon parameters (Jazzy code defaults). ``points`` as Nav2's string
-    ``"[[x, y], ...]"``; ``max_points`` (deprecated) N means ``min_points`` N + 1."""
+    ``"[[x, y], ...]"``; ``max_points`` (deprecated) N means ``min_points`` N + 1.
+    ``velocity_polygons`` names the sub-polygons of a ``velocity_polygon`` (each a
+    :class:`VelocitySubPolygon` under ``<polygon>.<name>``)."""
 
     type: str = "polygon"
     action_type: str = ""
@@ -82,17 +98,74 @@ class PolygonConfig:
     visualize: bool = False
     polygon_pub_topic: str = ""
     footprint_topic: str = "local_costmap/published_footprint"
+    polygon_sub_topic: str = ""
     sources_names: tuple[str, ...] = ()
+    velocity_polygons: tuple[str, ...] = ()
+    holonomic: bool = False
 
     def validate(self, server: str = "collision_monitor") -> None:
-        require(self.type in ("polygon", "circle"), server, "type", self.type,
-                "must be polygon or circle (velocity_polygon not supported)")
+        require(self.type in ZONE_TYPES, server, "type", self.type,
+                f"must be one of {list(ZONE_TYPES)}")
         require(self.action_type in _ACTIONS, server, "action_type", self.action_type,
                 f"must be one of {sorted(_ACTIONS)}")
         require(0.0 <= self.slowdown_ratio <= 1.0, server, "slowdown_ratio", self.slowdown_ratio,
                 "must be in [0, 1]")
         require(self.simulation_time_step > 0.0, server, "simulation_time_step",
                 self.simulation_time_step, "must be > 0")
+
+
+@dataclass(frozen=True)
+class VelocitySubPolygon:
+    """One sub-polygon of a ``velocity_polygon``: used while the command is in its ranges."""
+
+    name: str
+    points: tuple[tuple[float, float], ...]
+    linear_min: float
+    linear_max: float
+    theta_min: float
+    theta_max: float
+    direction_end_angle: float = math.pi
+    direction_start_angle: float = -math.pi
+
+    def in_range(self, cmd: Twist2D, holonomic: bool) -> bool:
+        """``VelocityPolygon::isInRange`` (Jazzy): ``vx`` in [linear_min, linear_max] and
+        ``wz`` in [theta_min, theta_max]; holonomic robots also need the direction
+        ``atan2(vy, vx)`` within [start, end] (a wrapped range when start > end)."""
+        ok = (self.linear_min <= cmd.vx <= self.linear_max
+              and self.theta_min <= cmd.wz <= self.theta_max)
+        if holonomic:
+            direction = math.atan2(cmd.vy, cmd.vx)
+            if self.direction_start_angle <= self.direction_end_angle:
+                ok = ok and self.direction_start_angle <= direction <= self.direction_end_angle
+            else:
+                ok = ok and (direction >= self.direction_start_angle
+                             or direction <= self.direction_end_angle)
+        return ok
+
+
+def _sub_polygons(zone: str, config: PolygonConfig, params: dict[str, Any]) -> list[VelocitySubPolygon]:
+    server = f"collision_monitor.{zone}"
+    require(len(config.velocity_polygons) > 0, server, "velocity_polygons",
+            list(config.velocity_polygons), "a velocity_polygon needs at least one sub-polygon")
+    out = []
+    for name in config.velocity_polygons:
+        sub = params.get(name)
+        if not isinstance(sub, dict):
+            raise ParameterError(server, f"{name}.points", None, "missing sub-polygon parameters")
+        for key in ("points", "linear_min", "linear_max", "theta_min", "theta_max"):
+            if key not in sub:
+                raise ParameterError(server, f"{name}.{key}", None, "missing (no default upstream)")
+        pts = sub["points"]
+        poly = _parse_points(str(pts) if isinstance(pts, list) else pts, server)
+        try:
+            nums = {k: float(sub[k]) for k in ("linear_min", "linear_max", "theta_min", "theta_max")}
+            end = float(sub.get("direction_end_angle", math.pi))
+            start = float(sub.get("direction_start_angle", -math.pi))
+        except (TypeError, ValueError) as exc:
+            raise ParameterError(server, name, sub, f"not a number: {exc}") from exc
+        out.append(VelocitySubPolygon(name, tuple((float(x), float(y)) for x, y in poly),
+                                      direction_end_angle=end, direction_start_angle=start, **nums))
+    return out
 
 
 def _parse_points(text: str, server: str) -> Points:
@@ -124,33 +197,74 @@ def points_in_polygon(poly: Points, pts: Points) -> npt.NDArray[np.bool_]:
 
 
 class Zone:
-    """One polygon or circle with its action."""
+    """One polygon, circle or velocity polygon with its action.
 
-    def __init__(self, name: str, config: PolygonConfig, footprint: Points | None = None) -> None:
+    A polygon without ``points`` takes its shape from ``polygon_sub_topic`` (or, for an
+    approach zone, from the footprint topic): :attr:`dynamic_topic` names it, the node feeds
+    :meth:`set_polygon`, and until then the zone is skipped (``isShapeSet``)."""
+
+    def __init__(self, name: str, config: PolygonConfig, footprint: Points | None = None,
+                 sub_polygons: list[VelocitySubPolygon] | None = None) -> None:
         self.name = name
         self.config = config
         config.validate(f"collision_monitor.{name}")
         self.action = _ACTIONS[config.action_type]
         self.min_points = config.max_points + 1 if config.max_points >= 0 else config.min_points
         self.poly: Points | None = None
+        self.dynamic_topic = ""
+        self.sub_polygons = sub_polygons or []
+        self.active_sub_polygon = ""
         if config.type == "polygon":
             if config.points:
                 self.poly = _parse_points(config.points, f"collision_monitor.{name}")
             elif footprint is not None:
                 self.poly = np.asarray(footprint, dtype=np.float64)
+            elif config.polygon_sub_topic:
+                self.dynamic_topic = config.polygon_sub_topic
+            elif self.action == ActionType.APPROACH and config.footprint_topic:
+                self.dynamic_topic = config.footprint_topic
             else:
                 raise ParameterError(f"collision_monitor.{name}", "points", config.points,
-                                     "polygon needs points (or a footprint for approach)")
+                                     "polygon needs points or polygon_sub_topic (or a "
+                                     "footprint topic for approach)")
+        elif config.type == "velocity_polygon":
+            if not self.sub_polygons:
+                raise ParameterError(f"collision_monitor.{name}", "velocity_polygons",
+                                     list(config.velocity_polygons), "no sub-polygons")
         elif config.radius <= 0.0:
             raise ParameterError(f"collision_monitor.{name}", "radius", config.radius,
                                  "circle needs radius > 0")
 
+    @property
+    def shape_set(self) -> bool:
+        """``isShapeSet``: circles always; polygons once they have >= 3 points."""
+        if self.config.type == "circle":
+            return True
+        return self.poly is not None and self.poly.shape[0] >= 3
+
+    def set_polygon(self, points: npt.ArrayLike) -> None:
+        """New shape (base frame) from the polygon or footprint topic."""
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        self.poly = pts if pts.shape[0] >= 3 else None
+
+    def update_polygon(self, cmd: Twist2D) -> None:
+        """``updatePolygon``: a velocity polygon takes the first sub-polygon whose ranges hold
+        ``cmd``; when none does, it keeps the previous one (none yet: no shape)."""
+        for sub in self.sub_polygons:
+            if sub.in_range(cmd, self.config.holonomic):
+                if sub.name != self.active_sub_polygon:
+                    self.poly = np.asarray(sub.points, dtype=np.float64)
+                    self.active_sub_polygon = sub.name
+                return
+
     def count_inside(self, pts: Points) -> int:
         if pts.shape[0] == 0:
             return 0
-        if self.poly is None:
+        if self.config.type == "circle":
             r = self.config.radius
             return int(np.count_nonzero(pts[:, 0] ** 2 + pts[:, 1] ** 2 < r * r))
+        if self.poly is None:
+            return 0
         return int(np.count_nonzero(points_in_polygon(self.poly, pts)))
 
     def collision_time(self, cmd: Twist2D, pts: Points) -> float:
@@ -216,17 +330,31 @@ class CollisionMonitor:
             return np.zeros((0, 2))
         return np.concatenate([np.asarray(a, dtype=np.float64).reshape(-1, 2) for a in arrays])
 
-    def process(self, cmd: Twist2D, sources: dict[str, Points | None], now_ns: int) -> MonitorOutput:
+    def zone(self, name: str) -> Zone:
+        for z in self.zones:
+            if z.name == name:
+                return z
+        raise KeyError(name)
+
+    def process(self, cmd: Twist2D, sources: dict[str, Points | None], now_ns: int,
+                stop_reason: str = "") -> MonitorOutput:
+        """One incoming command. ``stop_reason`` (not upstream): stop for a reason outside the
+        zones (lost localization), reported as the polygon name like ``invalid source``."""
         action = ActionType.DO_NOTHING
         name = ""
         request = cmd
         invalid = [n for n in self.config.observation_sources
                    if n in sources and sources[n] is None]
-        if invalid:
-            action, name, request = ActionType.STOP, "invalid source", Twist2D()
+        if stop_reason:
+            action, name, request = ActionType.STOP, stop_reason, Twist2D()
+        elif invalid:
+            action, name, request = ActionType.STOP, INVALID_SOURCE, Twist2D()
         else:
             for zone in self.zones:
                 if not zone.config.enabled:
+                    continue
+                zone.update_polygon(cmd)
+                if not zone.shape_set:
                     continue
                 pts = self._points_for(zone, sources)
                 if zone.action == ActionType.STOP:
@@ -282,8 +410,10 @@ def build_collision_monitor(params: dict[str, Any], footprint: Points | None = N
         sub = dict(params.get(name, {}) or {})
         if isinstance(sub.get("points"), list):
             sub["points"] = str(sub["points"])
-        zones.append(Zone(name, from_params(PolygonConfig, sub, server=f"{server}.{name}",
-                                            validate=lambda c, s: None), footprint))
+        pcfg = from_params(PolygonConfig, {k: v for k, v in sub.items() if not isinstance(v, dict)},
+                           server=f"{server}.{name}", validate=lambda c, s: None)
+        subs = _sub_polygons(name, pcfg, sub) if pcfg.type == "velocity_polygon" else None
+        zones.append(Zone(name, pcfg, footprint, subs))
     return CollisionMonitor(cfg, zones)
 
 
@@ -313,8 +443,9 @@ def range_source_points(range_m: float, min_range: float, max_range: float,
                         field_of_view: float, sensor_pose: tuple[float, float, float],
                         obstacles_angle: float = math.pi / 180.0) -> Points:
     """Range -> points on the arc at the measured distance, every ``obstacles_angle``
-    across the field of view (``Range::getData``); nothing outside [min_range, max_range)."""
-    if not math.isfinite(range_m) or range_m < min_range or range_m >= max_range:
+    across the field of view (``Range::getData``); nothing outside [min_range, max_range]
+    (upstream's test) or for a non-finite range (REP 117's "nothing detected")."""
+    if not math.isfinite(range_m) or range_m < min_range or range_m > max_range:
         return np.zeros((0, 2))
     half = field_of_view / 2.0
     angles = np.arange(-half, half, obstacles_angle)
@@ -325,16 +456,38 @@ def range_source_points(range_m: float, min_range: float, max_range: float,
     return np.stack([xs, ys], axis=-1)
 
 
+def polygon_source_points(polygons: list[npt.ArrayLike], sampling_distance: float = 0.1) -> Points:
+    """PolygonInstanceStamped shapes (base frame) -> points along their closed outlines, each
+    edge split into ``ceil(length / sampling_distance)`` (>= 1) equal steps, both ends
+    included (``PolygonSource::convertPolygonStampedToPoints``)."""
+    out: list[Points] = []
+    for poly in polygons:
+        p = np.asarray(poly, dtype=np.float64).reshape(-1, 2)
+        if p.shape[0] == 0:
+            continue
+        nxt = np.roll(p, -1, axis=0)
+        for a, b in zip(p, nxt):
+            n = max(math.ceil(math.hypot(*(b - a)) / sampling_distance), 1)
+            t = np.arange(n + 1)[:, None] / n
+            out.append(a + t * (b - a))
+    return np.concatenate(out) if out else np.zeros((0, 2))
+
+
 __all__ = [
+    "INVALID_SOURCE",
+    "SOURCE_TYPES",
+    "ZONE_TYPES",
     "ActionType",
     "CollisionMonitor",
     "CollisionMonitorConfig",
     "MonitorOutput",
     "PolygonConfig",
+    "VelocitySubPolygon",
     "Zone",
     "build_collision_monitor",
     "cloud_source_points",
     "points_in_polygon",
+    "polygon_source_points",
     "range_source_points",
     "scan_source_points",
 ]

@@ -131,6 +131,12 @@ class SlamConfig:
     """Odometry heading σ per radian turned (rad/rad)."""
     odometry_rotation_noise_per_meter: float = 0.05
     """Odometry heading σ per metre travelled (rad/m)."""
+    match_fine_search_climb: int = 0
+    """Re-centre the correlative matcher's fine search (fine headings × ±(step/2 + 1) cells)
+    on its best up to this many times while that best lies on the edge of its translation
+    box. A heading error of ½ coarse step turns far end points by centimetres, so the best
+    translation at the right fine heading can lie outside the box Karto searches around the
+    coarse best; 0 = Karto's single box."""
     match_coarse_heading_variance: bool = False
     """Sequential matches take their heading variance from every coarse heading (how well
     the scan fits several degrees off), not only from the fine steps beside the best."""

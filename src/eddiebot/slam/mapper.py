@@ -142,6 +142,7 @@ def matcher_params(
             fine_angle_step=config.fine_search_angle_offset,
             penalize=False,
             use_response_expansion=config.use_response_expansion,
+            fine_search_climb=config.match_fine_search_climb,
         )
     return MatcherParams(
         search_dimension=config.correlation_search_space_dimension,
@@ -157,6 +158,7 @@ def matcher_params(
         minimum_angle_penalty=config.minimum_angle_penalty,
         use_response_expansion=config.use_response_expansion,
         coarse_heading_variance=config.match_coarse_heading_variance,
+        fine_search_climb=config.match_fine_search_climb,
     )
 
 

@@ -15,11 +15,22 @@ as markers on ``~/graph_visualization``.
 A scan is processed when the robot moved ``minimum_travel_distance`` **or** turned
 ``minimum_travel_heading`` — in every mode (upstream's sync and localization modes ignore
 pure rotation; with a 57° Kinect scan, turning in place is how Eddie sees a room).
+
+Low-feature places (a corridor): when a scan match's position variance along its weakest
+direction exceeds ``corridor_covariance_threshold`` (m²), one warning is logged per
+*episode* — the first such match starts one; it ends after `LOW_FEATURE_CLEAR_MATCHES`
+consecutive well-constrained matches, and the next poorly constrained match logs again.
+``low_feature_episodes`` and ``low_feature_matches`` count them.
+
+``scan_cpu_s`` holds the CPU time (this thread's, ``time.thread_time``) the core spent on
+each processed scan (matching, loop closure, optimisation); ``map_update_cpu_s`` the time
+of each occupancy-grid refresh for ``/map``.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections import deque
 from pathlib import Path
 from typing import Any
@@ -49,9 +60,13 @@ from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning
 from eddiebot.slam.scan import Scan
 from eddiebot.slam.session import load_session, save_session
 
-__all__ = ["SlamNode"]
+__all__ = ["LOW_FEATURE_CLEAR_MATCHES", "SlamNode"]
 
 _NODE_ONLY = {"extra"}
+
+#: Consecutive well-constrained matches that end a low-feature episode (hysteresis: a door
+#: in a corridor wall does not end the corridor).
+LOW_FEATURE_CLEAR_MATCHES = 3
 
 
 class SlamNode(Node):
@@ -70,6 +85,12 @@ class SlamNode(Node):
             raise ValueError(f"{self.fully_qualified_name}: processing must be sync or async")
         self.config = SlamConfig(**values).validated()
         self._warned: set[str] = set()
+        self.low_feature_episodes = 0
+        self.low_feature_matches = 0
+        self._low_feature_active = False
+        self._well_constrained_run = 0
+        self.scan_cpu_s: deque[float] = deque(maxlen=100_000)
+        self.map_update_cpu_s: deque[float] = deque(maxlen=100_000)
         if self.config.mode in ("localization", "lifelong") and self.config.map_file_name:
             self.core = load_session(self.config.map_file_name, self.config, mode=self.config.mode)
             self.core.on_warning = self._on_warning
@@ -109,8 +130,18 @@ class SlamNode(Node):
 
     # -- warnings --------------------------------------------------------------------------
     def _on_warning(self, w: SlamWarning) -> None:
-        if w.kind == "corridor":
-            self.get_logger().warning(w.message)  # worth repeating: it is about this place
+        if w.kind == "low_feature":
+            self.low_feature_matches += 1
+            self._well_constrained_run = 0
+            if not self._low_feature_active:
+                # once per episode: it is about this place, not about every scan in it
+                self._low_feature_active = True
+                self.low_feature_episodes += 1
+                self.get_logger().warning(
+                    f"{w.message} (variance above corridor_covariance_threshold "
+                    f"{self.config.corridor_covariance_threshold} m²; not repeated until "
+                    f"{LOW_FEATURE_CLEAR_MATCHES} well-constrained matches)"
+                )
             return
         if w.kind not in self._warned:
             self._warned.add(w.kind)
@@ -189,13 +220,28 @@ class SlamNode(Node):
             self._warn_once("no_odom_tf", f"no odometry at the scan's time: {exc}")
             return
         scan = Scan.from_laser_scan(msg, stamp)
+        cpu0 = time.thread_time()
         result = self.core.process(scan, np.array(odom), expected_beams=len(msg.ranges))
+        cpu = time.thread_time() - cpu0
         if result.status in (ProcessStatus.ADDED, ProcessStatus.LOCALIZED):
+            self.scan_cpu_s.append(cpu)
+            self._track_low_feature(result)
             self._last_scan_ns = stamp
             self._map_dirty = self._map_dirty or result.status == ProcessStatus.ADDED
             if result.loop_closed:
                 self.get_logger().info(f"loop closed at node {result.node_id}")
                 self._map_dirty = True
+
+    def _track_low_feature(self, result: Any) -> None:
+        """End a low-feature episode after enough well-constrained matches."""
+        if result.covariance is None or any(w.kind == "low_feature" for w in result.warnings):
+            return
+        if any(w.kind == "weak_match" for w in result.warnings):
+            return  # odometry only: says nothing about the place
+        self._well_constrained_run += 1
+        if self._low_feature_active and self._well_constrained_run >= LOW_FEATURE_CLEAR_MATCHES:
+            self._low_feature_active = False
+            self.get_logger().info("scan matches well constrained again")
 
     # -- outputs ---------------------------------------------------------------------------
     def _publish_transform(self) -> None:
@@ -211,8 +257,10 @@ class SlamNode(Node):
             return
         if len(self.core.nodes) == 0:
             return
+        cpu0 = time.thread_time()
         self.core.update_map()
         grid = self.core.occupancy_map()
+        self.map_update_cpu_s.append(time.thread_time() - cpu0)
         msg = map_to_msg(grid, frame_id=self.config.map_frame, stamp_ns=self.get_clock().now_ns())
         self.map_pub.publish(msg)
         self.meta_pub.publish(msg.info)

@@ -2,10 +2,38 @@
 
 Nodes are integer ids 0..N-1 holding poses (x, y, theta) in the map frame; edges are relative
 measurements ``z = inv(x_i) ∘ x_j`` with a 3×3 covariance (x, y, theta order, GTSAM's Pose2
-tangent order). Node 0 is anchored by a tight prior. Loop-closure edges can carry a robust
-kernel (Huber, Cauchy or DCS) so that a false closure cannot drag the trajectory far: its
-weight falls as its residual grows. The graph knows nothing about scans, so the RGB-D SLAM
-reuses it unchanged.
+tangent order). Node 0 is anchored by a tight prior. The graph knows nothing about scans, so
+the RGB-D SLAM reuses it unchanged.
+
+False loop closures are handled on edges added with ``robust=True`` (the loop closures), in
+three steps, each edge tested when it arrives, against the estimate of the graph so far:
+
+1. **Residual on its own covariance.** An edge whose whitened residual ``eᵀe`` at the current
+   estimate is within ``χ²₃(gate_probability)`` agrees with the graph as it is: accepted.
+2. **χ² gate on the innovation.** Otherwise, with ``A`` the whitened Jacobian over both poses
+   and ``S`` their joint marginal covariance (from iSAM2's Bayes tree, or batch marginals with
+   Levenberg–Marquardt), the edge is rejected when ``eᵀ (I + A S Aᵀ)⁻¹ e > χ²₃(p)``: even the
+   graph's own uncertainty cannot explain it. Since ``I + A S Aᵀ ⪰ I``, step 1 never rejects
+   what this test would accept, and only surprising edges pay for the marginal.
+3. **Support** (``require_support``, default on). A surprising edge that passes the gate is one
+   the graph cannot yet confirm: a long drift, or covariances too loose for the gate to mean
+   much. It is taken when another loop closes the same place — an accepted loop edge with both
+   ends within ``support_window`` nodes of its own, or a held one with which it passes the
+   joint test (the conditional innovation of one given the other within the gate) — the
+   "consistent over consecutive detections" check of visual loop closing. Until then it is
+   held (`held`); the oldest of more than 8 held edges is rejected.
+
+Edges accepted in step 3 carry a Huber kernel at the gate (√χ²₃(p) σ): their residual is large
+until the graph absorbs them, and Huber pulls with bounded force rather than ignoring them as a
+redescending kernel would. The rest carry ``robust_kernel`` with its width raised to the gate,
+so that a vetted edge keeps full weight while it agrees with the graph. Rejected edges stay in
+`edges` (listed by `rejected`).
+
+A graph solved in one go from its initial guess (e.g. a g2o file initialised by chained
+odometry) has no estimate to test against: ``optimize`` then sweeps it node by node through the
+same gated iSAM2 path in node order (node k placed from a non-robust edge to an earlier node)
+and polishes the result with Levenberg–Marquardt on the accepted edges. ``gate_probability=None``
+turns all this off: the kernel alone (in batch annealed from 1000σ down to ``kernel_width``).
 
 ``half_chi2`` reports ½ Σ eᵀ Ω e with every kernel removed (the figure the g2o benchmarks
 quote), whatever optimiser produced the estimate.
@@ -14,19 +42,24 @@ quote), whatever optimiser produced the estimate.
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import gtsam
 import numpy as np
 import numpy.typing as npt
+from scipy.special import gammaincinv
 
 __all__ = ["Edge", "EdgeKind", "PoseGraph"]
 
 FloatArray = npt.NDArray[np.float64]
 
 _PRIOR_SIGMAS = np.array([1e-4, 1e-4, 1e-5])
+_EXTRA_ROUNDS = 4
+"""At most this many extra iSAM2 relinearisation rounds after a loop closure."""
+_HOLD = 8
+"""Surprising edges waiting for a consistent partner; the oldest is rejected beyond this."""
 
 
 class EdgeKind(str, enum.Enum):
@@ -62,18 +95,37 @@ def _pose2(p: npt.ArrayLike) -> gtsam.Pose2:
 def _sanitize_covariance(cov: npt.ArrayLike) -> FloatArray:
     c = np.asarray(cov, dtype=np.float64).reshape(3, 3)
     c = 0.5 * (c + c.T)
+    try:
+        np.linalg.cholesky(c)
+        if np.linalg.cond(c) < 1e12:
+            return c
+    except np.linalg.LinAlgError:
+        pass
     w, v = np.linalg.eigh(c)
     w = np.clip(w, 1e-12, None)
     return np.asarray((v * w) @ v.T)
+
+
+def _joint(marginal: Any, keys: list[int]) -> FloatArray:
+    """The dense joint covariance of ``keys`` from a GTSAM JointMarginal."""
+    return np.block([[marginal.at(a, b) for b in keys] for a in keys])
+
+
+def chi2_quantile(probability: float, dof: int = 3) -> float:
+    """χ²_dof quantile: the squared Mahalanobis distance under which ``probability`` of a
+    correct measurement's residuals fall."""
+    return float(2.0 * gammaincinv(0.5 * dof, probability))
 
 
 class PoseGraph:
     """An SE(2) pose graph with incremental or batch optimisation.
 
     ``optimizer`` is ``"isam2"`` (each `optimize` call folds the new nodes and edges into
-    iSAM2; after a loop closure it relinearises a few extra rounds) or
+    iSAM2; after a loop closure it relinearises until nothing moves, at most 4 extra rounds) or
     ``"levenberg_marquardt"`` (each call re-solves the whole graph from the current estimate).
-    ``robust_kernel`` applies to edges added with ``robust=True``.
+    ``robust_kernel``, the χ² gate (``gate_probability``; None disables it) and the support
+    rule (``require_support``, ``support_window`` in nodes) apply to edges added with
+    ``robust=True``; see the module docstring.
     """
 
     def __init__(
@@ -82,6 +134,9 @@ class PoseGraph:
         optimizer: str = "isam2",
         robust_kernel: str = "cauchy",
         kernel_width: float = 1.0,
+        gate_probability: float | None = 0.999,
+        require_support: bool = True,
+        support_window: int = 10,
     ) -> None:
         if optimizer not in ("isam2", "levenberg_marquardt"):
             raise ValueError(
@@ -89,36 +144,67 @@ class PoseGraph:
             )
         if robust_kernel not in ("none", "huber", "cauchy", "dcs"):
             raise ValueError(f"unknown robust kernel {robust_kernel!r}")
+        if gate_probability is not None and not 0.0 < gate_probability < 1.0:
+            raise ValueError(f"gate_probability must be in (0, 1) or None, got {gate_probability}")
         self.optimizer = optimizer
         self.robust_kernel = robust_kernel
         self.kernel_width = float(kernel_width)
-        self._poses: list[FloatArray] = []
+        self.gate_probability = gate_probability
+        self._gate = None if gate_probability is None else chi2_quantile(gate_probability)
+        self.require_support = bool(require_support)
+        self.support_window = int(support_window)
+        # with the gate on, an accepted edge keeps full weight anywhere inside the gate
+        self._accept_width = self.kernel_width
+        if self._gate is not None:
+            gate_width = self._gate if robust_kernel == "dcs" else float(np.sqrt(self._gate))
+            self._accept_width = max(self.kernel_width, gate_width)
+        self._p = np.zeros((16, 3))
+        self._n = 0
+        self._stale = False  # iSAM2 holds a newer estimate than _p (fetched on demand)
         self._edges: list[Edge] = []
         self._adjacency: list[set[int]] = []
+        self._rejected: set[int] = set()
+        self._held: list[int] = []
+        self._trusted: set[int] = set()
+        self._closures: dict[int, list[int]] = {}  # accepted loop edges: later end -> earlier ends
         self._pending_nodes: list[int] = []
-        self._pending_edges: list[Edge] = []
+        self._pending_edges: list[int] = []
         self._needs_full_solve = False
+        self._solved = False
         self._isam_broken = False
         self.isam_recoveries = 0
         """How often an iSAM2 update failed and was replaced by a batch solve."""
+        self.gate_tests = 0
+        """Robust edges tested by the χ² gate."""
+        self.marginal_queries = 0
+        """Gate tests that needed the joint marginal covariance (residual above the gate)."""
         self._isam: gtsam.ISAM2 | None = None
+        self._isam_keys: set[int] = set()
         self._reset_isam()
 
     # ------------------------------------------------------------------ building
     def _reset_isam(self) -> None:
+        self._sync()
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(0.01)
         params.relinearizeSkip = 1
+        # QR, not Cholesky: a loop closure with a near-singular information matrix (as g2o
+        # graphs carry) made Cholesky report an indeterminate system mid-replay
+        params.setFactorization("QR")
         self._isam = gtsam.ISAM2(params)
-        self._pending_nodes = list(range(len(self._poses)))
-        self._pending_edges = list(self._edges)
+        self._isam_keys = set()
+        self._pending_nodes = list(range(self._n))
+        self._pending_edges = list(range(len(self._edges)))
 
     def add_node(self, pose: npt.ArrayLike) -> int:
         """Add a node with an initial estimate (map frame); returns its id."""
-        p = np.asarray(pose, dtype=np.float64).reshape(3).copy()
-        self._poses.append(p)
+        p = np.asarray(pose, dtype=np.float64).reshape(3)
+        if self._n == len(self._p):
+            self._p = np.concatenate([self._p, np.zeros_like(self._p)])
+        self._p[self._n] = p
+        self._n += 1
         self._adjacency.append(set())
-        idx = len(self._poses) - 1
+        idx = self._n - 1
         self._pending_nodes.append(idx)
         return idx
 
@@ -133,7 +219,7 @@ class PoseGraph:
         robust: bool = False,
     ) -> Edge:
         """Add a relative-pose edge ``inv(x_i) ∘ x_j ≈ measurement``."""
-        n = len(self._poses)
+        n = self._n
         if not (0 <= i < n and 0 <= j < n) or i == j:
             raise ValueError(f"edge ({i}, {j}) needs two distinct existing nodes (have {n})")
         edge = Edge(
@@ -147,30 +233,57 @@ class PoseGraph:
         self._edges.append(edge)
         self._adjacency[i].add(j)
         self._adjacency[j].add(i)
-        self._pending_edges.append(edge)
+        self._pending_edges.append(len(self._edges) - 1)
         if kind is EdgeKind.LOOP:
             self._needs_full_solve = True
         return edge
 
     # ------------------------------------------------------------------ queries
     def __len__(self) -> int:
-        return len(self._poses)
+        return self._n
 
     @property
     def poses(self) -> FloatArray:
         """Current estimates (N, 3), map frame."""
-        if not self._poses:
-            return np.zeros((0, 3))
-        return np.array(self._poses)
+        self._sync()
+        return self._p[: self._n].copy()
 
     def pose(self, idx: int) -> FloatArray:
         """Current estimate of one node."""
-        return self._poses[idx].copy()
+        if not 0 <= idx < self._n:
+            raise IndexError(f"node {idx} out of range (have {self._n})")
+        return self._current(idx)
+
+    def _current(self, idx: int) -> FloatArray:
+        if self._stale and idx in self._isam_keys:
+            assert self._isam is not None
+            p = self._isam.calculateEstimatePose2(idx)
+            return np.array([p.x(), p.y(), p.theta()])
+        return self._p[idx].copy()
+
+    def _sync(self) -> None:
+        """Copy iSAM2's current estimate into ``_p`` (one pass over every variable)."""
+        if not self._stale:
+            return
+        self._stale = False
+        assert self._isam is not None
+        if self._isam_keys:
+            self._store(self._isam.calculateEstimate(), len(self._isam_keys) == self._n)
 
     @property
     def edges(self) -> list[Edge]:
-        """Every edge, in insertion order."""
+        """Every edge, in insertion order (rejected ones included)."""
         return list(self._edges)
+
+    @property
+    def rejected(self) -> list[int]:
+        """Indices into `edges` of the robust edges the gate left out of the estimate."""
+        return sorted(self._rejected)
+
+    @property
+    def held(self) -> list[int]:
+        """Indices into `edges` of surprising edges waiting for a consistent partner."""
+        return list(self._held)
 
     def neighbours(self, idx: int) -> set[int]:
         """Nodes sharing an edge with ``idx``."""
@@ -181,7 +294,7 @@ class PoseGraph:
         base = gtsam.noiseModel.Gaussian.Covariance(edge.covariance)
         if not edge.robust or self.robust_kernel == "none":
             return base
-        k = self.kernel_width if width is None else width
+        k = self._accept_width if width is None else width
         est = gtsam.noiseModel.mEstimator
         factory: Any = {"huber": est.Huber, "cauchy": est.Cauchy, "dcs": est.DCS}[
             self.robust_kernel
@@ -197,14 +310,14 @@ class PoseGraph:
 
     def _prior(self) -> gtsam.PriorFactorPose2:
         return gtsam.PriorFactorPose2(
-            0, _pose2(self._poses[0]), gtsam.noiseModel.Diagonal.Sigmas(_PRIOR_SIGMAS)
+            0, _pose2(self._p[0]), gtsam.noiseModel.Diagonal.Sigmas(_PRIOR_SIGMAS)
         )
 
     def _graph(
         self, edges: Iterable[Edge], *, robust: bool = True, prior: bool = True
     ) -> gtsam.NonlinearFactorGraph:
         graph = gtsam.NonlinearFactorGraph()
-        if prior and self._poses:
+        if prior and self._n:
             graph.add(self._prior())
         for e in edges:
             graph.add(self._factor(e, robust=robust))
@@ -213,14 +326,143 @@ class PoseGraph:
     def _values(self, nodes: Iterable[int]) -> gtsam.Values:
         values = gtsam.Values()
         for k in nodes:
-            values.insert(k, _pose2(self._poses[k]))
+            values.insert(k, _pose2(self._p[k]))
         return values
 
-    def _store(self, estimate: gtsam.Values) -> None:
+    def _store(self, estimate: gtsam.Values, contiguous: bool = False) -> None:
         arr = gtsam.utilities.extractPose2(estimate)
-        keys = list(estimate.keys())
-        for k, row in zip(keys, arr):
-            self._poses[int(k)] = np.array(row, dtype=np.float64)
+        if contiguous and len(arr) == self._n:
+            self._p[: self._n] = arr
+            return
+        keys = np.array(list(estimate.keys()), dtype=np.int64)
+        self._p[keys] = arr
+
+    def _is_out(self, k: int) -> bool:
+        return k in self._rejected or k in self._held
+
+    def _inliers(self) -> list[Edge]:
+        return [e for k, e in enumerate(self._edges) if not self._is_out(k)]
+
+    def _edge_factor(self, k: int) -> gtsam.BetweenFactorPose2:
+        """An accepted edge's factor: its kernel, or Huber at the gate if confirmed by support."""
+        edge = self._edges[k]
+        if k not in self._trusted or self._gate is None:
+            return self._factor(edge)
+        # a confirmed surprising edge: Huber at the gate, bounded pull until it is absorbed
+        kernel = gtsam.noiseModel.mEstimator.Huber.Create(float(np.sqrt(self._gate)))
+        base = gtsam.noiseModel.Gaussian.Covariance(edge.covariance)
+        noise = gtsam.noiseModel.Robust.Create(kernel, base)
+        return gtsam.BetweenFactorPose2(edge.i, edge.j, _pose2(edge.measurement), noise)
+
+    def _inlier_graph(self) -> gtsam.NonlinearFactorGraph:
+        graph = gtsam.NonlinearFactorGraph()
+        graph.add(self._prior())
+        for k in range(len(self._edges)):
+            if not self._is_out(k):
+                graph.add(self._edge_factor(k))
+        return graph
+
+    # ------------------------------------------------------------------ gate
+    def _linearized(self, k: int) -> tuple[FloatArray, FloatArray]:
+        """Whitened Jacobian (3×6 over poses i, j) and residual of edge k at the estimate."""
+        e = self._edges[k]
+        factor = gtsam.BetweenFactorPose2(
+            e.i, e.j, _pose2(e.measurement), gtsam.noiseModel.Gaussian.Covariance(e.covariance)
+        )
+        values = gtsam.Values()
+        values.insert(e.i, _pose2(self._current(e.i)))
+        values.insert(e.j, _pose2(self._current(e.j)))
+        a, b = factor.linearize(values).jacobian()
+        return np.asarray(a), np.asarray(b)
+
+    def _innovation(self, ks: Sequence[int], marginal: Any) -> tuple[FloatArray, FloatArray]:
+        """Stacked whitened residual of edges ``ks`` and its covariance I + A S Aᵀ."""
+        keys = list(dict.fromkeys(v for k in ks for v in (self._edges[k].i, self._edges[k].j)))
+        col = {key: 3 * c for c, key in enumerate(keys)}
+        a_all = np.zeros((3 * len(ks), 3 * len(keys)))
+        b_all = np.zeros(3 * len(ks))
+        for r, k in enumerate(ks):
+            a, b = self._linearized(k)
+            e = self._edges[k]
+            a_all[3 * r : 3 * r + 3, col[e.i] : col[e.i] + 3] += a[:, :3]
+            a_all[3 * r : 3 * r + 3, col[e.j] : col[e.j] + 3] += a[:, 3:]
+            b_all[3 * r : 3 * r + 3] = b
+        cov = marginal(keys)
+        return b_all, np.eye(len(b_all)) + a_all @ cov @ a_all.T
+
+    def _gate_edges(self, candidates: Sequence[int], marginal: Any) -> tuple[list[int], bool]:
+        """Split robust edges into accepted ones (returned), held and rejected ones (recorded).
+
+        ``marginal(keys)`` gives the joint covariance of those poses at the current estimate.
+        The second return value says whether any accepted edge was surprising (residual beyond
+        the gate on its own covariance), i.e. worth extra relinearisation rounds.
+        """
+        assert self._gate is not None
+        gate = self._gate
+        accepted: list[int] = []
+        surprising = False
+        # held edges a closure accepted since has come to support get another test
+        retry = [h for h in self._held if self._supported(h)]
+        self._held = [h for h in self._held if h not in retry]
+        for k in [*retry, *candidates]:
+            self.gate_tests += 1
+            self._rejected.discard(k)
+            _, b = self._linearized(k)
+            if float(b @ b) <= gate:
+                accepted.append(k)
+                continue
+            self.marginal_queries += 1
+            b, c = self._innovation([k], marginal)
+            if float(b @ np.linalg.solve(c, b)) > gate:
+                self._rejected.add(k)
+                continue
+            partner = -1
+            if self.require_support and not self._supported(k):
+                ek = self._edges[k]
+                for h in reversed(self._held):
+                    eh = self._edges[h]
+                    if (
+                        abs(min(eh.i, eh.j) - min(ek.i, ek.j)) > self.support_window
+                        or abs(max(eh.i, eh.j) - max(ek.i, ek.j)) > self.support_window
+                    ):
+                        continue
+                    # does k still fit once h is in? (conditional innovation, 3 dof)
+                    self.marginal_queries += 1
+                    b2, c2 = self._innovation([h, k], marginal)
+                    joint = float(b2 @ np.linalg.solve(c2, b2))
+                    alone = float(b2[:3] @ np.linalg.solve(c2[:3, :3], b2[:3]))
+                    if joint - alone <= gate and alone <= gate:
+                        partner = h
+                        break
+                if partner < 0:
+                    self._held.append(k)
+                    if len(self._held) > _HOLD:
+                        self._rejected.add(self._held.pop(0))
+                    continue
+                self._held.remove(partner)
+                accepted.append(partner)
+                self._trusted.add(partner)
+            accepted.append(k)
+            self._trusted.add(k)
+            surprising = True
+        for k in accepted:
+            self._note_closure(k)
+        return accepted, surprising
+
+    def _note_closure(self, k: int) -> None:
+        e = self._edges[k]
+        self._closures.setdefault(max(e.i, e.j), []).append(min(e.i, e.j))
+
+    def _supported(self, k: int) -> bool:
+        """Whether an accepted loop edge closes the same place (both ends within
+        ``support_window`` nodes of k's ends)."""
+        e, w = self._edges[k], self.support_window
+        lo, hi = min(e.i, e.j), max(e.i, e.j)
+        for last in range(hi - w, hi + w + 1):
+            for first in self._closures.get(last, ()):
+                if abs(first - lo) <= w:
+                    return True
+        return False
 
     # ------------------------------------------------------------------ solving
     def optimize(self, *, full: bool | None = None) -> bool:
@@ -228,63 +470,148 @@ class PoseGraph:
 
         With iSAM2, a graph that received a loop edge since the last call gets extra
         relinearisation rounds (or ``full=True`` asks for them). With Levenberg–Marquardt
-        the whole graph is re-solved when anything is pending.
+        the whole graph is re-solved when anything is pending. Pending robust edges are
+        gated first (see the module docstring).
         """
-        if not self._poses:
+        if not self._n:
             return False
         loop = self._needs_full_solve if full is None else full
         if not self._pending_nodes and not self._pending_edges and not loop:
             return False
         if self.optimizer == "levenberg_marquardt" or self._isam_broken:
-            self._solve_batch()
+            self._optimize_lm()
         else:
             try:
-                self._solve_isam(loop)
+                self._solve_isam(loop, forced=full is True)
             except RuntimeError:
+                try:
+                    self._sync()
+                except RuntimeError:
+                    self._stale = False
                 # GTSAM reports an ill-conditioned incremental update (e.g. a loop edge far
                 # from the current linearisation) as IndeterminateSystemException: re-solve in
                 # batch and restart iSAM2 from that optimum; if even that fails, stay batch.
-                self._solve_batch()
+                self._pending_nodes, self._pending_edges = [], []
+                self._store(self._lm(self._inlier_graph()))
                 self.isam_recoveries += 1
                 try:
-                    self._reset_isam()
-                    self._solve_isam(False)
+                    self._restart_isam()
                 except RuntimeError:
                     self._isam_broken = True
         self._pending_nodes = []
         self._pending_edges = []
         self._needs_full_solve = False
+        self._solved = True
         return True
 
-    def _solve_isam(self, loop: bool) -> None:
+    def _split_pending(self) -> tuple[list[int], list[int]]:
+        """Pending edges for the first pass (non-robust, plus robust ones a new node depends
+        on) and the robust ones to gate against its result."""
+        if self._gate is None:
+            return list(self._pending_edges), []
+        first = [k for k in self._pending_edges if not self._edges[k].robust]
+        covered = set(self._isam_keys) if self.optimizer == "isam2" else set()
+        if self.optimizer != "isam2":
+            covered.update(range(self._n))
+            covered.difference_update(self._pending_nodes)
+        covered.add(0)
+        for k in first:
+            covered.add(self._edges[k].i)
+            covered.add(self._edges[k].j)
+        gated = []
+        for k in self._pending_edges:
+            e = self._edges[k]
+            if not e.robust:
+                continue
+            if e.i in covered and e.j in covered and (self._solved or self.optimizer == "isam2"):
+                gated.append(k)
+            else:
+                # nothing to test it against: straight in, with its kernel
+                first.append(k)
+                covered.add(e.i)
+                covered.add(e.j)
+        return sorted(first), gated
+
+    def _solve_isam(self, loop: bool, *, forced: bool = False) -> None:
         assert self._isam is not None
+        isam = self._isam
+        first, gated = self._split_pending()
+        # extra rounds after an ungated loop edge, on request, or after a surprising gated one
+        surprising = forced or any(self._edges[k].kind is EdgeKind.LOOP for k in first)
         graph = gtsam.NonlinearFactorGraph()
         if 0 in self._pending_nodes:
             graph.add(self._prior())
-        for e in self._pending_edges:
-            graph.add(self._factor(e))
-        values = self._values(self._pending_nodes)
-        self._isam.update(graph, values)
-        for _ in range(4 if loop else 0):
-            self._isam.update()
-        self._store(self._isam.calculateEstimate())
+        for k in first:
+            if not self._is_out(k):
+                graph.add(self._edge_factor(k))
+                if self._edges[k].kind is EdgeKind.LOOP:
+                    self._note_closure(k)
+        new = [n for n in self._pending_nodes if n not in self._isam_keys]
+        isam.update(graph, self._values(new))
+        self._isam_keys.update(new)
+        self._stale = True
+        if gated:
 
-    def _solve_batch(self) -> None:
-        """Levenberg–Marquardt on the whole graph; with robust edges, the kernel is annealed.
+            def marginal(keys: list[int]) -> FloatArray:
+                return _joint(isam.jointMarginalCovariance(keys), keys)
 
-        Robust kernels need a start near the answer: from a poor initial guess (e.g. chained
-        odometry) true loop closures look like outliers too. So the kernel width starts wide
-        (1000σ, nearly least squares) and shrinks by 10× per solve down to ``kernel_width``,
-        each solve starting from the last (graduated non-convexity in its simplest form).
-        """
-        robust = self.robust_kernel != "none" and any(e.robust for e in self._edges)
-        widths = [self.kernel_width]
-        if robust:
-            widths = [w for w in (1000.0, 100.0, 10.0) if w > self.kernel_width] + widths
+            accepted, surprised = self._gate_edges(gated, marginal)
+            surprising |= surprised
+            if accepted:
+                graph = gtsam.NonlinearFactorGraph()
+                for k in accepted:
+                    graph.add(self._edge_factor(k))
+                isam.update(graph, gtsam.Values())
+        if loop and surprising:
+            for _ in range(_EXTRA_ROUNDS):
+                if not isam.update().getVariablesRelinearized():
+                    break
+
+    def _optimize_lm(self) -> None:
+        self._sync()
+        if not self._solved or self._gate is None:
+            self._solve_batch()
+            return
+        _, gated = self._split_pending()
+        if gated:
+            # solve without the new robust edges, gate them against that optimum, then re-solve
+            fresh = set(gated)
+            graph = gtsam.NonlinearFactorGraph()
+            graph.add(self._prior())
+            for k in range(len(self._edges)):
+                if k not in fresh and not self._is_out(k):
+                    graph.add(self._edge_factor(k))
+            self._store(self._lm(graph))
+            marginals = gtsam.Marginals(graph, self._values(range(self._n)))
+
+            def marginal(keys: list[int]) -> FloatArray:
+                return _joint(marginals.jointMarginalCovariance(keys), keys)
+
+            self._gate_edges(gated, marginal)
+        self._store(self._lm(self._inlier_graph()))
+
+    def _lm(self, graph: gtsam.NonlinearFactorGraph) -> gtsam.Values:
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(100)
         params.setRelativeErrorTol(1e-6)
         params.setAbsoluteErrorTol(1e-6)
+        values = self._values(range(self._n))
+        return gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
+
+    def _solve_batch(self) -> None:
+        """The whole graph from the current estimate, deciding every robust edge afresh.
+
+        With the gate on, a sweep (`_sweep`) decides the robust edges. With the gate off, or
+        with no chain to sweep along, the robust kernel is annealed: its width starts wide
+        (1000σ, nearly least squares) and shrinks by 10× per solve down to ``kernel_width``,
+        each solve starting from the last.
+        """
+        robust = [k for k, e in enumerate(self._edges) if e.robust]
+        if robust and self._gate is not None and self._sweep():
+            return
+        widths = [self.kernel_width]
+        if robust and self.robust_kernel != "none":
+            widths = [w for w in (1000.0, 100.0, 10.0) if w > self.kernel_width] + widths
         for width in widths:
             graph = gtsam.NonlinearFactorGraph()
             graph.add(self._prior())
@@ -292,32 +619,102 @@ class PoseGraph:
                 graph.add(
                     gtsam.BetweenFactorPose2(e.i, e.j, _pose2(e.measurement), self._noise(e, width))
                 )
-            values = self._values(range(len(self._poses)))
-            self._store(gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize())
+            self._store(self._lm(graph))
+
+    def _sweep(self) -> bool:
+        """Replay the graph node by node through a gated iSAM2 graph, then polish with
+        Levenberg–Marquardt on the accepted edges.
+
+        Node k is placed from its first non-robust edge to an earlier node; returns False (and
+        does nothing) when some node has none, i.e. there is no chain to sweep along.
+        """
+        n = self._n
+        anchor: list[int] = [-1] * n
+        by_last: list[list[int]] = [[] for _ in range(n)]
+        for k, e in enumerate(self._edges):
+            last = max(e.i, e.j)
+            by_last[last].append(k)
+            if not e.robust and anchor[last] < 0:
+                anchor[last] = k
+        if any(a < 0 for a in anchor[1:]):
+            return False
+        sub = PoseGraph(
+            optimizer="isam2",
+            robust_kernel=self.robust_kernel,
+            kernel_width=self.kernel_width,
+            gate_probability=self.gate_probability,
+        )
+        order: list[int] = []
+        for node in range(n):
+            if node == 0:
+                sub.add_node(self._p[0])
+            else:
+                e = self._edges[anchor[node]]
+                z = _pose2(e.measurement)
+                if e.j == node:
+                    guess = _pose2(sub.pose(e.i)).compose(z)
+                else:
+                    guess = _pose2(sub.pose(e.j)).compose(z.inverse())
+                sub.add_node([guess.x(), guess.y(), guess.theta()])
+            for k in by_last[node]:
+                e = self._edges[k]
+                sub.add_edge(e.i, e.j, e.measurement, e.covariance, kind=e.kind, robust=e.robust)
+                order.append(k)
+            sub.optimize()
+        self._p[:n] = sub.poses
+        self._rejected = {order[k] for k in sub.rejected + sub.held}
+        self._trusted = {order[k] for k in sub._trusted}
+        self._held = []
+        self.gate_tests += sub.gate_tests
+        self.marginal_queries += sub.marginal_queries
+        self._store(self._lm(self._inlier_graph()))
+        return True
 
     def optimize_batch(self) -> None:
-        """Re-solve the whole graph with Levenberg–Marquardt (kernels annealed) from the current
-        estimate, then restart iSAM2 from the result."""
-        if not self._poses:
+        """Re-solve the whole graph from the current estimate, deciding every robust edge
+        afresh (a gated sweep with the gate on, an annealed kernel without), then restart
+        iSAM2 from the result."""
+        if not self._n:
             return
+        self._sync()
+        self._pending_nodes, self._pending_edges = [], []
         self._solve_batch()
+        self._solved = True
         if self.optimizer == "isam2":
-            self._reset_isam()
-            self._solve_isam(False)
-            self._pending_nodes = []
-            self._pending_edges = []
+            self._restart_isam()
 
-    def half_chi2(self) -> float:
-        """½ Σ eᵀ Ω e over all edges at the current estimate, without kernels or prior."""
-        if not self._poses:
+    def _restart_isam(self) -> None:
+        """iSAM2 afresh from the current estimate with the accepted edges (no gating: the
+        batch solve has just decided every edge)."""
+        self._reset_isam()
+        gate, self._gate = self._gate, None
+        try:
+            self._solve_isam(False)
+        finally:
+            self._gate = gate
+        self._pending_nodes = []
+        self._pending_edges = []
+
+    def half_chi2(self, *, include_rejected: bool = True) -> float:
+        """½ Σ eᵀ Ω e over all edges (or the accepted ones) at the current estimate, without
+        kernels or prior."""
+        if not self._n:
             return 0.0
-        graph = self._graph(self._edges, robust=False, prior=False)
-        return float(graph.error(self._values(range(len(self._poses)))))
+        self._sync()
+        edges = self._edges if include_rejected else self._inliers()
+        graph = self._graph(edges, robust=False, prior=False)
+        return float(graph.error(self._values(range(self._n))))
 
     def set_poses(self, poses: npt.ArrayLike) -> None:
         """Replace every estimate (e.g. after loading a session) and restart iSAM2 from them."""
         arr = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-        if arr.shape[0] != len(self._poses):
-            raise ValueError(f"{arr.shape[0]} poses for {len(self._poses)} nodes")
-        self._poses = [row.copy() for row in arr]
+        if arr.shape[0] != self._n:
+            raise ValueError(f"{arr.shape[0]} poses for {self._n} nodes")
+        self._stale = False
+        self._p[: self._n] = arr
+        self._rejected = set()
+        self._held = []
+        self._trusted = set()
+        self._closures = {}
+        self._solved = True
         self._reset_isam()

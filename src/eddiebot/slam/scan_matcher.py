@@ -11,7 +11,8 @@ Translations are searched by branch and bound over precomputed max-pooled grids
 (Olson's multi-resolution idea in Cartographer's form: level h holds the maximum of the
 2^h × 2^h cells it covers, an upper bound on every finer candidate beneath it), so wide
 windows cost little. The best coarse candidate is refined on a fine angular step
-(``fine_search_angle_offset``) over ±½ coarse step and ±2 cells, then to sub-cell accuracy by
+(``fine_search_angle_offset``) over ±½ coarse step and ±2 cells (optionally re-centred while
+its best sits on the box's edge: ``fine_search_climb``), then to sub-cell accuracy by
 Gauss–Newton on the bilinearly interpolated grid. Karto's distance/angle penalties are
 applied to candidate responses when ``penalize`` is set (sequential matching).
 
@@ -75,6 +76,9 @@ class MatcherParams:
     use_response_expansion: bool = True
     refine: bool = True
     """Sub-cell Gauss–Newton refinement after the discrete search."""
+    fine_search_climb: int = 0
+    """Re-centre the fine search on its best up to this many times while that best lies on
+    the edge of its translation box (0: one box around the coarse best, as Karto)."""
     coarse_heading_variance: bool = False
     """Heading variance from every coarse heading's best response over the whole window
     (headings within 0.1 of the best count), not only the fine headings next to the best:
@@ -214,6 +218,28 @@ def _penalty(
 
 
 @njit(cache=True)
+def _top_level_scores(
+    grid: npt.NDArray[np.float32],
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    window: int,
+    step: int,
+) -> npt.NDArray[np.float64]:
+    """Scores on a pyramid level of every (angle, dx, dy) candidate ``step`` cells apart,
+    flattened as ((a · n_side) + ix) · n_side + iy."""
+    n_ang = px.shape[0]
+    n_side = (2 * window + 1 + step - 1) // step
+    out = np.empty(n_ang * n_side * n_side)
+    k = 0
+    for a in range(n_ang):
+        for ix in range(n_side):
+            for iy in range(n_side):
+                out[k] = _score(grid, px[a], py[a], -window + ix * step, -window + iy * step)
+                k += 1
+    return out
+
+
+@njit(cache=True)
 def _branch_and_bound(
     g0: npt.NDArray[np.float32],
     g1: npt.NDArray[np.float32],
@@ -232,8 +258,14 @@ def _branch_and_bound(
     avp: float,
     mdp: float,
     map_: float,
+    top_scores: npt.NDArray[np.float64],
+    order: npt.NDArray[np.int64],
 ) -> tuple[int, int, int, float]:
-    """Best (angle index, dx, dy, penalised response) over the window, depth-first B&B."""
+    """Best (angle index, dx, dy, penalised response) over the window, depth-first B&B.
+
+    ``top_scores`` are `_top_level_scores` on the coarsest grid, ``order`` their ascending
+    argsort (done outside: numba's sort costs seconds of compilation).
+    """
     grids = (g0, g1, g2, g3, g4, g5)
     top = n_levels - 1
     step = 1 << top
@@ -246,25 +278,20 @@ def _branch_and_bound(
     s_y = np.empty(cap, np.int64)
     s_h = np.empty(cap, np.int64)
     s_s = np.empty(cap, np.float64)
-    # top level candidates, sorted ascending so the best is popped first
+    # top level candidates (scored and ordered by the caller), ascending so the best is
+    # popped first
     n = 0
-    for a in range(n_ang):
-        for ix in range(n_side):
-            for iy in range(n_side):
-                dx = -window + ix * step
-                dy = -window + iy * step
-                s_a[n] = a
-                s_x[n] = dx
-                s_y[n] = dy
-                s_h[n] = top
-                s_s[n] = _score(grids[top], px[a], py[a], dx, dy)
-                n += 1
-    order = np.argsort(s_s[:n])
-    s_a[:n] = s_a[:n][order]
-    s_x[:n] = s_x[:n][order]
-    s_y[:n] = s_y[:n][order]
-    s_h[:n] = s_h[:n][order]
-    s_s[:n] = s_s[:n][order]
+    for k in range(order.size):
+        flat = order[k]
+        a = flat // (n_side * n_side)
+        ix = (flat // n_side) % n_side
+        iy = flat % n_side
+        s_a[n] = a
+        s_x[n] = -window + ix * step
+        s_y[n] = -window + iy * step
+        s_h[n] = top
+        s_s[n] = top_scores[flat]
+        n += 1
     best_a, best_x, best_y, best_s = -1, 0, 0, 0.0
     c_a = np.empty(4, np.int64)
     c_x = np.empty(4, np.int64)
@@ -484,6 +511,40 @@ def _bilinear(grid: npt.NDArray[np.float32], u: float, v: float) -> tuple[float,
 
 
 @njit(cache=True)
+def _solve3(
+    a00: float,
+    a01: float,
+    a02: float,
+    a11: float,
+    a12: float,
+    a22: float,
+    b0: float,
+    b1: float,
+    b2: float,
+) -> tuple[float, float, float]:
+    """Solve the symmetric 3×3 system A x = b by Cramer's rule (A positive definite).
+
+    Written out rather than ``np.linalg.solve``: LAPACK's binding costs seconds of JIT
+    compilation in every fresh process without a numba cache.
+    """
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    if abs(det) < 1e-300:
+        return 0.0, 0.0, 0.0
+    c11 = a00 * a22 - a02 * a02
+    c12 = a01 * a02 - a00 * a12
+    c22 = a00 * a11 - a01 * a01
+    inv = 1.0 / det
+    return (
+        (c00 * b0 + c01 * b1 + c02 * b2) * inv,
+        (c01 * b0 + c11 * b1 + c12 * b2) * inv,
+        (c02 * b0 + c12 * b1 + c22 * b2) * inv,
+    )
+
+
+@njit(cache=True)
 def _refine(
     grid: npt.NDArray[np.float32],
     pts: npt.NDArray[np.float64],
@@ -500,8 +561,8 @@ def _refine(
     for _ in range(iterations):
         c = math.cos(th)
         s = math.sin(th)
-        H = np.zeros((3, 3))
-        g = np.zeros(3)
+        h00 = h01 = h02 = h11 = h12 = h22 = 0.0
+        g0 = g1 = g2 = 0.0
         for i in range(n):
             px = pts[i, 0]
             py = pts[i, 1]
@@ -514,26 +575,23 @@ def _refine(
             gy = dv / res
             gth = gx * (-s * px - c * py) + gy * (c * px - s * py)
             r = 1.0 - val
-            J0, J1, J2 = gx, gy, gth
-            g[0] += J0 * r
-            g[1] += J1 * r
-            g[2] += J2 * r
-            H[0, 0] += J0 * J0
-            H[0, 1] += J0 * J1
-            H[0, 2] += J0 * J2
-            H[1, 1] += J1 * J1
-            H[1, 2] += J1 * J2
-            H[2, 2] += J2 * J2
-        H[1, 0] = H[0, 1]
-        H[2, 0] = H[0, 2]
-        H[2, 1] = H[1, 2]
-        for k in range(3):
-            H[k, k] += 1e-9 + 1e-3 * H[k, k]
-        delta = np.linalg.solve(H, g)
-        x += delta[0]
-        y += delta[1]
-        th += delta[2]
-        if abs(delta[0]) < 1e-5 and abs(delta[1]) < 1e-5 and abs(delta[2]) < 1e-6:
+            g0 += gx * r
+            g1 += gy * r
+            g2 += gth * r
+            h00 += gx * gx
+            h01 += gx * gy
+            h02 += gx * gth
+            h11 += gy * gy
+            h12 += gy * gth
+            h22 += gth * gth
+        h00 += 1e-9 + 1e-3 * h00
+        h11 += 1e-9 + 1e-3 * h11
+        h22 += 1e-9 + 1e-3 * h22
+        d0, d1, d2 = _solve3(h00, h01, h02, h11, h12, h22, g0, g1, g2)
+        x += d0
+        y += d1
+        th += d2
+        if abs(d0) < 1e-5 and abs(d1) < 1e-5 and abs(d2) < 1e-6:
             break
     c = math.cos(th)
     s = math.sin(th)
@@ -632,6 +690,9 @@ def match_scan(
             params.minimum_angle_penalty,
         )
         if n_levels > 1:
+            top_step = 1 << (n_levels - 1)
+            top_scores = _top_level_scores(levels[n_levels - 1], px, py, window, top_step)
+            order = np.argsort(top_scores, kind="stable").astype(np.int64)
             best = _branch_and_bound(
                 levels[0],
                 levels[1],
@@ -646,6 +707,8 @@ def match_scan(
                 window,
                 res,
                 *penalties,
+                top_scores,
+                order,
             )
         else:
             best = _coarse_grid_search(
@@ -663,22 +726,28 @@ def match_scan(
     fdth = dth[a_idx] + fine * np.arange(-n_fine, n_fine + 1, dtype=np.float64)
     fpx, fpy = _cells_for_angles(pts, prior, prior[2] + fdth, grid)
     radius = coarse_step // 2 + 1 if n_levels == 1 else 1
-    resp = _exhaustive(
-        grid.likelihood,
-        fpx,
-        fpy,
-        fdth,
-        bx,
-        by,
-        radius,
-        res,
+    penalties = (
         params.penalize,
         params.distance_variance_penalty,
         params.angle_variance_penalty,
         params.minimum_distance_penalty,
         params.minimum_angle_penalty,
     )
+    resp = _exhaustive(grid.likelihood, fpx, fpy, fdth, bx, by, radius, res, *penalties)
     fa, fix, fiy = np.unravel_index(int(np.argmax(resp)), resp.shape)
+    # Heading and translation are coupled (the scan turns about the sensor, metres away from
+    # most end points): the best fine heading can want a translation outside the box around
+    # the coarse best. Follow the best to the box's edge until it is inside (bounded).
+    for _ in range(params.fine_search_climb):
+        at_edge = fix in (0, 2 * radius) or fiy in (0, 2 * radius)
+        if not at_edge:
+            break
+        nx, ny = bx - radius + int(fix), by - radius + int(fiy)
+        if max(abs(nx), abs(ny)) > window:
+            break
+        bx, by = nx, ny
+        resp = _exhaustive(grid.likelihood, fpx, fpy, fdth, bx, by, radius, res, *penalties)
+        fa, fix, fiy = np.unravel_index(int(np.argmax(resp)), resp.shape)
     best_resp = float(resp[fa, fix, fiy])
     dx = bx - radius + int(fix)
     dy = by - radius + int(fiy)
@@ -738,12 +807,15 @@ def match_scan(
             grid.likelihood, pts, pose[0], pose[1], pose[2], grid.origin[0], grid.origin[1], res, 10
         )
         # Trust the refinement near the discrete optimum (within one smear σ: the penalty can
-        # hold the discrete pose that far from the best fit) and only when it does not lose fit.
+        # hold the discrete pose that far from the best fit) and only when its mean response
+        # is at least the discrete pose's: on sparse reference points (beams centimetres apart
+        # on a far wall) the smeared grid is bumpy along walls and Σ(1 - f)² can pull the
+        # heading off while the mean response drops.
         raw = score_pose(pts, pose, grid)
         if (
             math.hypot(rx - pose[0], ry - pose[1]) <= max(2.0 * res, params.smear_deviation)
             and abs(rth - pose[2]) <= 0.5 * step
-            and rscore >= raw - 0.01
+            and rscore >= raw
         ):
             pose = np.array([rx, ry, rth])
     pose[2] = float(wrap_angle(pose[2]))

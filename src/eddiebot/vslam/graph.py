@@ -1,13 +1,14 @@
 """Pose-graph optimisation behind a small interface.
 
-With `Reg/Force3DoF` (the report's setting) the graph is SE(2) and runs incrementally on the 2D
-SLAM's `eddiebot.slam.pose_graph.PoseGraph` (iSAM2): `IncrementalPose2Graph` keeps the graph
-between calls and folds in only the nodes and links that are new, so a loop closure costs an
-iSAM2 update instead of a batch re-solve of the whole graph. Without Force3DoF the graph is
-Pose3, solved in batch by gtsam Levenberg–Marquardt (`GtsamPoseGraph`).
+With `Reg/Force3DoF` (the report's setting) the graph is SE(2) and runs incrementally in gtsam's
+iSAM2: `IncrementalPose2Graph` keeps the graph between calls and folds in only the nodes and
+links that are new, so a loop closure costs an iSAM2 update (a few ms at 1,000 nodes) instead of
+a batch re-solve of the whole graph. Without Force3DoF the graph is Pose3, solved in batch by
+gtsam Levenberg–Marquardt (`GtsamPoseGraph`).
 
-Everything the core needs is `PoseGraphOptimizer.optimize` and `link_errors`. Poses and link
-transforms are 4×4 (m); informations are 6×6 in (x, y, z, roll, pitch, yaw).
+Everything the core needs is `PoseGraphOptimizer.optimize` and `optimized_link_errors` (the
+`RGBD/OptimizeMaxError` residuals). Poses and link transforms are 4×4 (m); informations are 6×6
+in (x, y, z, roll, pitch, yaw).
 """
 
 from __future__ import annotations
@@ -20,7 +21,6 @@ import gtsam
 import numpy as np
 from numpy.typing import NDArray
 
-from eddiebot.slam.pose_graph import EdgeKind, PoseGraph
 from eddiebot.vslam.transforms import yaw_of
 
 __all__ = [
@@ -28,9 +28,12 @@ __all__ = [
     "GtsamPoseGraph",
     "IncrementalPose2Graph",
     "LinkError",
+    "LinkLike",
     "PoseGraphOptimizer",
+    "discard_links",
     "link_errors",
     "make_optimizer",
+    "optimized_link_errors",
 ]
 
 F64 = NDArray[np.float64]
@@ -39,6 +42,8 @@ _IDX_POSE2 = np.array([0, 1, 5])
 _IDX_POSE3 = np.array([3, 4, 5, 0, 1, 2])
 _INFO_IGNORED = 1e-4
 _MIN_VARIANCE = 1e-6  # (1 mm)², (1 mrad)²: floor of link variances in the incremental graph
+# anchor of the incremental graph's root (as `eddiebot.slam.pose_graph.PoseGraph`'s node 0)
+_PRIOR_NOISE = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-4, 1e-4, 1e-5]))
 
 
 @dataclass(frozen=True)
@@ -49,6 +54,19 @@ class GraphLink:
     to_id: int
     transform: F64
     information: F64
+
+
+class LinkLike(Protocol):
+    """Anything with a link's fields (`GraphLink`, `eddiebot.vslam.memory.Link`)."""
+
+    @property
+    def from_id(self) -> int: ...
+    @property
+    def to_id(self) -> int: ...
+    @property
+    def transform(self) -> F64: ...
+    @property
+    def information(self) -> F64: ...
 
 
 class LinkError(NamedTuple):
@@ -66,7 +84,7 @@ class PoseGraphOptimizer(Protocol):
     def optimize(
         self,
         poses: Mapping[int, F64],
-        links: Iterable[GraphLink],
+        links: Iterable[LinkLike],
         root_id: int,
         iterations: int,
     ) -> dict[int, F64]:
@@ -78,7 +96,7 @@ class GtsamPoseGraph:
     """Pose3 (or, with `three_dof`, Pose2) pose graph.
 
     With `three_dof` and `incremental` (the default) every call is delegated to an
-    `IncrementalPose2Graph` (iSAM2 on `eddiebot.slam.pose_graph.PoseGraph`); otherwise each call
+    `IncrementalPose2Graph` (gtsam iSAM2); otherwise each call
     re-solves the whole graph with Levenberg–Marquardt.
     """
 
@@ -93,7 +111,7 @@ class GtsamPoseGraph:
     def optimize(
         self,
         poses: Mapping[int, F64],
-        links: Iterable[GraphLink],
+        links: Iterable[LinkLike],
         root_id: int,
         iterations: int,
     ) -> dict[int, F64]:
@@ -105,7 +123,7 @@ class GtsamPoseGraph:
     def optimize_batch(
         self,
         poses: Mapping[int, F64],
-        links: Iterable[GraphLink],
+        links: Iterable[LinkLike],
         root_id: int,
         iterations: int,
     ) -> dict[int, F64]:
@@ -173,76 +191,157 @@ class GtsamPoseGraph:
 
 
 class IncrementalPose2Graph:
-    """SE(2) graph kept between calls on `eddiebot.slam.pose_graph.PoseGraph` (iSAM2).
+    """SE(2) graph kept between calls in gtsam's iSAM2, with its links held as arrays.
 
     Each `optimize` call receives the whole connected graph (as the batch optimiser does); only
-    nodes and links not seen before are folded into iSAM2, with extra relinearisation rounds when
-    a new link closes a loop. The graph is rebuilt from the given poses (one batch-sized iSAM2
-    update) when it cannot be continued: a link seen before is gone (the core removed a closure
-    rejected by `RGBD/OptimizeMaxError`, whose factor iSAM2 had already absorbed), a node left
-    (memory management), or the root changed. `RGBD/OptimizeFromGraphEnd` moves the root every
-    call, so that case is solved in batch.
+    nodes and links not seen before are folded into iSAM2, with extra relinearisation rounds for
+    the first loop closure after a stretch without any. The graph is rebuilt from the given
+    poses (one batch-sized iSAM2 update) when it cannot be continued: a link seen before is gone
+    (the core removed a closure rejected by `RGBD/OptimizeMaxError`, whose factor iSAM2 had
+    already absorbed), a node left (memory management), or the root changed.
+    `RGBD/OptimizeFromGraphEnd` moves the root every call, so that case is solved in batch.
+
+    Per call the bookkeeping is a few set operations over the link keys; the estimate and the
+    `RGBD/OptimizeMaxError` residuals (`link_error_ratios`) are computed on arrays, so the cost
+    at ~1,000 nodes is the iSAM2 update itself (a few ms), not Python loops over the graph.
     """
 
     def __init__(self, epsilon: float = 1e-5) -> None:
         self.epsilon = epsilon
         self.rebuilds = 0
         """How often the incremental graph had to be rebuilt."""
-        self._graph: PoseGraph | None = None
-        self._index: dict[int, int] = {}
-        self._ids: list[int] = []
-        self._links: set[tuple[int, int, int]] = set()
-        self._root = 0
-        self._root_pose: F64 | None = None
-        self._closing = False
+        self.recoveries = 0
+        """How often an iSAM2 update failed and the graph was re-solved in batch."""
+        self.removed_links = 0
+        """Links taken out by `remove_links` (closures rejected after optimisation)."""
         self._batch = GtsamPoseGraph(True, epsilon, incremental=False)
+        self.reset()
 
     def reset(self) -> None:
         """Forget the graph (the next call rebuilds it)."""
-        self._graph = None
-        self._index = {}
-        self._ids = []
-        self._links = set()
-        self._root_pose = None
+        self._isam: gtsam.ISAM2 | None = None
+        self._index: dict[int, int] = {}  # node id → slot (insertion order)
+        self._ids: list[int] = []
+        self._xyt = np.zeros((0, 3))
+        self._z = np.zeros(0)
+        self._order = np.zeros(0, np.int64)  # slots in gtsam key (= id) order
+        self._links: dict[tuple[int, int, int], int] = {}  # key → link slot
+        self._lk_slots = np.zeros((0, 2), np.int64)
+        self._lk_transform = np.zeros((0, 4, 4))
+        self._lk_info = np.zeros((0, 6))
+        self._lk_factor = np.zeros(0, np.int64)  # iSAM2 factor index
+        self._lk_keys: list[tuple[int, int, int]] = []
+        self._n_links = 0
+        self._root = 0
+        self._root_pose: F64 | None = None
         self._closing = False
 
     def optimize(
         self,
         poses: Mapping[int, F64],
-        links: Iterable[GraphLink],
+        links: Iterable[LinkLike],
         root_id: int,
         iterations: int,
     ) -> dict[int, F64]:
         """Optimised poses of the component of `root_id` (root fixed at its first pose)."""
-        link_list = [lk for lk in links if lk.from_id in poses and lk.to_id in poses]
-        keyed: dict[tuple[int, int, int], GraphLink] = {}
-        for lk in link_list:
-            k = 0
-            while (lk.from_id, lk.to_id, k) in keyed:
-                k += 1
-            keyed[(lk.from_id, lk.to_id, k)] = lk
+        link_list = links if isinstance(links, list) else list(links)
+        keyed: dict[tuple[int, int, int], LinkLike] = {
+            (lk.from_id, lk.to_id, 0): lk for lk in link_list}
+        if len(keyed) != len(link_list):  # parallel links between two nodes
+            keyed = {}
+            for lk in link_list:
+                key = (lk.from_id, lk.to_id, 0)
+                while key in keyed:
+                    key = (key[0], key[1], key[2] + 1)
+                keyed[key] = lk
         root_pose = np.asarray(poses[root_id], dtype=np.float64)
         if (self._root_pose is not None and root_id == self._root
                 and not np.allclose(root_pose, self._root_pose, rtol=0.0, atol=1e-3)):
             # the root is re-anchored every call (OptimizeFromGraphEnd): nothing to keep
             self.reset()
             return self._batch.optimize_batch(poses, link_list, root_id, iterations)
-        if (self._graph is None or root_id != self._root
-                or not self._links.issubset(keyed.keys())
-                or any(i not in poses for i in self._ids)):
-            if self._graph is not None:
+        if (self._isam is None or root_id != self._root
+                or not keyed.keys() >= self._links.keys()
+                or not poses.keys() >= self._index.keys()):
+            if self._isam is not None:
                 self.rebuilds += 1
-            self.reset()
-            self._graph = PoseGraph(optimizer="isam2", robust_kernel="none")
-            self._root = root_id
-            self._root_pose = root_pose.copy()
-        graph = self._graph
-        assert graph is not None
+            self._start(root_id, root_pose)
+        try:
+            self._update(poses, keyed)
+        except RuntimeError:
+            # gtsam reports an ill-conditioned incremental update (a loop edge far from the
+            # current linearisation) as IndeterminateSystemException: re-solve in batch and
+            # restart iSAM2 from that optimum
+            self.recoveries += 1
+            solved = self._batch.optimize_batch(poses, link_list, root_id, max(iterations, 100))
+            self._start(root_id, root_pose)
+            self._update({**poses, **solved}, keyed)
+        return dict(zip(self._ids, self.poses_array()))
+
+    @property
+    def node_count(self) -> int:
+        """Nodes in the graph."""
+        return len(self._ids)
+
+    @property
+    def node_ids(self) -> list[int]:
+        """Ids in the graph, in the order of `poses_array`."""
+        return list(self._ids)
+
+    def poses_array(self) -> F64:
+        """Current estimates as 4×4 matrices (N, 4, 4), z kept from each node's input pose."""
+        xyt = self._xyt
+        c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
+        mats = np.zeros((len(xyt), 4, 4))
+        mats[:, 0, 0], mats[:, 0, 1], mats[:, 1, 0], mats[:, 1, 1] = c, -s, s, c
+        mats[:, 2, 2] = mats[:, 3, 3] = 1.0
+        mats[:, 0, 3], mats[:, 1, 3], mats[:, 2, 3] = xyt[:, 0], xyt[:, 1], self._z
+        return mats
+
+    def link_error_ratios(self) -> tuple[NDArray[np.int64], F64, F64]:
+        """`RGBD/OptimizeMaxError` residuals of every link in the graph at the current estimate:
+        ((from_id, to_id) rows, linear ratios, angular ratios), as `link_errors` computes them."""
+        n = self._n_links
+        fr, to = self._lk_slots[:n, 0], self._lk_slots[:n, 1]
+        m = self._lk_transform[:n]
+        xa, xb = self._xyt[fr], self._xyt[to]
+        # T = inv(A) B for planar A, B: Rz(θb − θa), Rz(−θa)(tb − ta), z difference
+        ca, sa = np.cos(xa[:, 2]), np.sin(xa[:, 2])
+        dx, dy = xb[:, 0] - xa[:, 0], xb[:, 1] - xa[:, 1]
+        t = np.stack([ca * dx + sa * dy, -sa * dx + ca * dy, self._z[to] - self._z[fr]], axis=1)
+        phi = xb[:, 2] - xa[:, 2]
+        c, s = np.cos(phi), np.sin(phi)
+        # trace(Mᵀ Rz(φ))
+        trace = c * (m[:, 0, 0] + m[:, 1, 1]) + s * (m[:, 1, 0] - m[:, 0, 1]) + m[:, 2, 2]
+        lin, ang = _ratios(np.abs(t - m[:, :3, 3]), trace, self._lk_info[:n])
+        ids = np.asarray(self._ids, np.int64)
+        return ids[self._lk_slots[:n]], lin, ang
+
+    # -- internals --------------------------------------------------------------------------
+    def _start(self, root_id: int, root_pose: F64) -> None:
+        self.reset()
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(0.01)
+        params.relinearizeSkip = 1
+        self._isam = gtsam.ISAM2(params)
+        self._root = root_id
+        self._root_pose = root_pose.copy()
+
+    def _update(self, poses: Mapping[int, F64],
+                keyed: Mapping[tuple[int, int, int], LinkLike]) -> None:
+        isam = self._isam
+        assert isam is not None
+        factors = gtsam.NonlinearFactorGraph()
+        values = gtsam.Values()
+        new_ids: list[int] = []
         if not self._index:
-            self._index[root_id] = graph.add_node(_xyt(poses[root_id]))
-            self._ids.append(root_id)
-        # attach new nodes through new links to the graph (the root's component only)
-        fresh = [(key, lk) for key, lk in keyed.items() if key not in self._links]
+            root = self._root
+            factors.add(gtsam.PriorFactorPose2(root, _pose2(poses[root]), _PRIOR_NOISE))
+            self._add_node(root, poses[root], values, new_ids)
+        fresh = [(key, keyed[key]) for key in keyed.keys() - self._links.keys()
+                 if key[0] in poses and key[1] in poses]
+        fresh.sort(key=lambda kv: kv[0])
+        # attach new nodes through new links (the root's component only)
         pending = fresh
         while pending:
             left = []
@@ -252,38 +351,105 @@ class IncrementalPose2Graph:
                     left.append((key, lk))
                     continue
                 new_id = lk.to_id if a else lk.from_id
-                self._index[new_id] = graph.add_node(_xyt(poses[new_id]))
-                self._ids.append(new_id)
+                self._add_node(new_id, poses[new_id], values, new_ids)
             if len(left) == len(pending):
                 break
             pending = left
         loop = False
+        added: list[tuple[tuple[int, int, int], LinkLike]] = []
         for key, lk in fresh:
-            if lk.from_id not in self._index or lk.to_id not in self._index:
+            i, j = self._index.get(lk.from_id), self._index.get(lk.to_id)
+            if i is None or j is None or i == j:
                 continue
-            i, j = self._index[lk.from_id], self._index[lk.to_id]
-            if i == j:
-                continue
-            chain = abs(i - j) == 1
-            loop |= not chain
-            sub = np.asarray(lk.information, dtype=np.float64)[_IDX_POSE2[:, None], _IDX_POSE2]
-            graph.add_edge(i, j, _xyt(lk.transform), _floored_covariance(sub),
-                           kind=EdgeKind.ODOMETRY if chain else EdgeKind.LOOP)
-            self._links.add(key)
+            loop |= abs(i - j) != 1
+            info = np.asarray(lk.information, dtype=np.float64)
+            sub = info[_IDX_POSE2[:, None], _IDX_POSE2]
+            noise = gtsam.noiseModel.Gaussian.Covariance(_floored_covariance(sub))
+            factors.add(gtsam.BetweenFactorPose2(lk.from_id, lk.to_id,
+                                                 _pose2(np.asarray(lk.transform)), noise))
+            added.append((key, lk))
+        if new_ids:
+            self._grow_nodes(new_ids, poses)
+        result = isam.update(factors, values)
+        indices = list(result.getNewFactorsIndices())
+        self._add_links(added, indices[len(indices) - len(added):])
         # extra relinearisation rounds for the first closure after a stretch without any;
         # while closures come every call, each update relinearises anyway
-        full = loop and not self._closing
+        for _ in range(4 if loop and not self._closing else 0):
+            isam.update()
         self._closing = loop
-        graph.optimize(full=full)
-        xyt = graph.poses
-        c, s = np.cos(xyt[:, 2]), np.sin(xyt[:, 2])
-        mats = np.zeros((len(xyt), 4, 4))
-        mats[:, 0, 0], mats[:, 0, 1], mats[:, 1, 0], mats[:, 1, 1] = c, -s, s, c
-        mats[:, 2, 2] = mats[:, 3, 3] = 1.0
-        mats[:, 0, 3], mats[:, 1, 3] = xyt[:, 0], xyt[:, 1]
-        # keep the out-of-plane part (z) of the input pose, as RTAB-Map's 2D optimisers
-        mats[:, 2, 3] = [float(poses[i][2, 3]) for i in self._ids]
-        return dict(zip(self._ids, mats))
+        self._xyt[self._order] = gtsam.utilities.extractPose2(isam.calculateEstimate())
+
+    def _add_node(self, node_id: int, pose: F64, values: gtsam.Values,
+                  new_ids: list[int]) -> None:
+        self._index[node_id] = len(self._ids)
+        self._ids.append(node_id)
+        values.insert(node_id, _pose2(np.asarray(pose, dtype=np.float64)))
+        new_ids.append(node_id)
+
+    def _grow_nodes(self, new_ids: list[int], poses: Mapping[int, F64]) -> None:
+        new = np.array([_xyt(np.asarray(poses[i], dtype=np.float64)) for i in new_ids])
+        self._xyt = np.concatenate([self._xyt, new])
+        self._z = np.concatenate([self._z, [float(poses[i][2, 3]) for i in new_ids]])
+        self._order = np.argsort(np.asarray(self._ids, np.int64), kind="stable")
+
+    def _add_links(self, added: list[tuple[tuple[int, int, int], LinkLike]],
+                   factors: list[int]) -> None:
+        if not added:
+            return
+        n, m = self._n_links, len(added)
+        if n + m > len(self._lk_slots):
+            cap = max(n + m, 2 * len(self._lk_slots), 64)
+            self._lk_slots = np.resize(self._lk_slots, (cap, 2))
+            self._lk_transform = np.resize(self._lk_transform, (cap, 4, 4))
+            self._lk_info = np.resize(self._lk_info, (cap, 6))
+            self._lk_factor = np.resize(self._lk_factor, cap)
+        for k, (key, lk) in enumerate(added):
+            self._links[key] = n + k
+            self._lk_keys.append(key)
+            self._lk_slots[n + k] = (self._index[lk.from_id], self._index[lk.to_id])
+            self._lk_transform[n + k] = lk.transform
+            self._lk_info[n + k] = np.diagonal(np.asarray(lk.information, dtype=np.float64))
+            self._lk_factor[n + k] = factors[k]
+        self._n_links = n + m
+
+    def remove_links(self, pairs: Iterable[tuple[int, int]]) -> int:
+        """Take links (from_id, to_id), as given to `optimize`, out of the graph: their factors
+        leave iSAM2 and the estimate relinearises without them, so the next `optimize` call
+        (whose links no longer hold them) continues instead of rebuilding. Links whose removal
+        would cut a node off (chain links) are left for that rebuild. Returns how many left."""
+        if self._isam is None:
+            return 0
+        slots = []
+        for a, b in pairs:
+            for key in ((a, b, 0), (b, a, 0)):
+                slot = self._links.get(key)
+                if slot is not None:
+                    i, j = self._lk_slots[slot]
+                    if abs(int(i) - int(j)) != 1:
+                        slots.append(slot)
+        if not slots:
+            return 0
+        self._isam.update(gtsam.NonlinearFactorGraph(), gtsam.Values(),
+                          [int(self._lk_factor[k]) for k in slots])
+        self._isam.update()
+        for slot in sorted(slots, reverse=True):
+            self._drop_link_slot(slot)
+        self._xyt[self._order] = gtsam.utilities.extractPose2(self._isam.calculateEstimate())
+        self.removed_links += len(slots)
+        return len(slots)
+
+    def _drop_link_slot(self, slot: int) -> None:
+        last = self._n_links - 1
+        del self._links[self._lk_keys[slot]]
+        if slot != last:
+            moved = self._lk_keys[last]
+            self._links[moved] = slot
+            self._lk_keys[slot] = moved
+            for arr in (self._lk_slots, self._lk_transform, self._lk_info, self._lk_factor):
+                arr[slot] = arr[last]
+        self._lk_keys.pop()
+        self._n_links = last
 
 
 def make_optimizer(force_3dof: bool, epsilon: float = 1e-5) -> PoseGraphOptimizer:
@@ -313,7 +479,7 @@ def _pose3(t: F64) -> gtsam.Pose3:
     return gtsam.Pose3(np.asarray(t, dtype=np.float64))
 
 
-def _component(root: int, links: list[GraphLink]) -> set[int]:
+def _component(root: int, links: list[LinkLike]) -> set[int]:
     adjacency: dict[int, list[int]] = {}
     for lk in links:
         adjacency.setdefault(lk.from_id, []).append(lk.to_id)
@@ -329,7 +495,7 @@ def _component(root: int, links: list[GraphLink]) -> set[int]:
     return seen
 
 
-def link_errors(poses: Mapping[int, F64], links: Iterable[GraphLink]) -> list[LinkError]:
+def link_errors(poses: Mapping[int, F64], links: Iterable[LinkLike]) -> list[LinkError]:
     """Per link: max axis deviation / linear σ and rotation deviation / angular σ.
 
     σ comes from the smallest information term among x, y, z (resp. roll, pitch, yaw), ignoring
@@ -343,11 +509,52 @@ def link_errors(poses: Mapping[int, F64], links: Iterable[GraphLink]) -> list[Li
     b = np.stack([poses[lk.to_id] for lk in usable])
     m = np.stack([lk.transform for lk in usable])
     info = np.diagonal(np.stack([lk.information for lk in usable]), axis1=1, axis2=2)
+    lin_ratio, ang_ratio = _error_ratios(a, b, m, info)
+    return [LinkError(lk.from_id, lk.to_id, x, y)
+            for lk, x, y in zip(usable, lin_ratio.tolist(), ang_ratio.tolist())]
+
+
+def optimized_link_errors(
+    optimizer: PoseGraphOptimizer, optimized: Mapping[int, F64], links: Iterable[LinkLike]
+) -> tuple[NDArray[np.int64], F64, F64]:
+    """`RGBD/OptimizeMaxError` residuals right after `optimizer.optimize(..., links, ...)`
+    returned `optimized`: ((from_id, to_id) rows, linear ratios, angular ratios).
+
+    The incremental graph answers from its own arrays (no per-link Python); any other optimiser
+    goes through `link_errors`.
+    """
+    inner = optimizer.incremental if isinstance(optimizer, GtsamPoseGraph) else optimizer
+    if isinstance(inner, IncrementalPose2Graph) and inner.node_count:
+        return inner.link_error_ratios()
+    errors = link_errors(optimized, links)
+    ids = np.array([(e.from_id, e.to_id) for e in errors], np.int64).reshape(-1, 2)
+    return (ids, np.array([e.linear_ratio for e in errors], np.float64),
+            np.array([e.angular_ratio for e in errors], np.float64))
+
+
+def discard_links(optimizer: PoseGraphOptimizer, links: Iterable[LinkLike]) -> None:
+    """Tell the optimiser that these links, just optimised, were rejected
+    (`RGBD/OptimizeMaxError`) and will be missing from the next call; the incremental graph
+    removes their factors at once instead of rebuilding later. Other optimisers keep nothing."""
+    inner = optimizer.incremental if isinstance(optimizer, GtsamPoseGraph) else optimizer
+    if isinstance(inner, IncrementalPose2Graph):
+        inner.remove_links([(lk.from_id, lk.to_id) for lk in links])
+
+
+def _error_ratios(a: F64, b: F64, m: F64, info: F64) -> tuple[F64, F64]:
+    """Linear and angular ratios of links with poses `a` (from), `b` (to), transforms `m`
+    (all (L, 4, 4)) and information diagonals `info` (L, 6)."""
     ra = a[:, :3, :3]
     # T = inv(A) B
     t_rot = np.einsum("nji,njk->nik", ra, b[:, :3, :3])
     t_tr = np.einsum("nji,nj->ni", ra, b[:, :3, 3] - a[:, :3, 3])
-    d = np.abs(t_tr - m[:, :3, 3])
+    trace = np.einsum("nji,nji->n", m[:, :3, :3], t_rot)  # trace(Mᵀ T)
+    return _ratios(np.abs(t_tr - m[:, :3, 3]), trace, info)
+
+
+def _ratios(d: F64, trace: F64, info: F64) -> tuple[F64, F64]:
+    """Ratios from per-axis translation deviations `d` (L, 3), trace(Mᵀ T) of the rotations
+    and information diagonals (L, 6)."""
     lin_info = np.where(info[:, :3] > _INFO_IGNORED, info[:, :3], np.inf)
     ang_info = np.where(info[:, 3:] > _INFO_IGNORED, info[:, 3:], np.inf)
     # σ floored as the incremental graph floors link variances, so the check judges the
@@ -355,11 +562,9 @@ def link_errors(poses: Mapping[int, F64], links: Iterable[GraphLink]) -> list[Li
     lin_sigma = np.sqrt(np.maximum(1.0 / lin_info.min(axis=1), _MIN_VARIANCE))
     ang_sigma = np.sqrt(np.maximum(1.0 / ang_info.min(axis=1), _MIN_VARIANCE))
     lin = np.where(np.isfinite(lin_info), d, 0.0).max(axis=1)
-    delta = np.einsum("nji,njk->nik", m[:, :3, :3], t_rot)
-    c = np.clip((np.trace(delta, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    c = np.clip((trace - 1.0) / 2.0, -1.0, 1.0)
     ang = np.arccos(c)
     with np.errstate(divide="ignore", invalid="ignore"):
         lin_ratio = np.where(lin_sigma > 0, lin / lin_sigma, 0.0)
         ang_ratio = np.where(ang_sigma > 0, ang / ang_sigma, 0.0)
-    return [LinkError(lk.from_id, lk.to_id, x, y)
-            for lk, x, y in zip(usable, lin_ratio.tolist(), ang_ratio.tolist())]
+    return lin_ratio, ang_ratio

@@ -33,6 +33,8 @@ __all__ = [
     "LoopDetection",
     "detect_loops",
     "list_images",
+    "precision_recall_curve",
+    "recall_at_full_precision",
     "write_loop_rows",
 ]
 
@@ -93,6 +95,47 @@ class AppearanceLoopDetector:
         value = 1.0 - posterior.get(VIRTUAL_PLACE_ID, 1.0)
         loop = best if (best and value >= self.params.rtabmap_loop_thr and len(wm) > 1) else 0
         return LoopDetection(node.id, best, value, loop)
+
+
+def precision_recall_curve(
+    values: Sequence[float], verdicts: Sequence[int], n_positive: int
+) -> list[tuple[float, float, float]]:
+    """(threshold, precision, recall) for each distinct hypothesis value used as `Rtabmap/LoopThr`.
+
+    Per query image: `values` = its best hypothesis value, `verdicts` = 1 if that hypothesis is
+    the same place, −1 if it is a wrong place, 0 if it is neither counted right nor wrong (a
+    near place within the ground truth's tolerance); `n_positive` = query images that have a
+    same place among the loop candidates. Images accepted at a threshold t have value ≥ t.
+    """
+    v = np.asarray(values, np.float64)
+    d = np.asarray(verdicts, np.int64)
+    order = np.argsort(-v, kind="stable")
+    v, d = v[order], d[order]
+    tp = np.cumsum(d == 1)
+    fp = np.cumsum(d == -1)
+    out = []
+    for k in range(v.size):
+        if v[k] <= 0.0:
+            break
+        if k + 1 < v.size and v[k + 1] == v[k]:
+            continue  # ties: take all images with this value together
+        precision = tp[k] / max(1, tp[k] + fp[k])
+        out.append((float(v[k]), float(precision), float(tp[k] / max(1, n_positive))))
+    return out
+
+
+def recall_at_full_precision(
+    values: Sequence[float], verdicts: Sequence[int], n_positive: int
+) -> tuple[float, float]:
+    """RTAB-Map's metric: sort the query images by hypothesis value, count the right ones
+    until the first wrong one. Returns (recall, the lowest `Rtabmap/LoopThr` that keeps
+    precision at 100 %; 1.0 when the very first is wrong)."""
+    best_recall, best_thr = 0.0, 1.0
+    for thr, precision, recall in precision_recall_curve(values, verdicts, n_positive):
+        if precision < 1.0:
+            break
+        best_recall, best_thr = recall, thr
+    return best_recall, best_thr
 
 
 def list_images(folder: str | Path) -> list[Path]:

@@ -201,15 +201,11 @@ class Memory:
 
     def unique_links(self, ids: Iterable[int] | None = None) -> list[Link]:
         """Each link once (from < to orientation as stored by `from_id`), among `ids` if given."""
-        allowed = None if ids is None else set(ids)
-        out = []
-        for a, nb in self.links.items():
-            if allowed is not None and a not in allowed:
-                continue
-            for b, link in nb.items():
-                if a < b and (allowed is None or b in allowed):
-                    out.append(link)
-        return out
+        if ids is None:
+            return [link for a, nb in self.links.items() for b, link in nb.items() if a < b]
+        allowed = ids if isinstance(ids, (set, frozenset)) else set(ids)
+        return [link for a, nb in self.links.items() if a in allowed
+                for b, link in nb.items() if a < b and b in allowed]
 
     def neighbours(self, node_id: int, max_depth: int, *, exclude_stm: bool = True,
                    wm_only: bool = True) -> dict[int, int]:

@@ -64,6 +64,10 @@ class RtabmapParameters:
     vis_cor_nndr: float = _p("Vis/CorNNDR", 0.8, "registration NNDR")
     vis_cor_guess_win_size: int = _p("Vis/CorGuessWinSize", 40, "px, projection matching window")
     vis_pnp_variance_median_ratio: int = _p("Vis/PnPVarianceMedianRatio", 4, "")
+    vis_pnp_jacobian_covariance: bool = _p(
+        "Vis/PnPJacobianCovariance", False,
+        "not upstream: per axis, the larger of the 3D-error variance and the PnP geometry's "
+        "σ²(JᵀJ)⁻¹ marginal (inlier reprojection residual, ≥ 0.5 px)")
     reg_force_3dof: bool = _p("Reg/Force3DoF", False, "x, y, yaw only")
     reg_repeat_once: bool = _p("Reg/RepeatOnce", True, "second pass with the first result as guess")
     # --- odometry ---
@@ -101,6 +105,14 @@ class RtabmapParameters:
     rgbd_optimize_max_error: float = _p("RGBD/OptimizeMaxError", 3.0, "sigmas, 0 = off")
     rgbd_optimize_from_graph_end: bool = _p("RGBD/OptimizeFromGraphEnd", False, "")
     rgbd_max_loop_closure_distance: float = _p("RGBD/MaxLoopClosureDistance", 0.0, "m, 0 = off")
+    rgbd_loop_cov_limited: bool = _p(
+        "RGBD/LoopCovLimited", False,
+        "cap a closure's information at the largest odometry information seen (per axis)")
+    rgbd_loop_closure_max_mahalanobis: float = _p(
+        "RGBD/LoopClosureMaxMahalanobis", 0.0,
+        "not upstream; sigmas, 0 = off: reject a loop/proximity closure whose (x, y, yaw) is "
+        "farther than this Mahalanobis distance from the graph's prediction, with the "
+        "covariance of the closure plus the link covariances composed along the graph path")
     rgbd_proximity_by_space: bool = _p("RGBD/ProximityBySpace", True, "")
     rgbd_local_radius: float = _p("RGBD/LocalRadius", 10.0, "m")
     rgbd_proximity_max_graph_depth: int = _p("RGBD/ProximityMaxGraphDepth", 50, "")

@@ -31,6 +31,7 @@ __all__ = [
     "estimate_covariance",
     "match_by_projection",
     "match_descriptors",
+    "pnp_jacobian_covariance",
     "register",
     "solve_pnp",
 ]
@@ -41,6 +42,7 @@ _CONFIDENCE = 0.99
 _LINEAR_VARIANCE_FLOOR = 1e-8
 _ANGULAR_VARIANCE_FLOOR = 3e-8
 _CHI2_FACTOR = 2.1981
+_MIN_PIXEL_SIGMA = 0.5  # px: keypoint localisation floor of the Jacobian covariance
 
 
 def _huge_covariance() -> F64:
@@ -210,6 +212,63 @@ def estimate_covariance(
     return np.diag([lin, lin, lin, angv, angv, angv])
 
 
+def pnp_jacobian_covariance(
+    link: F64,
+    from_points: F64,
+    to_uv: NDArray[np.float32],
+    camera: CameraIntrinsics,
+    three_dof: bool,
+    min_pixel_sigma: float = _MIN_PIXEL_SIGMA,
+) -> F64:
+    """Marginal variances (diagonal 6×6, x y z roll pitch yaw) of a PnP result from the
+    geometry of its inliers: σ²(JᵀJ)⁻¹ with J the Jacobian of the inliers' reprojections with
+    respect to a perturbation of `link` (pose of the old frame in the new one, perturbed on
+    the right as the graph's between factors are) and σ the inliers' RMS reprojection residual
+    (at least `min_pixel_sigma` px).
+
+    Unlike the 3D-error rule, this grows along directions the inliers do not constrain, e.g.
+    the lateral-shift/yaw ambiguity when all inliers lie at one depth. With `three_dof` only x,
+    y and yaw are estimated; the other variances are 0 (left to the caller).
+    """
+    n = from_points.shape[0]
+    axes = [0, 1, 5] if three_dof else [0, 1, 2, 3, 4, 5]
+    if n < len(axes):
+        return _huge_covariance()
+    cam_from_base = se3_inverse(camera.local_transform)
+
+    def project(t: F64) -> NDArray[np.float64]:
+        m = cam_from_base @ t
+        pc = from_points @ m[:3, :3].T + m[:3, 3]
+        z = np.maximum(pc[:, 2], 1e-6)
+        return np.stack([camera.fx * pc[:, 0] / z + camera.cx,
+                         camera.fy * pc[:, 1] / z + camera.cy], axis=1)
+
+    base = project(link)
+    resid = base - np.asarray(to_uv, dtype=np.float64)
+    dof = max(1, 2 * n - len(axes))
+    sigma2 = max(float(np.sum(resid**2)) / dof, min_pixel_sigma**2)
+    eps = 1e-6
+    cols = []
+    for a in axes:
+        xi = np.zeros(6)
+        xi[a] = eps
+        d = np.eye(4)
+        if a < 3:
+            d[a, 3] = eps
+        else:
+            d[:3, :3] = cv2.Rodrigues(xi[3:].reshape(3, 1))[0]
+        cols.append(((project(link @ d) - base) / eps).ravel())
+    jac = np.stack(cols, axis=1)
+    h = jac.T @ jac
+    try:
+        cov_sub = np.linalg.inv(h) * sigma2
+    except np.linalg.LinAlgError:
+        return _huge_covariance()
+    var = np.zeros(6)
+    var[axes] = np.clip(np.diag(cov_sub), 0.0, LOST_VARIANCE)
+    return np.diag(var)
+
+
 def register(
     old: FrameFeatures,
     new: FrameFeatures,
@@ -258,6 +317,10 @@ def register(
             transform, old.points[fi_in], new.points[ti_in], new.uv[ti_in], camera,
             params.vis_pnp_variance_median_ratio,
         )
+        if params.vis_pnp_jacobian_covariance:
+            jac = pnp_jacobian_covariance(se3_inverse(transform), old.points[fi_in],
+                                          new.uv[ti_in], camera, force)
+            cov = np.maximum(cov, jac)
         return RegistrationResult(transform, cov, int(inl.size), int(fi.size), fi_in, ti_in)
 
     result = _once(guess)

@@ -9,6 +9,7 @@ Pure core: the optional `SessionDatabase` is the only I/O, and time is only meas
 
 from __future__ import annotations
 
+import heapq
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -20,7 +21,12 @@ from numpy.typing import NDArray
 from eddiebot.vslam.bayes import VIRTUAL_PLACE_ID, BayesFilter, adjust_likelihood, tfidf_scores
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
-from eddiebot.vslam.graph import GraphLink, GtsamPoseGraph, PoseGraphOptimizer, link_errors
+from eddiebot.vslam.graph import (
+    GtsamPoseGraph,
+    PoseGraphOptimizer,
+    discard_links,
+    optimized_link_errors,
+)
 from eddiebot.vslam.icp import icp_2d
 from eddiebot.vslam.memory import Link, LinkType, Memory, Node, NodeData
 from eddiebot.vslam.occupancy import (
@@ -40,7 +46,7 @@ from eddiebot.vslam.registration import register
 from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, to_3dof, xyz_rpy, yaw_of
 from eddiebot.vslam.vocabulary import Vocabulary
 
-__all__ = ["FrameRecord", "ProcessResult", "Rtabmap"]
+__all__ = ["FrameRecord", "ProcessResult", "Rtabmap", "closure_mahalanobis", "path_covariance"]
 
 F64 = NDArray[np.float64]
 _DEFAULT_ODOM_VARIANCE = 0.001
@@ -139,6 +145,7 @@ class Rtabmap:
         self._last_hypothesis = (0, 0.0)
         self._prev_hyp_value = 0.0
         self._localized = False
+        self._odom_max_info: F64 | None = None  # per-axis largest odometry information
         if database is not None:
             database.load_into(self)
 
@@ -212,6 +219,9 @@ class Rtabmap:
             if p.rgbd_neighbor_link_refining and scan is not None and prev.data is not None:
                 link = self._refine_with_scan(link, prev, scan)
             new_links.append(link)
+            diag = np.diag(link.information).copy()
+            self._odom_max_info = (diag if self._odom_max_info is None
+                                   else np.maximum(self._odom_max_info, diag))
 
         t_mem = self._timer()
         stats["Timing/Features_and_words/ms"] = (t_mem - t0) * 1e3
@@ -415,7 +425,22 @@ class Rtabmap:
         if limit > 0 and float(np.linalg.norm(reg.transform[:3, 3])) > limit:
             return None, "RGBD/MaxLoopClosureDistance exceeded"
         info = np.asarray(np.linalg.inv(reg.covariance), dtype=np.float64)
-        return Link(new.id, old.id, link_type, se3_inverse(reg.transform), info), ""
+        if self.params.rgbd_loop_cov_limited and self._odom_max_info is not None:
+            # RGBD/LoopCovLimited: no axis more certain than the best odometry link
+            cap = self._odom_max_info
+            idx = np.flatnonzero((np.diag(info) > cap) & (cap > 0))
+            info[idx, idx] = cap[idx]
+        link = Link(new.id, old.id, link_type, se3_inverse(reg.transform), info)
+        gate = self.params.rgbd_loop_closure_max_mahalanobis
+        if gate > 0 and not self.localization_mode:
+            old_pose = self.optimized_poses.get(old.id)
+            if old_pose is not None:
+                d = closure_mahalanobis(link, self.map_to_odom @ new.odom_pose, old_pose,
+                                        self.memory.links)
+                if d is not None and d > gate:
+                    return None, (f"RGBD/LoopClosureMaxMahalanobis exceeded ({d:.1f} > "
+                                  f"{gate:g})")
+        return link, ""
 
     def _refine_with_scan(self, link: Link, prev: Node, scan: Scan2D) -> Link:
         """`RGBD/NeighborLinkRefining`: 2D ICP of this scan against the previous node's scan."""
@@ -467,10 +492,10 @@ class Rtabmap:
         mem = self.memory
         in_ram = set(mem.wm) | set(mem.stm)
         comp = mem.component(current, in_ram)
-        poses = {i: self.optimized_poses.get(i, self.map_to_odom @ mem.nodes[i].odom_pose)
+        known = self.optimized_poses
+        poses = {i: known[i] if i in known else self.map_to_odom @ mem.nodes[i].odom_pose
                  for i in comp}
-        links = [GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information)
-                 for lk in mem.unique_links(comp)]
+        links = mem.unique_links(comp)
         if self.params.rgbd_optimize_from_graph_end:
             root = current
             poses[root] = mem.nodes[root].odom_pose
@@ -479,9 +504,10 @@ class Rtabmap:
         optimized = self.optimizer.optimize(poses, links, root, self.params.optimizer_iterations)
         thr = self.params.rgbd_optimize_max_error
         if thr > 0 and new_links:
-            errors = link_errors(optimized, links)
-            worst = max((max(e.linear_ratio, e.angular_ratio) for e in errors), default=0.0)
+            _, lin, ang = optimized_link_errors(self.optimizer, optimized, links)
+            worst = max(float(lin.max(initial=0.0)), float(ang.max(initial=0.0)))
             if worst > thr:
+                discard_links(self.optimizer, new_links)
                 return False
         self.optimized_poses.update(optimized)
         return True
@@ -541,3 +567,89 @@ class Rtabmap:
             mem.transfer_to_ltm(i)
             self.bayes.node_left(i, neighbourhood)
         return len(cands)
+
+
+# -- loop-closure plausibility ----------------------------------------------------------------
+def _xyt(t: F64) -> F64:
+    return np.array([t[0, 3], t[1, 3], yaw_of(t)])
+
+
+def _link_covariance_xyt(info: F64) -> F64:
+    """(x, y, yaw) covariance of a link from its 6×6 information (diagonal terms)."""
+    d = np.diag(np.asarray(info, dtype=np.float64))[[0, 1, 5]]
+    return np.diag(1.0 / np.maximum(d, 1e-12))
+
+
+def path_covariance(links: Mapping[int, Mapping[int, Link]], start: int, goal: int,
+                    max_nodes: int = 100_000) -> tuple[F64, F64] | None:
+    """Pose of `goal` in `start`'s frame (x, y, yaw) and its 3×3 covariance, composed along the
+    graph path from `start` to `goal` of least summed link variance (None if not connected).
+
+    Each link's covariance (x, y, yaw, in the link's `from` frame) is propagated through the
+    SE(2) composition with first-order Jacobians, so a heading uncertainty early on the path
+    grows into a lateral one further along it. A path is one of several in a graph with loops,
+    so this overestimates the marginal covariance: a conservative prediction for gating.
+    """
+    if start == goal:
+        return np.zeros(3), np.zeros((3, 3))
+    best = {start: 0.0}
+    parent: dict[int, int] = {}
+    heap = [(0.0, start)]
+    done: set[int] = set()
+    while heap:
+        cost, n = heapq.heappop(heap)
+        if n in done:
+            continue
+        done.add(n)
+        if n == goal or len(done) > max_nodes:
+            break
+        for m, lk in links.get(n, {}).items():
+            if m in done:
+                continue
+            c = _link_covariance_xyt(lk.information)
+            w = cost + float(c[0, 0] + c[1, 1] + c[2, 2])
+            if w < best.get(m, np.inf):
+                best[m] = w
+                parent[m] = n
+                heapq.heappush(heap, (w, m))
+    if goal not in parent:
+        return None
+    chain = [goal]
+    while chain[-1] != start:
+        chain.append(parent[chain[-1]])
+    chain.reverse()
+    pose = np.zeros(3)
+    cov = np.zeros((3, 3))
+    for a, b in zip(chain[:-1], chain[1:]):
+        lk = links[a][b]
+        step = _xyt(lk.transform)
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        j1 = np.array([[1.0, 0.0, -s * step[0] - c * step[1]],
+                       [0.0, 1.0, c * step[0] - s * step[1]],
+                       [0.0, 0.0, 1.0]])
+        j2 = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        cov = j1 @ cov @ j1.T + j2 @ _link_covariance_xyt(lk.information) @ j2.T
+        pose = np.array([pose[0] + c * step[0] - s * step[1],
+                         pose[1] + s * step[0] + c * step[1],
+                         float(np.arctan2(np.sin(pose[2] + step[2]), np.cos(pose[2] + step[2])))])
+    return pose, cov
+
+
+def closure_mahalanobis(link: Link, from_pose: F64, to_pose: F64,
+                        links: Mapping[int, Mapping[int, Link]]) -> float | None:
+    """Mahalanobis distance (σ) between a candidate closure and the graph's prediction.
+
+    `from_pose`/`to_pose`: current estimates of the closure's two nodes (map frame, 4×4). The
+    prediction is their relative pose; its covariance is that of the least-variance graph path
+    between them (`path_covariance`) plus the closure's own. None when they are not connected.
+    """
+    path = path_covariance(links, link.from_id, link.to_id)
+    if path is None:
+        return None
+    _, cov = path
+    pred = _xyt(se3_inverse(from_pose) @ to_pose)
+    meas = _xyt(link.transform)
+    d = meas - pred
+    d[2] = float(np.arctan2(np.sin(d[2]), np.cos(d[2])))
+    total = cov + _link_covariance_xyt(link.information)
+    return float(np.sqrt(max(0.0, float(d @ np.linalg.solve(total, d)))))

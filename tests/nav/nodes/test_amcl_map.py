@@ -14,6 +14,19 @@ def test_amcl_localises_and_the_robot_navigates(make_stack):
     from test_navigate import navigate
 
     stack = make_stack(start=(1.0, 1.0, 0.0), amcl_pose=(1.25, 0.85, 0.15))
+    # set_initial_pose (as Nav2) puts every particle on the given pose; an operator's
+    # /initialpose with RViz's covariance spreads them so the scans can pull them in.
+    assert stack.nodes["amcl"].amcl.particles[:, :2].std(axis=0).max() < 1e-9
+    init = PoseWithCovarianceStamped()
+    init.header.frame_id = "map"
+    init.pose.pose.position.x, init.pose.pose.position.y = 1.25, 0.85
+    init.pose.pose.orientation.z, init.pose.pose.orientation.w = math.sin(0.075), math.cos(0.075)
+    cov = [0.0] * 36
+    cov[0] = cov[7] = 0.25
+    cov[35] = 0.0685
+    init.pose.covariance = cov
+    stack.nodes["amcl"]._on_initial_pose(init)  # what a /initialpose message does
+    assert stack.nodes["amcl"].amcl.particles[:, :2].std(axis=0).min() > 0.3
     poses = []
     stack.probe.create_subscription(PoseWithCovarianceStamped, "/amcl_pose", poses.append, MAP_QOS)
     _, res = navigate(stack, 4.5, 1.2, 0.0)

@@ -16,6 +16,8 @@ from typing import Any, Protocol
 import numpy.typing as npt
 
 from eddiebot.nav.controllers.checkers import (
+    PoseProgressChecker,
+    PoseProgressCheckerConfig,
     SimpleGoalChecker,
     SimpleGoalCheckerConfig,
     SimpleProgressChecker,
@@ -55,6 +57,7 @@ CONTROLLER_PLUGINS: dict[str, type[Any]] = {
 }
 PROGRESS_CHECKER_PLUGINS: dict[str, type[Any]] = {
     "nav2_controller::SimpleProgressChecker": SimpleProgressChecker,
+    "nav2_controller::PoseProgressChecker": PoseProgressChecker,
 }
 GOAL_CHECKER_PLUGINS: dict[str, type[Any]] = {
     "nav2_controller::SimpleGoalChecker": SimpleGoalChecker,
@@ -143,9 +146,13 @@ def build_controller_server(params: Mapping[str, Any] | None = None,
                 cfg.controller_frequency,
             )
     for name in cfg.progress_checker_plugins:
-        _, sub = _plugin(params, name, PROGRESS_CHECKER_PLUGINS, server)
-        out.progress_checkers[name] = SimpleProgressChecker(
-            from_params(SimpleProgressCheckerConfig, sub, server=f"{server}.{name}"))
+        pcls, sub = _plugin(params, name, PROGRESS_CHECKER_PLUGINS, server)
+        if pcls is PoseProgressChecker:
+            out.progress_checkers[name] = PoseProgressChecker(
+                from_params(PoseProgressCheckerConfig, sub, server=f"{server}.{name}"))
+        else:
+            out.progress_checkers[name] = SimpleProgressChecker(
+                from_params(SimpleProgressCheckerConfig, sub, server=f"{server}.{name}"))
     for name in cfg.goal_checker_plugins:
         _, sub = _plugin(params, name, GOAL_CHECKER_PLUGINS, server)
         out.goal_checkers[name] = SimpleGoalChecker(
@@ -162,6 +169,8 @@ __all__ = [
     "ControllerServerConfig",
     "DWBConfig",
     "DWBController",
+    "PoseProgressChecker",
+    "PoseProgressCheckerConfig",
     "RegulatedPurePursuitConfig",
     "RegulatedPurePursuitController",
     "SimpleGoalChecker",

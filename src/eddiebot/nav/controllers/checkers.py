@@ -51,6 +51,45 @@ class SimpleProgressChecker:
 
 
 @dataclass(frozen=True)
+class PoseProgressCheckerConfig:
+    """``nav2_controller::PoseProgressChecker`` (Jazzy code defaults)."""
+
+    required_movement_radius: float = 0.5
+    required_movement_angle: float = 0.5
+    movement_time_allowance: float = 10.0
+
+    def validate(self, server: str = "controller_server") -> None:
+        require(self.required_movement_radius >= 0.0, server, "required_movement_radius",
+                self.required_movement_radius, "must be >= 0")
+        require(self.required_movement_angle >= 0.0, server, "required_movement_angle",
+                self.required_movement_angle, "must be >= 0")
+        require(self.movement_time_allowance >= 0.0, server, "movement_time_allowance",
+                self.movement_time_allowance, "must be >= 0")
+
+
+class PoseProgressChecker(SimpleProgressChecker):
+    """As :class:`SimpleProgressChecker`, but turning by ``required_movement_angle`` (rad)
+    also counts as progress: a robot turning in place to the goal heading, or to face its
+    path, is not failed for standing on the spot."""
+
+    def __init__(self, config: PoseProgressCheckerConfig | None = None) -> None:
+        self.pose_config = config or PoseProgressCheckerConfig()
+        self.pose_config.validate()
+        super().__init__(SimpleProgressCheckerConfig(
+            self.pose_config.required_movement_radius, self.pose_config.movement_time_allowance))
+
+    def check(self, pose: npt.ArrayLike, now_ns: int) -> bool:
+        p = np.asarray(pose, dtype=np.float64)
+        b = self._baseline
+        if b is None or math.hypot(p[0] - b[0], p[1] - b[1]) > self.config.required_movement_radius \
+                or abs(wrap_angle(float(p[2] - b[2]))) > self.pose_config.required_movement_angle:
+            self._baseline = p.copy()
+            self._baseline_ns = now_ns
+            return True
+        return not ((now_ns - self._baseline_ns) * 1e-9 > self.config.movement_time_allowance)
+
+
+@dataclass(frozen=True)
 class SimpleGoalCheckerConfig:
     """``nav2_controller::SimpleGoalChecker`` (Jazzy code defaults)."""
 
@@ -94,6 +133,8 @@ class SimpleGoalChecker:
 
 
 __all__ = [
+    "PoseProgressChecker",
+    "PoseProgressCheckerConfig",
     "SimpleGoalChecker",
     "SimpleGoalCheckerConfig",
     "SimpleProgressChecker",

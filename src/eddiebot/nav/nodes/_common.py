@@ -156,17 +156,31 @@ def pose_stamped(x: float, y: float, yaw: float, frame_id: str, stamp_ns: int = 
 
 
 def path_to_msg(path: npt.ArrayLike, frame_id: str, stamp_ns: int = 0) -> Any:
+    from eddiebot.msgs.builtin_interfaces import Time
+    from eddiebot.msgs.geometry_msgs import Point, Pose, PoseStamped, Quaternion
     from eddiebot.msgs.nav_msgs import Path
+    from eddiebot.msgs.std_msgs import Header
 
     p = np.asarray(path, dtype=np.float64).reshape(-1, 3)
-    head = pose_stamped(0.0, 0.0, 0.0, frame_id, stamp_ns).header
-    return Path(header=head, poses=[pose_stamped(r[0], r[1], r[2], frame_id, stamp_ns) for r in p])
+    sec, nanosec = int(stamp_ns // 1_000_000_000), int(stamp_ns % 1_000_000_000)
+    qz, qw = np.sin(p[:, 2] / 2.0).tolist(), np.cos(p[:, 2] / 2.0).tolist()
+    # the message classes resolved once per path, not once per pose (paths run to 1000s)
+    poses = [PoseStamped(header=Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id),
+                         pose=Pose(position=Point(x=x, y=y, z=0.0),
+                                   orientation=Quaternion(x=0.0, y=0.0, z=z, w=w)))
+             for x, y, z, w in zip(p[:, 0].tolist(), p[:, 1].tolist(), qz, qw)]
+    return Path(header=Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id), poses=poses)
 
 
 def path_from_msg(msg: Any) -> npt.NDArray[np.float64]:
     if not msg.poses:
         return np.zeros((0, 3))
-    return np.array([pose_from_msg(ps.pose) for ps in msg.poses])
+    rows = [(ps.pose.position.x, ps.pose.position.y, ps.pose.orientation.x, ps.pose.orientation.y,
+             ps.pose.orientation.z, ps.pose.orientation.w) for ps in msg.poses]
+    a = np.array(rows, dtype=np.float64)
+    qx, qy, qz, qw = a[:, 2], a[:, 3], a[:, 4], a[:, 5]
+    yaw = np.arctan2(2.0 * (qw * qz + qx * qy), 1.0 - 2.0 * (qy * qy + qz * qz))
+    return np.column_stack([a[:, 0], a[:, 1], yaw])
 
 
 def twist_from_msg(msg: Any) -> Twist2D:

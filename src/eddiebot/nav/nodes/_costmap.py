@@ -43,13 +43,15 @@ def cloud_xyz(msg: Any, max_points: int = 20000) -> npt.NDArray[np.float64]:
     if not {"x", "y", "z"} <= offsets.keys() or int(msg.point_step) == 0:
         return np.zeros((0, 3))
     n = int(msg.width) * int(msg.height)
-    raw = np.asarray(msg.data, dtype=np.uint8)[: n * int(msg.point_step)]
-    rows = raw.reshape(n, int(msg.point_step))
-    out = np.empty((n, 3))
-    for i, name in enumerate("xyz"):
-        o = offsets[name]
-        out[:, i] = rows[:, o:o + 4].copy().view("<f4" if not msg.is_bigendian else ">f4")[:, 0]
-    out = out[np.all(np.isfinite(out), axis=1)]
+    step = int(msg.point_step)
+    raw = np.ascontiguousarray(np.asarray(msg.data, dtype=np.uint8)[: n * step])
+    fmt = ">f4" if msg.is_bigendian else "<f4"
+    dtype = np.dtype({"names": ["x", "y", "z"], "formats": [fmt] * 3,
+                      "offsets": [offsets["x"], offsets["y"], offsets["z"]], "itemsize": step})
+    rec = np.frombuffer(raw, dtype=dtype, count=raw.size // step)
+    out = np.empty((rec.shape[0], 3))
+    out[:, 0], out[:, 1], out[:, 2] = rec["x"], rec["y"], rec["z"]
+    out = out[np.isfinite(out).all(axis=1)]
     if out.shape[0] > max_points:
         out = out[:: int(np.ceil(out.shape[0] / max_points))]
     return out

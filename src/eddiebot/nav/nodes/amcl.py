@@ -30,12 +30,12 @@ from eddiebot.core.tf import (
 )
 from eddiebot.core.time import stamp_to_ns
 from eddiebot.maps import map_from_msg
-from eddiebot.nav.amcl import Amcl, AmclConfig
+from eddiebot.nav.amcl import Amcl, AmclConfig, LocalizationLimits, localization_problem
 from eddiebot.nav.errors import LocalizationError
 from eddiebot.nav.nodes._common import NavServer, pose_from_msg
 from eddiebot.nav.params import from_params
 
-__all__ = ["AmclNode"]
+__all__ = ["AmclNode", "LocalizationWatch"]
 
 _LATCHED = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: scans waiting for their odometry transform (Nav2's laser_scan_filter_ queue size)
@@ -52,6 +52,47 @@ def _se2_compose(a: Any, b: Any) -> np.ndarray:
 def _se2_inverse(a: Any) -> np.ndarray:
     c, s = math.cos(a[2]), math.sin(a[2])
     return np.array([-c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]])
+
+
+class LocalizationWatch:
+    """Tells a node that commands motion when it must stop because localization is lost:
+    ``map → odom`` missing or older than ``limits.tf_timeout``, or the last pose published on
+    ``pose_topic`` (``amcl_pose``) with a standard deviation beyond the limits (see
+    :func:`eddiebot.nav.amcl.localization_problem`). :meth:`problem` returns the reason, or ""
+    when driving is allowed. A controller uses it as::
+
+        self._loc = LocalizationWatch(self, self.tf_buffer)          # on_activate
+        if (why := self._loc.problem(now)): abort(why)               # every cycle
+    """
+
+    def __init__(self, node: Any, buffer: Buffer, limits: LocalizationLimits | None = None, *,
+                 global_frame: str = "map", odom_frame: str = "odom",
+                 pose_topic: str = "amcl_pose") -> None:
+        from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
+
+        self.node = node
+        self.buffer = buffer
+        self.limits = limits or LocalizationLimits()
+        self.global_frame, self.odom_frame = global_frame, odom_frame
+        self.covariance: np.ndarray | None = None
+        self._sub = node.create_subscription(PoseWithCovarianceStamped, pose_topic,
+                                             self._on_pose, _LATCHED)
+
+    def _on_pose(self, msg: Any) -> None:
+        self.covariance = np.asarray(msg.pose.covariance, dtype=np.float64).copy()
+
+    def problem(self, now_ns: int) -> str:
+        try:
+            stamp: int | None = self.buffer.get_latest_common_time(
+                self.global_frame, self.odom_frame).nanoseconds
+        except TransformException:
+            stamp = None
+        return localization_problem(self.limits, now_ns, self.covariance, stamp)
+
+    def destroy(self) -> None:
+        if self._sub is not None:
+            self.node.destroy_subscription(self._sub)
+            self._sub = None
 
 
 class AmclNode(NavServer):
@@ -141,7 +182,9 @@ class AmclNode(NavServer):
         cfg = self.amcl.config
         if cfg.set_initial_pose and (cfg.always_reset_initial_pose or not self._initialised
                                      or self.amcl.particles.shape[0] == 0):
-            self.amcl.initialize((cfg.initial_pose_x, cfg.initial_pose_y, cfg.initial_pose_yaw))
+            # Nav2: a PoseWithCovarianceStamped with a zero covariance (no spread)
+            self.amcl.initialize((cfg.initial_pose_x, cfg.initial_pose_y, cfg.initial_pose_yaw),
+                                 np.zeros((3, 3)))
             self._initialised = True
 
     def _on_initial_pose(self, msg: Any) -> None:
@@ -153,9 +196,8 @@ class AmclNode(NavServer):
             return
         pose = pose_from_msg(msg.pose.pose)
         c = np.asarray(msg.pose.covariance, dtype=np.float64).reshape(6, 6)
+        # used as given (handleInitialPose): all zero puts every particle on the pose
         cov = np.array([[c[0, 0], c[0, 1], 0.0], [c[1, 0], c[1, 1], 0.0], [0.0, 0.0, c[5, 5]]])
-        if not np.any(cov):
-            cov = None  # type: ignore[assignment]
         self.amcl.initialize(pose, cov)
         self._initialised = True
         self.get_logger().info(f"initial pose set to ({pose[0]:.2f}, {pose[1]:.2f}, {pose[2]:.2f})")

@@ -64,6 +64,7 @@ class BtNavigator(NavServer):
         self._kind = ""
         self.bb = NavBlackboard()
         self._start_ns = 0
+        self._path_xy: tuple[Any, np.ndarray] = (None, np.zeros((0, 2)))
 
     def on_configure(self, state: State) -> TransitionCallbackReturn:
         def build() -> None:
@@ -252,7 +253,9 @@ class BtNavigator(NavServer):
         if pose is not None:
             fb.current_pose = pose_stamped(pose[0], pose[1], pose[2], gf, now)
             if self.bb.path is not None and self.bb.path.poses:
-                d = path_length_from(path_from_msg(self.bb.path)[:, :2], pose[0], pose[1])
+                if self._path_xy[0] is not self.bb.path:  # converted once per new path
+                    self._path_xy = (self.bb.path, path_from_msg(self.bb.path)[:, :2])
+                d = path_length_from(self._path_xy[1], pose[0], pose[1])
                 fb.distance_remaining = float(d)
                 if self._speed > 0.01:
                     fb.estimated_time_remaining = Duration.from_seconds(d / self._speed).to_msg()

@@ -93,7 +93,11 @@ class NavfnPlanner:
             raise NoValidPath(f"failed to create plan with tolerance of: {self.config.tolerance}")
         bc = costmap.world_to_map(best[0], best[1])
         assert bc is not None
-        max_cycles = 4 * max(nx, ny)
+        # Upstream stops the descent after 4 x the larger side in cycles of PATH_STEP cells,
+        # which cuts a winding path (a maze: 35 m on a 284-cell-wide map) before the start.
+        # eddiebot: also allow 4 cycles per cell the path can hold (each costs >= COST_NEUTRAL).
+        goal_pot = float(pot[bc[1] * nx + bc[0]])
+        max_cycles = max(4 * max(nx, ny), int(4.0 * goal_pot / K.COST_NEUTRAL) + 16)
         cells = K.calc_path(pot, nx, ny, bc[1] * nx + bc[0], max_cycles)
         if cells.shape[0] == 0:
             raise NoValidPath("failed to extract a path from the potential")

@@ -1,0 +1,634 @@
+"""Navigation in every built-in world: seeded random reachable goals through the real stack.
+
+Each run is the ``nav_sim`` launch (simulator with the Kinect at 320 × 240, Eddie's base stack
+against the firmware emulator, depth → scan and depth → cloud, AMCL, Nav2's servers and the
+BT navigator) in one process on the sim clock, as ``eddie nav --world W --map M`` runs it.
+The map is the world's **ground-truth footprint map** (`eddiebot.sim.ground_truth`: every
+prism between the ground clearance and the robot's height, 0.05 m) served by the map server,
+with AMCL started at the world's start pose. Goals go to ``navigate_to_pose`` one after
+another, each from wherever the robot stopped.
+
+Goals: uniform in free space with ≥ 0.35 m clearance, in the connected component of the
+start in free space eroded by the robot radius plus one cell, ≥ 1 m from the previous goal;
+yaw uniform. The reference length of each goal is the shortest path from the robot's true
+pose to the goal through the free space eroded by the robot radius (0.2245 m) of the
+footprint map (16-connected Dijkstra, then line-of-sight shortcuts). A goal is *reached*
+when the navigator reports success and the true final pose is within 0.35 m (the goal
+checker's 0.25 m on the AMCL estimate + 0.10 m for localisation) and 0.35 rad.
+
+Runs:
+* ``static``: every world without its people, ``--goals`` goals (50 by default).
+* ``person``: the worlds that script a walking person (who waits and steps aside when the
+  robot blocks them), ``--person-goals`` goals.
+* ``door``: the office with the kitchen door (x 16.0–16.9 on y = 8.5) closed after
+  mapping (open in the map, closed in the world); from the corridor, a goal in the kitchen
+  must be reached another way (there is none) or aborted with a typed reason within 60 s.
+  The maze with a door closed in one of its loops has another way.
+
+Collisions are the simulator's contacts (the robot's own motion blocked by an obstacle or a
+person); contacts with a person near are counted apart.
+
+    .venv/bin/python benchmarks/bench_nav_worlds.py                      # everything
+    .venv/bin/python benchmarks/bench_nav_worlds.py --goals 5 --worlds office maze --runs static
+    .venv/bin/python benchmarks/bench_nav_worlds.py --runs door
+
+Prints a table per run and writes ``benchmarks/results/nav_worlds.json`` (``--out`` to change).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from scipy import ndimage
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import RESULTS, machine, print_table
+
+from eddiebot.maps import OccupancyMap, save_map
+from eddiebot.sim.world import ROBOT_RADIUS, World
+
+WORLDS = ("office", "maze", "warehouse", "depot", "corridor", "house")
+GOAL_CLEARANCE = 0.35
+REACH_XY = 0.35
+REACH_YAW = 0.35
+DOOR_LIMIT_S = 60.0
+
+
+# --------------------------------------------------------------------------- geometry
+@dataclass
+class FreeSpace:
+    """The footprint map's free space: clearance (m) per cell and the grid frame."""
+
+    clearance: np.ndarray
+    resolution: float
+    origin: tuple[float, float]
+
+    @classmethod
+    def of(cls, grid: OccupancyMap) -> FreeSpace:
+        free = grid.data == 0
+        # distance from each free cell centre to the nearest occupied cell's outline
+        dist = ndimage.distance_transform_edt(free) * grid.resolution - grid.resolution / 2
+        return cls(np.where(free, dist, 0.0), grid.resolution, (grid.origin[0], grid.origin[1]))
+
+    def cell(self, x: float, y: float) -> tuple[int, int]:
+        return (math.floor((y - self.origin[1]) / self.resolution),
+                math.floor((x - self.origin[0]) / self.resolution))
+
+    def centre(self, r: int, c: int) -> tuple[float, float]:
+        return (self.origin[0] + (c + 0.5) * self.resolution,
+                self.origin[1] + (r + 0.5) * self.resolution)
+
+
+_NEIGHBOURS = [(dr, dc) for dr in range(-2, 3) for dc in range(-2, 3)
+               if (dr, dc) != (0, 0) and math.gcd(abs(dr), abs(dc)) == 1]
+
+
+def _crossed(dr: int, dc: int) -> list[tuple[int, int]]:
+    """Cells (relative) a move of (dr, dc) crosses besides its ends."""
+    sr, sc = (dr > 0) - (dr < 0), (dc > 0) - (dc < 0)
+    if abs(dr) == 2:
+        return [(sr, 0), (sr, dc)]
+    if abs(dc) == 2:
+        return [(0, sc), (dr, sc)]
+    if dr and dc:
+        return [(dr, 0), (0, dc)]
+    return []
+
+
+def _line_free(mask: np.ndarray, a: tuple[int, int], b: tuple[int, int]) -> bool:
+    n = int(max(abs(b[0] - a[0]), abs(b[1] - a[1])) * 3) + 1
+    rs = np.linspace(a[0], b[0], n + 1)
+    cs = np.linspace(a[1], b[1], n + 1)
+    # every cell the segment between the two centres touches (both roundings near halves)
+    return bool(np.all(mask[np.floor(rs + 0.5).astype(int), np.floor(cs + 0.5).astype(int)])
+                and np.all(mask[np.ceil(rs - 0.5).astype(int), np.ceil(cs - 0.5).astype(int)]))
+
+
+class PathGraph:
+    """16-connected graph of the cells of ``space`` with clearance > ``radius``."""
+
+    def __init__(self, space: FreeSpace, radius: float = ROBOT_RADIUS) -> None:
+        from scipy.sparse import coo_matrix
+
+        self.space = space
+        self.mask = mask = space.clearance > radius
+        h, w = mask.shape
+        idx = np.arange(h * w).reshape(h, w)
+        rows, cols, vals = [], [], []
+        pad = np.zeros((h + 4, w + 4), bool)
+        pad[2:-2, 2:-2] = mask
+        for dr, dc in _NEIGHBOURS:
+            ok = mask & pad[2 + dr:2 + dr + h, 2 + dc:2 + dc + w]
+            for cr, cc in _crossed(dr, dc):
+                ok &= pad[2 + cr:2 + cr + h, 2 + cc:2 + cc + w]
+            r, c = np.nonzero(ok)
+            rows.append(idx[r, c])
+            cols.append(idx[r + dr, c + dc])
+            vals.append(np.full(r.size, math.hypot(dr, dc)))
+        self.graph = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                                shape=(h * w, h * w)).tocsr()
+
+    def snap(self, p: tuple[float, float]) -> tuple[int, int]:
+        r, c = self.space.cell(*p)
+        h, w = self.mask.shape
+        if 0 <= r < h and 0 <= c < w and self.mask[r, c]:
+            return r, c
+        r0, c0 = max(0, r - 8), max(0, c - 8)
+        rr, cc = np.nonzero(self.mask[r0:r + 9, c0:c + 9])
+        if rr.size == 0:
+            raise ValueError(f"no free cell near {p}")
+        k = int(np.argmin((rr + r0 - r) ** 2 + (cc + c0 - c) ** 2))
+        return int(rr[k] + r0), int(cc[k] + c0)
+
+    def shortest(self, start: tuple[float, float], goal: tuple[float, float]) -> float:
+        """Shortest path (m) from ``start`` to ``goal`` through the eroded free space:
+        Dijkstra over 16 neighbours, then the path pulled tight by line-of-sight shortcuts."""
+        from scipy.sparse.csgraph import dijkstra
+
+        h, w = self.mask.shape
+        s, g = self.snap(start), self.snap(goal)
+        si, gi = s[0] * w + s[1], g[0] * w + g[1]
+        dist, pred = dijkstra(self.graph, indices=si, return_predecessors=True)
+        if not math.isfinite(dist[gi]):
+            return math.inf
+        chain = [gi]
+        while chain[-1] != si:
+            chain.append(int(pred[chain[-1]]))
+        chain.reverse()
+        cells = [(i // w, i % w) for i in chain]
+        pts = [cells[0]]
+        i = 0
+        while i < len(cells) - 1:
+            j = len(cells) - 1
+            while j > i + 1 and not _line_free(self.mask, cells[i], cells[j]):
+                j -= 1
+            pts.append(cells[j])
+            i = j
+        xy = np.array([self.space.centre(*p) for p in pts])
+        xy[0], xy[-1] = start, goal
+        return float(np.sum(np.hypot(np.diff(xy[:, 0]), np.diff(xy[:, 1]))))
+
+
+def sample_goals(space: FreeSpace, start: tuple[float, float], n: int, seed: int,
+                 min_step: float = 1.0) -> list[tuple[float, float, float]]:
+    """``n`` seeded random goals, reachable from ``start`` (see the module docstring)."""
+    reach = space.clearance > ROBOT_RADIUS + space.resolution
+    labels, _ = ndimage.label(reach, structure=np.ones((3, 3)))
+    r, c = space.cell(*start)
+    window = labels[max(0, r - 4):r + 5, max(0, c - 4):c + 5]
+    ids = window[window > 0]
+    if ids.size == 0:
+        raise ValueError(f"start {start} is not in free space")
+    comp = labels == np.bincount(ids).argmax()
+    rr, cc = np.nonzero(comp & (space.clearance >= GOAL_CLEARANCE))
+    rng = np.random.default_rng(seed)
+    goals: list[tuple[float, float, float]] = []
+    prev = start
+    while len(goals) < n:
+        k = int(rng.integers(rr.size))
+        x, y = space.centre(int(rr[k]), int(cc[k]))
+        x += float(rng.uniform(-0.5, 0.5)) * space.resolution
+        y += float(rng.uniform(-0.5, 0.5)) * space.resolution
+        if math.hypot(x - prev[0], y - prev[1]) < min_step:
+            continue
+        goals.append((x, y, float(rng.uniform(-math.pi, math.pi))))
+        prev = (x, y)
+    return goals
+
+
+# --------------------------------------------------------------------------- worlds
+def world_variant(name: str, out_dir: Path, *, people: bool, closed_doors: tuple[int, ...] = (),
+                  extra_doors: tuple[dict[str, Any], ...] = ()) -> Path:
+    """A copy of built-in world ``name`` with or without its people, some doors closed and
+    some doors added (written to ``out_dir``)."""
+    from eddiebot.sim.worlds import world_path
+
+    doc = yaml.safe_load(world_path(name).read_text())
+    if not people:
+        doc["people"] = []
+    doors = list(doc.get("doors") or [])
+    for i in closed_doors:
+        doors[i] = {**doors[i], "open": False}
+    doors.extend(extra_doors)
+    doc["doors"] = doors
+    tag = ("" if people else "-nopeople") + "".join(f"-d{i}" for i in closed_doors) + \
+        ("-extra" if extra_doors else "")
+    path = out_dir / f"{name}{tag}.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def map_of(world: World, out_dir: Path) -> tuple[Path, OccupancyMap]:
+    from eddiebot.sim.ground_truth import footprint_map
+
+    grid = footprint_map(world)
+    stem = out_dir / f"{world.name}-footprint-{abs(hash(world.prisms)) % 10**8}"
+    save_map(grid, stem)
+    return stem.with_suffix(".yaml"), grid
+
+
+# --------------------------------------------------------------------------- one run
+@dataclass
+class GoalRecord:
+    index: int
+    goal: tuple[float, float, float]
+    start: tuple[float, float, float]
+    status: str = "not sent"
+    error_code: int = 0
+    error_msg: str = ""
+    seconds: float = 0.0
+    driven_m: float = 0.0
+    shortest_m: float = math.nan
+    ratio: float = math.nan
+    final_xy_error: float = math.nan
+    final_yaw_error: float = math.nan
+    amcl_error: float = math.nan
+    collisions: int = 0
+    reached: bool = False
+
+
+@dataclass
+class RunResult:
+    name: str
+    world: str
+    goals: list[GoalRecord] = field(default_factory=list)
+    collisions: int = 0
+    person_collisions: int = 0
+    collision_points: list[tuple[float, float]] = field(default_factory=list)
+    sim_s: float = 0.0
+    wall_s: float = 0.0
+    cpu_s: float = 0.0
+
+    def summary(self) -> dict[str, Any]:
+        n = len(self.goals)
+        reached = [g for g in self.goals if g.reached]
+        ratios = [g.ratio for g in reached if math.isfinite(g.ratio)]
+        amcl = [g.amcl_error for g in self.goals if math.isfinite(g.amcl_error)]
+        return {
+            "run": self.name, "world": self.world, "goals": n,
+            "succeeded": sum(1 for g in self.goals if g.status == "succeeded"), "reached": len(reached),
+            "reached_pct": 100.0 * len(reached) / n if n else math.nan,
+            "collisions": self.collisions, "person_collisions": self.person_collisions,
+            "mean_ratio": float(np.mean(ratios)) if ratios else math.nan,
+            "max_ratio": float(np.max(ratios)) if ratios else math.nan,
+            "sum_ratio": (sum(g.driven_m for g in reached) / sum(g.shortest_m for g in reached)
+                          if reached else math.nan),
+            "mean_amcl_err": float(np.mean(amcl)) if amcl else math.nan,
+            "max_amcl_err": float(np.max(amcl)) if amcl else math.nan,
+            "sim_s": self.sim_s, "wall_s": self.wall_s, "cpu_s": self.cpu_s,
+        }
+
+
+class NavRun:
+    """The ``nav_sim`` launch in one process on the sim clock, with a goal client."""
+
+    def __init__(self, world_file: Path, map_yaml: Path, start: tuple[float, float, float],
+                 run_dir: Path, seed: int = 0, camera: tuple[int, int] = (320, 240)) -> None:
+        from eddiebot.cli.nav import default_params, resolve_params
+        from eddiebot.core.action import ActionClient
+        from eddiebot.core.context import Context
+        from eddiebot.core.executors import SingleThreadedExecutor
+        from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
+        from eddiebot.core.node import Node
+        from eddiebot.geometry import quaternion_to_yaw
+        from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
+        from eddiebot.msgs.nav2_msgs import NavigateToPose
+        from eddiebot.msgs.nav_msgs import Odometry
+        from eddiebot.msgs.std_msgs import UInt32
+        from eddiebot.registry import NODES
+
+        params = resolve_params(default_params(), run_dir, start)
+        self.context = Context(use_sim_time=True)
+        args = {"world": str(world_file), "seed": str(seed), "map": str(map_yaml),
+                "params_file": str(params), "camera_width": str(camera[0]),
+                "camera_height": str(camera[1])}
+        self.nodes = build_nodes(parse_launch_file(find_launch_file("nav_sim"), args),
+                                 self.context, NODES)
+        self.sim = self.context.resources["simulator"]
+        self.sim.publish_rgb = False  # navigation uses depth only
+        self.client_node = Node("bench_navigator", context=self.context)
+        self.client = ActionClient(self.client_node, NavigateToPose, "navigate_to_pose")
+        self.NavigateToPose = NavigateToPose
+        self.truth: list[tuple[float, float, float]] = []
+        self.amcl: tuple[float, float, float] | None = None
+        self.contacts: list[tuple[float, float, bool]] = []
+
+        def on_truth(msg: Any) -> None:
+            p = msg.pose.pose
+            q = p.orientation
+            self.truth.append((p.position.x, p.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w)))
+
+        def on_amcl(msg: Any) -> None:
+            p = msg.pose.pose
+            q = p.orientation
+            self.amcl = (p.position.x, p.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))
+
+        def on_contact(msg: Any) -> None:
+            st = self.sim.state
+            near = False
+            people = self.sim.people_now()
+            if people is not None and len(people):
+                d = np.hypot(people[:, 0] - st.x, people[:, 1] - st.y) - people[:, 2] - ROBOT_RADIUS
+                near = bool(np.min(d) < 0.1)
+            self.contacts.append((st.x, st.y, near))
+
+        self.client_node.create_subscription(Odometry, "/ground_truth/odom", on_truth, 50)
+        self.client_node.create_subscription(PoseWithCovarianceStamped, "/amcl_pose", on_amcl, 10)
+        self.client_node.create_subscription(UInt32, "/sim/collisions", on_contact, 10)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        for n in [*self.nodes, self.client_node]:
+            self.executor.add_node(n)
+
+    def now_s(self) -> float:
+        return float(self.context.sim_clock.now_ns()) / 1e9
+
+    def spin(self, seconds: float) -> None:
+        self.executor.spin_for(seconds)
+
+    def pose(self) -> tuple[float, float, float]:
+        st = self.sim.state
+        return (st.x, st.y, st.theta)
+
+    def navigate(self, goal: tuple[float, float, float], timeout_s: float,
+                 record: GoalRecord) -> None:
+        from eddiebot.geometry import yaw_to_quaternion
+
+        msg = self.NavigateToPose.Goal()
+        msg.pose.header.frame_id = "map"
+        msg.pose.pose.position.x, msg.pose.pose.position.y = goal[0], goal[1]
+        q = yaw_to_quaternion(goal[2])
+        o = msg.pose.pose.orientation
+        o.x, o.y, o.z, o.w = q
+        n0 = len(self.truth)
+        c0 = len(self.contacts)
+        t0 = self.now_s()
+        deadline = t0 + timeout_s
+        send = self.client.send_goal_async(msg)
+        while not send.done() and self.now_s() < deadline:
+            self.spin(0.1)
+        handle = send.result() if send.done() else None
+        if handle is None or not handle.accepted:
+            record.status = "rejected"
+            return
+        res = handle.get_result_async()
+        while not res.done() and self.now_s() < deadline:
+            self.spin(0.2)
+        record.seconds = self.now_s() - t0
+        if not res.done():
+            record.status = "timed out"
+            handle.cancel_goal_async()
+            self.spin(1.0)
+        else:
+            wrapped = res.result()
+            status = int(getattr(wrapped, "status", 0))
+            r = getattr(wrapped, "result", wrapped)
+            record.error_code = int(getattr(r, "error_code", 0))
+            record.error_msg = str(getattr(r, "error_msg", ""))
+            record.status = {4: "succeeded", 5: "canceled", 6: "aborted"}.get(status, str(status))
+        seg = np.array(self.truth[n0:]) if len(self.truth) > n0 else np.array([self.pose()])
+        record.driven_m = float(np.sum(np.hypot(np.diff(seg[:, 0]), np.diff(seg[:, 1]))))
+        end = self.pose()
+        record.final_xy_error = math.hypot(end[0] - goal[0], end[1] - goal[1])
+        record.final_yaw_error = abs(math.remainder(end[2] - goal[2], math.tau))
+        if self.amcl is not None:
+            record.amcl_error = math.hypot(self.amcl[0] - end[0], self.amcl[1] - end[1])
+        record.collisions = len(self.contacts) - c0
+        record.reached = (record.status == "succeeded" and record.final_xy_error <= REACH_XY
+                          and record.final_yaw_error <= REACH_YAW)
+
+    def close(self) -> None:
+        for n in reversed([*self.nodes, self.client_node]):
+            n.destroy_node()
+        self.context.shutdown()
+
+
+def goal_timeout(shortest_m: float) -> float:
+    return 60.0 + 4.0 * shortest_m / 0.4
+
+
+def run_goals(name: str, world_name: str, world_file: Path, n_goals: int, seed: int,
+              tmp: Path, verbose: bool = True,
+              goals: list[tuple[float, float, float]] | None = None,
+              checkpoint: Callable[[RunResult], None] | None = None) -> RunResult:
+    """Goals one after another in one launch; ``checkpoint`` sees the result after each goal."""
+    from eddiebot.sim.worlds import load_world
+
+    world = load_world(world_file)
+    map_yaml, grid = map_of(load_world(world_name), tmp)
+    space = FreeSpace.of(grid)
+    truth_space = FreeSpace.of(map_of(world, tmp)[1])
+    if goals is None:
+        goals = sample_goals(truth_space, world.start[:2], n_goals, seed)
+    graph = PathGraph(truth_space)
+    result = RunResult(name, world_name)
+    t_wall, t_cpu = time.perf_counter(), time.process_time()
+    run = NavRun(world_file, map_yaml, world.start, tmp / f"{name}-{world_name}", seed=seed)
+    try:
+        run.spin(3.0)
+        for i, goal in enumerate(goals):
+            start = run.pose()
+            rec = GoalRecord(i, goal, start)
+            try:
+                rec.shortest_m = graph.shortest(start[:2], goal[:2])
+            except ValueError:
+                rec.shortest_m = math.nan
+            timeout = goal_timeout(rec.shortest_m if math.isfinite(rec.shortest_m) else 30.0)
+            run.navigate(goal, timeout, rec)
+            if rec.reached and rec.shortest_m > 0:
+                rec.ratio = rec.driven_m / rec.shortest_m
+            result.goals.append(rec)
+            result.sim_s = run.now_s()
+            result.collisions = len(run.contacts)
+            result.person_collisions = sum(1 for c in run.contacts if c[2])
+            result.collision_points = [(c[0], c[1]) for c in run.contacts]
+            result.wall_s = time.perf_counter() - t_wall
+            result.cpu_s = time.process_time() - t_cpu
+            if checkpoint is not None:
+                checkpoint(result)
+            if verbose:
+                print(f"  [{world_name} {i:2d}] ({start[0]:6.2f},{start[1]:6.2f}) -> "
+                      f"({goal[0]:6.2f},{goal[1]:6.2f}) {rec.status:9s} {rec.error_code:3d} "
+                      f"{rec.seconds:6.1f}s drove {rec.driven_m:5.2f} m / {rec.shortest_m:5.2f} m "
+                      f"err {rec.final_xy_error:.3f} m {rec.final_yaw_error:.2f} rad "
+                      f"amcl {rec.amcl_error:.3f} contacts {rec.collisions} {rec.error_msg}",
+                      flush=True)
+        result.sim_s = run.now_s()
+        result.collisions = len(run.contacts)
+        result.person_collisions = sum(1 for c in run.contacts if c[2])
+        result.collision_points = [(c[0], c[1]) for c in run.contacts]
+    finally:
+        run.close()
+    result.wall_s = time.perf_counter() - t_wall
+    result.cpu_s = time.process_time() - t_cpu
+    _ = space
+    return result
+
+
+# --------------------------------------------------------------------------- door runs
+@dataclass(frozen=True)
+class DoorCase:
+    world: str
+    closed: tuple[int, ...]
+    extra: tuple[dict[str, Any], ...]
+    staging: tuple[float, float, float]
+    goal: tuple[float, float, float]
+    other_way: bool
+    note: str
+
+
+DOOR_CASES = (
+    DoorCase("office", (6,), (), (13.5, 7.5, 0.0), (16.45, 11.0, math.pi / 2), False,
+             "kitchen door (16.0-16.9, 8.5) closed; the kitchen has no other door"),
+)
+
+
+def run_door(case: DoorCase, seed: int, tmp: Path) -> dict[str, Any]:
+    from eddiebot.sim.worlds import load_world
+
+    world_file = world_variant(case.world, tmp, people=False, closed_doors=case.closed,
+                               extra_doors=case.extra)
+    world = load_world(world_file)
+    base = load_world(world_variant(case.world, tmp, people=False))
+    map_yaml, _ = map_of(base, tmp)  # mapped with the door open
+    truth = FreeSpace.of(map_of(world, tmp)[1])
+    t_wall, t_cpu = time.perf_counter(), time.process_time()
+    run = NavRun(world_file, map_yaml, world.start, tmp / f"door-{case.world}", seed=seed)
+    out: dict[str, Any] = {"world": case.world, "note": case.note, "other_way": case.other_way}
+    try:
+        run.spin(3.0)
+        stage = GoalRecord(0, case.staging, run.pose())
+        run.navigate(case.staging, 120.0, stage)
+        start = run.pose()
+        rec = GoalRecord(1, case.goal, start)
+        rec.shortest_m = PathGraph(truth).shortest(start[:2], case.goal[:2])
+        run.navigate(case.goal, 180.0, rec)
+        out.update({"staging_status": stage.status, "status": rec.status,
+                    "error_code": rec.error_code, "error_msg": rec.error_msg,
+                    "seconds": rec.seconds, "final_xy_error": rec.final_xy_error,
+                    "driven_m": rec.driven_m, "shortest_m": rec.shortest_m,
+                    "collisions": len(run.contacts), "reached": rec.reached})
+        typed_abort = rec.status == "aborted" and rec.error_code != 0 and rec.seconds <= DOOR_LIMIT_S
+        out["passed"] = bool((rec.reached if case.other_way else typed_abort or rec.reached)
+                             and len(run.contacts) == 0)
+        out["sim_s"] = run.now_s()
+    finally:
+        run.close()
+    out["wall_s"] = time.perf_counter() - t_wall
+    out["cpu_s"] = time.process_time() - t_cpu
+    return out
+
+
+# --------------------------------------------------------------------------- main
+PERSON_WORLDS = ("office", "warehouse", "depot", "house")
+COLUMNS = ["run", "world", "goals", "succeeded", "reached", "reached_pct", "collisions", "person_collisions",
+           "mean_ratio", "max_ratio", "mean_amcl_err", "sim_s", "wall_s", "cpu_s"]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--worlds", nargs="+", default=list(WORLDS), choices=WORLDS)
+    ap.add_argument("--goals", type=int, default=50)
+    ap.add_argument("--person-goals", type=int, default=10)
+    ap.add_argument("--runs", nargs="+", default=["static", "person", "door"],
+                    choices=["static", "person", "door"])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=RESULTS / "nav_worlds.json")
+    ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="JSON",
+                    help="combine the results of earlier runs (e.g. worlds run in parallel) into --out")
+    args = ap.parse_args(argv)
+    if args.merge:
+        return merge(args.merge, args.out)
+
+    rows: list[dict[str, Any]] = []
+    details: dict[str, Any] = {}
+    doors: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory(prefix="bench_nav_worlds_") as td:
+        tmp = Path(td)
+        for kind in args.runs:
+            if kind == "door":
+                for case in DOOR_CASES:
+                    d = run_door(case, args.seed, tmp)
+                    print(f"door {case.world}: {d}", flush=True)
+                    doors.append(d)
+                    _write(args, rows, doors, details)
+                continue
+            worlds = [w for w in args.worlds if kind == "static" or w in PERSON_WORLDS]
+            for w in worlds:
+                wf = world_variant(w, tmp, people=kind == "person")
+                n = args.goals if kind == "static" else args.person_goals
+
+                def save(r: RunResult, final: bool = False) -> None:
+                    # written after every goal, so a run cut short keeps what it measured
+                    details[f"{r.name}/{r.world}"] = {"goals": [asdict(g) for g in r.goals],
+                                                      "collision_points": r.collision_points,
+                                                      "complete": final}
+                    partial = [*rows, r.summary()] if not final else rows
+                    _write(args, partial, doors, details)
+
+                r = run_goals(kind, w, wf, n, args.seed, tmp, verbose=not args.quiet,
+                              checkpoint=save)
+                s = r.summary()
+                rows.append(s)
+                save(r, final=True)
+                print_table([s], COLUMNS)
+    print()
+    if rows:
+        print_table(rows, COLUMNS)
+    for d in doors:
+        print(f"door {d['world']}: {d['status']} ({d['error_code']}: {d['error_msg']}) in "
+              f"{d['seconds']:.1f} s, passed {d['passed']}")
+    _write(args, rows, doors, details)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _write(args: argparse.Namespace, rows: list[dict[str, Any]], doors: list[dict[str, Any]],
+           details: dict[str, Any]) -> None:
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = args.out.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps({"machine": machine(), "args": {k: (str(v) if isinstance(v, Path) else v)
+                                                              for k, v in vars(args).items()},
+                               "results": rows, "doors": doors, "details": details},
+                              indent=1, default=float) + "\n")
+    tmp.replace(args.out)
+
+
+def merge(files: list[Path], out: Path) -> int:
+    rows: list[dict[str, Any]] = []
+    doors: list[dict[str, Any]] = []
+    details: dict[str, Any] = {}
+    runs: list[dict[str, Any]] = []
+    for f in files:
+        doc = json.loads(f.read_text())
+        rows += doc.get("results", [])
+        doors += doc.get("doors", [])
+        details.update(doc.get("details", {}))
+        runs.append({"file": f.name, "machine": doc.get("machine"), "args": doc.get("args")})
+    for r in rows:  # navigator-reported successes (``reached`` also needs the true pose in tolerance)
+        goals = details.get(f"{r['run']}/{r['world']}", {}).get("goals", [])
+        r["succeeded"] = sum(1 for g in goals if g["status"] == "succeeded")
+    print_table(rows, COLUMNS)
+    for d in doors:
+        print(f"door {d['world']}: {d['status']} ({d['error_code']}: {d['error_msg']}) in "
+              f"{d['seconds']:.1f} s, passed {d['passed']}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"machine": machine(), "merged": runs, "results": rows, "doors": doors,
+                               "details": details}, indent=1, default=float) + "\n")
+    print(f"wrote {out}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
