@@ -102,6 +102,7 @@ class RouteDriver(Node):
         self.timeout_ns = round(timeout_s * 1e9)
         self.index = 0
         self.spin_left = 0.0
+        self._segment_start: tuple[float, float] | None = None
         self.pose: tuple[float, float, float] | None = None
         self._last_yaw: float | None = None
         self.done = threading.Event()
@@ -159,15 +160,31 @@ class RouteDriver(Node):
             else:
                 self._advance()
             return
-        err = float(wrap_angle(math.atan2(dy, dx) - th))
+        # Pure pursuit on the segment from the previous waypoint: a carrot `lookahead` beyond
+        # the robot's projection on the line, so a lateral offset (after a spin, say) is
+        # removed within a metre instead of being carried into the next doorway.
+        tx, ty = wp.x, wp.y
+        if self._segment_start is not None:
+            sx, sy = self._segment_start
+            lx, ly = wp.x - sx, wp.y - sy
+            length = math.hypot(lx, ly)
+            if length > 1e-6:
+                ux, uy = lx / length, ly / length
+                along = (x - sx) * ux + (y - sy) * uy
+                carrot = min(length, max(0.0, along) + max(self.lookahead, 0.5))
+                tx, ty = sx + carrot * ux, sy + carrot * uy
+        err = float(wrap_angle(math.atan2(ty - y, tx - x) - th))
         if abs(err) > math.radians(35):
             self._send(0.0, math.copysign(self.turn_speed, err))
             return
-        curvature = 2.0 * math.sin(err) / max(self.lookahead, min(dist, 1.0))
+        curvature = 2.0 * math.sin(err) / max(self.lookahead, min(math.hypot(tx - x, ty - y), 1.0))
         v = min(self.speed, 0.6 * dist + 0.05)
         self._send(v, max(-self.turn_speed, min(self.turn_speed, v * curvature)))
 
     def _advance(self) -> None:
         self.spin_left = 0.0
         self._last_yaw = None
+        if self.index < len(self.route):
+            wp = self.route[self.index]
+            self._segment_start = (wp.x, wp.y)
         self.index += 1
