@@ -69,17 +69,12 @@ BEFORE = {"laser_model_type": "likelihood_field", "do_beamskip": False,
 SWEEP: dict[str, dict[str, Any]] = {
     "before (alphas 0.02, likelihood_field, multinomial)": BEFORE,
     "alphas 0.005": {**BEFORE, **_A},
-    "alphas 0.002": {**BEFORE, **{f"alpha{i}": 0.002 for i in (1, 2, 3, 4)}},
     "alphas 0.005 + likelihood_field_prob": {**BEFORE, **_A, **_PROB},
-    "nav2.yaml (+ beam skip, systematic)": {},
-    "nav2.yaml, alphas 0.002": {f"alpha{i}": 0.002 for i in (1, 2, 3, 4)},
-    "nav2.yaml, alphas 0.01": {f"alpha{i}": 0.01 for i in (1, 2, 3, 4)},
+    "nav2.yaml": {},
+    "nav2.yaml, alpha3 0.005": {"alpha3": 0.005},
+    "nav2.yaml, multinomial": {"resample_method": "multinomial"},
     "nav2.yaml, sigma_hit 0.1": {"sigma_hit": 0.1},
-    "nav2.yaml, laser_max_range 8": {"laser_max_range": 8.0},
-    "nav2.yaml, max_beams 120": {"max_beams": 120},
-    "nav2.yaml, update_min_d/a 0.05": {"update_min_d": 0.05, "update_min_a": 0.05},
     "nav2.yaml, update_min_d/a 0.2": {"update_min_d": 0.2, "update_min_a": 0.2},
-    "nav2.yaml, min_particles 1000": {"min_particles": 1000},
 }
 SAMPLE_S = 0.2
 
@@ -395,6 +390,8 @@ def main() -> int:
                     help="run the AMCL core on recorded runs instead of simulating")
     ap.add_argument("--sweep", action="store_true",
                     help="with --replay: every parameter set of SWEEP, mean over --seeds")
+    ap.add_argument("--only", default="",
+                    help="with --sweep: only the parameter sets whose label contains this")
     ap.add_argument("--before", action="store_true",
                     help="simulate with the amcl parameters nav2.yaml had before this study")
     ap.add_argument("--trace", type=Path, default=None,
@@ -408,6 +405,8 @@ def main() -> int:
         overrides = {**BEFORE, **overrides}
     if args.replay and args.sweep:
         for label, sweep_set in SWEEP.items():
+            if args.only not in label:
+                continue
             for path in args.replay:
                 runs = [replay(path, {**sweep_set, **overrides}, seed, args.map)
                         for seed in args.seeds]

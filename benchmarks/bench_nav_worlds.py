@@ -209,20 +209,24 @@ def sample_goals(space: FreeSpace, start: tuple[float, float], n: int, seed: int
 
 # --------------------------------------------------------------------------- worlds
 def world_variant(name: str, out_dir: Path, *, people: bool, closed_doors: tuple[int, ...] = (),
-                  extra_doors: tuple[dict[str, Any], ...] = ()) -> Path:
-    """A copy of built-in world ``name`` with or without its people, some doors closed and
-    some doors added (written to ``out_dir``)."""
+                  extra_doors: tuple[dict[str, Any], ...] = (),
+                  opened_doors: tuple[int, ...] = ()) -> Path:
+    """A copy of built-in world ``name`` with or without its people, some doors opened, some
+    closed and some added (written to ``out_dir``)."""
     from eddiebot.sim.worlds import world_path
 
     doc = yaml.safe_load(world_path(name).read_text())
     if not people:
         doc["people"] = []
     doors = list(doc.get("doors") or [])
+    for i in opened_doors:
+        doors[i] = {**doors[i], "open": True}
     for i in closed_doors:
         doors[i] = {**doors[i], "open": False}
     doors.extend(extra_doors)
     doc["doors"] = doors
     tag = ("" if people else "-nopeople") + "".join(f"-d{i}" for i in closed_doors) + \
+        "".join(f"-o{i}" for i in opened_doors) + \
         ("-extra" if extra_doors else "")
     path = out_dir / f"{name}{tag}.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
@@ -485,11 +489,15 @@ class DoorCase:
     goal: tuple[float, float, float]
     other_way: bool
     note: str
+    opened: tuple[int, ...] = ()
 
 
 DOOR_CASES = (
     DoorCase("office", (6,), (), (13.5, 7.5, 0.0), (16.45, 11.0, math.pi / 2), False,
              "kitchen door (16.0-16.9, 8.5) closed; the kitchen has no other door"),
+    DoorCase("house", (0,), (), (5.6, 2.45, 0.0), (9.5, 2.0, 0.0), True,
+             "door (7.0, 2.0-2.9) closed; the other way runs through the doors at "
+             "(7.0, 6.5-7.4), open in map and world, and (8.5-9.4, 4.5)", opened=(1,)),
 )
 
 
@@ -497,9 +505,9 @@ def run_door(case: DoorCase, seed: int, tmp: Path) -> dict[str, Any]:
     from eddiebot.sim.worlds import load_world
 
     world_file = world_variant(case.world, tmp, people=False, closed_doors=case.closed,
-                               extra_doors=case.extra)
+                               extra_doors=case.extra, opened_doors=case.opened)
     world = load_world(world_file)
-    base = load_world(world_variant(case.world, tmp, people=False))
+    base = load_world(world_variant(case.world, tmp, people=False, opened_doors=case.opened))
     map_yaml, _ = map_of(base, tmp)  # mapped with the door open
     truth = FreeSpace.of(map_of(world, tmp)[1])
     t_wall, t_cpu = time.perf_counter(), time.process_time()
@@ -543,6 +551,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--runs", nargs="+", default=["static", "person", "door"],
                     choices=["static", "person", "door"])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--door-worlds", nargs="+", default=None,
+                    help="only the door cases in these worlds (default: all)")
     ap.add_argument("--out", type=Path, default=RESULTS / "nav_worlds.json")
     ap.add_argument("--quiet", action="store_true")
     ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="JSON",
@@ -559,6 +569,8 @@ def main(argv: list[str] | None = None) -> int:
         for kind in args.runs:
             if kind == "door":
                 for case in DOOR_CASES:
+                    if args.door_worlds and case.world not in args.door_worlds:
+                        continue
                     d = run_door(case, args.seed, tmp)
                     print(f"door {case.world}: {d}", flush=True)
                     doors.append(d)

@@ -5,12 +5,13 @@ encoder noise), Eddie's base stack, depthimage_to_laserscan and the SLAM node
 (``config/slam.yaml``, sync processing) on a simulated clock, a scripted operator driving a
 fixed route:
 
-* ``office``: `OFFICE_LONG_ROUTE` (about 10 simulated minutes, every open room, the corridor
-  and the start revisited);
-* ``warehouse``: `WAREHOUSE_ROUTE` (about 10 simulated minutes, two loops through the aisles);
+* ``office``: `OFFICE_LONG_ROUTE` (about 6.5 simulated minutes, 89 m: every open room, the
+  corridor and the start revisited);
+* ``warehouse``: `WAREHOUSE_ROUTE` (about 6.5 simulated minutes, 105 m: two loops through the
+  aisles);
 * ``corridor``: `CORRIDOR_ROUTE` of the RGB-D benchmark (down a 40 m low-feature hallway and
   back) — the low-feature warning and the end-point error against odometry alone;
-* ``office-demo``: the demo's own `OFFICE_ROUTE` (about 5 minutes), to check the demo stage.
+* ``office-demo``: the demo's own `OFFICE_ROUTE` (about 3.5 minutes), to check the demo stage.
 
 Figures: trajectory error of the SLAM nodes against ground truth (RMSE, max; the map frame
 starts at the true start pose), wheel odometry's at the same times, end-point error of
@@ -22,6 +23,13 @@ writes ``benchmarks/results/slam_sim.json``.
 
     .venv/bin/python benchmarks/bench_slam_sim.py [--worlds office warehouse corridor office-demo]
         [--seed 0] [--params FILE] [--keep DIR [--record]]
+
+``--replay DIR`` scores the bags a ``--keep DIR --record`` run left (``DIR/<run>/mapping_bag``)
+offline instead: each bag through `SlamCore` (as ``eddie slam replay`` does: every scan that
+moved enough, no node time gate) with ``--set NAME:=VALUE`` overrides on config/slam.yaml —
+how the parameters below were chosen. Writes ``benchmarks/results/<--name>.json``.
+
+    .venv/bin/python benchmarks/bench_slam_sim.py --replay DIR [--worlds ...] [--set K:=V ...]
 """
 
 from __future__ import annotations
@@ -95,6 +103,88 @@ def run_one(name: str, out: Path, seed: int, params: Path | None,
     return row
 
 
+def _series(bag: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    from eddiebot.geometry import quaternion_to_yaw
+    from eddiebot.viz.bag import BagReader
+
+    t, p = [], []
+    with BagReader(bag) as reader:
+        for m in reader.messages([topic]):
+            msg = m.decode()
+            q = msg.pose.pose.orientation
+            t.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+            p.append((msg.pose.pose.position.x, msg.pose.pose.position.y,
+                      quaternion_to_yaw(q.x, q.y, q.z, q.w)))
+    return np.array(t, dtype=np.int64), np.array(p)
+
+
+def _interp(t: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    out = np.empty((len(q), 3))
+    out[:, 0] = np.interp(q, t, p[:, 0])
+    out[:, 1] = np.interp(q, t, p[:, 1])
+    out[:, 2] = np.interp(q, t, np.unwrap(p[:, 2]))
+    return out
+
+
+def replay_one(name: str, bag: Path, overrides: dict[str, Any]) -> dict[str, Any]:
+    """Replay a recorded run's bag and score it against its ground truth."""
+    from eddiebot.cli.slam import _default_params, replay_bag
+    from eddiebot.geometry import se2_compose
+    from eddiebot.sim.worlds import load_world
+    from eddiebot.slam import load_slam_config
+
+    start = np.array(load_world(RUNS[name][0]).start, dtype=np.float64)
+    config = load_slam_config(_default_params(), overrides=overrides)
+    tg, pg = _series(bag, "/ground_truth/odom")
+    to, po = _series(bag, "/odom")
+    res = replay_bag(bag, config)
+    stamps, poses = res.trajectory()
+    q = np.round(stamps * 1e9).astype(np.int64)
+    est = se2_compose(np.broadcast_to(start, poses.shape), poses)
+    gt = _interp(tg, pg, q)
+    od = se2_compose(np.broadcast_to(start, poses.shape), _interp(to, po, q))
+    err = np.hypot(*(est[:, :2] - gt[:, :2]).T)
+    oerr = np.hypot(*(od[:, :2] - gt[:, :2]).T)
+
+    def drift(a: np.ndarray) -> float:
+        d = np.unwrap(a[:, 2]) - gt[:, 2]
+        d = (d - d[0] + np.pi) % (2 * np.pi) - np.pi
+        return float(np.degrees(np.abs(d).max()))
+
+    cpu = 1e3 * np.asarray(res.scan_cpu_s)
+    return {
+        "run": name, "overrides": " ".join(f"{k}:={v}" for k, v in overrides.items()) or "-",
+        "nodes": len(poses), "loop_closures": len(res.core.loop_closures),
+        "ate_rmse_m": float(np.sqrt(np.mean(err**2))), "ate_max_m": float(err.max()),
+        "slam_end_m": float(err[-1]), "odom_ate_rmse_m": float(np.sqrt(np.mean(oerr**2))),
+        "odom_end_m": float(oerr[-1]), "heading_drift_max_deg": drift(est),
+        "odom_heading_drift_max_deg": drift(od),
+        "scan_cpu_median_ms": float(np.median(cpu)), "scan_cpu_p99_ms": float(np.percentile(cpu, 99)),
+    }
+
+
+def main_replay(args: argparse.Namespace) -> int:
+    import yaml
+
+    overrides: dict[str, Any] = {}
+    for item in args.set:
+        key, value = item.split(":=", 1)
+        overrides[key.strip()] = yaml.safe_load(value)
+    rows = []
+    for name in args.worlds:
+        bag = args.replay / name / "mapping_bag"
+        if not bag.exists():
+            print(f"{name}: no {bag}, skipped")
+            continue
+        rows.append(replay_one(name, bag, overrides))
+        print(rows[-1], flush=True)
+    print_table(rows, ["run", "nodes", "loop_closures", "ate_rmse_m", "ate_max_m", "slam_end_m",
+                       "odom_ate_rmse_m", "odom_end_m", "heading_drift_max_deg",
+                       "odom_heading_drift_max_deg", "scan_cpu_median_ms", "overrides"])
+    print(f"\nwrote {write_results(args.name, rows)}")
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--worlds", nargs="+", default=list(RUNS), choices=list(RUNS))
@@ -107,7 +197,15 @@ def main() -> int:
     ap.add_argument("--record", action="store_true",
                     help="record /scan, /odom, /ground_truth/odom and TF of each run into "
                     "--keep DIR/<run>/mapping_bag (for eddie slam replay)")
+    ap.add_argument("--replay", type=Path, default=None,
+                    help="score the bags of an earlier --keep DIR --record run offline")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME:=VALUE",
+                    help="with --replay: override one SLAM parameter (repeatable)")
     args = ap.parse_args()
+    if args.replay is not None:
+        if args.name == "slam_sim":
+            args.name = "slam_sim_replay"
+        return main_replay(args)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         out = args.keep or Path(tmp)

@@ -238,8 +238,12 @@ def main() -> int:
             print(f"{str(r['session'])[-30:]:30s} {r['nodes']:6d} {r['loop_closures']:6d} "
                   f"{r['rejected']:4d} {r['ate_rmse_m']:9.3f} {r['ate_max_m']:8.3f} "
                   f"{r['closure_error_max_m']:15.3f} {r['cpu_s']:6.1f}")
-        if args.out != RESULTS:
-            args.out.write_text(json.dumps(rows, indent=2, default=str))
+        out = RESULTS.with_name("vslam_sim_replay.json") if args.out == RESULTS else args.out
+        out.write_text(json.dumps({
+            "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+            "overrides": overrides, "odom_variance": args.odom_variance, "sessions": rows},
+            indent=2, default=str))
+        print(f"wrote {out}")
         return 0
     if args.graph:
         graph = bench_graph()

@@ -182,7 +182,10 @@ def test_initial_pose_covariance_is_used_as_given() -> None:
                            initial_pose_x=5.0, initial_pose_y=4.0, initial_pose_yaw=1.0),
                 OccupancyMap(occ, RES), seed=2)
     # set_initial_pose: Nav2's zero covariance puts every particle on the pose
-    assert np.allclose(amcl.particles, [5.0, 4.0, 1.0]) and amcl.converged
+    assert np.allclose(amcl.particles, [5.0, 4.0, 1.0])
+    assert not amcl.converged  # as pf_init: decided at the next resampling
+    amcl.resample()
+    assert amcl.converged
     cov = np.array([[0.04, 0.03, 0.0], [0.03, 0.09, 0.0], [0.0, 0.0, 0.01]])
     amcl.initialize((5.0, 4.0, 1.0), cov)
     emp = np.cov(amcl.particles.T)

@@ -113,6 +113,24 @@ def test_gate_holds_a_surprising_loop_until_a_neighbour_confirms_it() -> None:
     del second
 
 
+def test_gate_in_levenberg_marquardt_mode_uses_batch_marginals() -> None:
+    truth = _square()
+    graph = _drifting_graph(truth, DRIFT_COV, optimizer="levenberg_marquardt")
+    _loop(graph, truth, 39, 0)
+    graph.optimize()
+    assert len(graph.held) == 1
+    _loop(graph, truth, 38, 1)
+    graph.optimize()
+    assert graph.held == [] and graph.rejected == []
+    assert _error(graph, truth) < 0.5
+    clean = graph.poses.copy()
+    false = len(graph.edges)
+    graph.add_edge(20, 0, np.array([0.3, 0.0, 0.1]), LOOP_COV, kind=EdgeKind.LOOP, robust=True)
+    graph.optimize()
+    assert graph.rejected == [false]
+    assert float(np.max(np.hypot(*(graph.poses[:, :2] - clean[:, :2]).T))) < 1e-3
+
+
 def test_gate_without_support_takes_a_single_plausible_loop() -> None:
     truth = _square()
     graph = _drifting_graph(truth, DRIFT_COV, require_support=False)

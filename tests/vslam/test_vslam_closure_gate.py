@@ -130,3 +130,39 @@ def test_loop_cov_limited_caps_closure_information_at_odometry():
     assert free[0] > 1000.0 and free[5] > 1e4  # registration alone: mm / sub-mrad
     np.testing.assert_allclose(capped[[0, 1, 2]], 100.0)
     np.testing.assert_allclose(capped[[5]], 1000.0)
+
+
+def test_pnp_jacobian_covariance_grows_along_the_unconstrained_direction():
+    from eddiebot.vslam.registration import pnp_jacobian_covariance
+
+    rng = np.random.default_rng(3)
+    lt = CAM.local_transform
+    # inliers straight ahead (base x forward): a narrow cluster on one wall 3 m away, or
+    # points spread over the view between 1 and 5 m
+    narrow = np.column_stack([np.full(40, 3.0), rng.uniform(-0.15, 0.15, 40),
+                              rng.uniform(0.2, 0.5, 40)])
+    spread = np.column_stack([rng.uniform(1.0, 5.0, 40), rng.uniform(-1.0, 1.0, 40),
+                              rng.uniform(0.0, 1.0, 40)])
+    link = planar_pose(-0.2, 0.05, 0.1)  # pose of the old frame in the new one
+
+    def uv_of(points: np.ndarray) -> np.ndarray:
+        from eddiebot.vslam.transforms import se3_inverse
+
+        m = se3_inverse(lt) @ link
+        pc = points @ m[:3, :3].T + m[:3, 3]
+        return np.column_stack([CAM.fx * pc[:, 0] / pc[:, 2] + CAM.cx,
+                                CAM.fy * pc[:, 1] / pc[:, 2] + CAM.cy]).astype(np.float32)
+
+    var_narrow = np.diag(pnp_jacobian_covariance(link, narrow, uv_of(narrow), CAM, True))
+    var_spread = np.diag(pnp_jacobian_covariance(link, spread, uv_of(spread), CAM, True))
+    # exact projections: the 0.5 px floor sets the scale; out-of-plane axes are left at 0
+    assert np.all(var_narrow[[2, 3, 4]] == 0.0) and np.all(var_spread[[0, 1, 5]] > 0.0)
+    # one cluster at one depth: sideways shift and yaw trade off, both far less certain
+    assert var_narrow[1] > 20 * var_spread[1]
+    assert var_narrow[5] > 20 * var_spread[5]
+    # the spread case is well constrained: yaw to ~0.1°
+    assert np.sqrt(var_spread[5]) < np.deg2rad(0.1)
+    # noisy pixels raise the variances through the residual
+    noisy = uv_of(spread) + rng.normal(0, 3.0, (40, 2)).astype(np.float32)
+    var_noisy = np.diag(pnp_jacobian_covariance(link, spread, noisy, CAM, True))
+    assert var_noisy[5] > 10 * var_spread[5]

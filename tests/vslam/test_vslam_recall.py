@@ -18,3 +18,9 @@ def test_ties_are_accepted_together_and_a_wrong_first_hypothesis_gives_zero():
     assert recall == 0.0 and thr == 1.0
     recall, _ = recall_at_full_precision([0.4, 0.4, 0.2], [1, 1, 1], n_positive=4)
     assert recall == 0.75
+
+
+def test_near_places_at_the_top_are_not_errors():
+    curve = precision_recall_curve([0.9, 0.8, 0.3], [0, 1, -1], n_positive=2)
+    assert curve[0] == (0.9, 1.0, 0.0)
+    assert recall_at_full_precision([0.9, 0.8, 0.3], [0, 1, -1], n_positive=2) == (0.5, 0.8)

@@ -48,9 +48,9 @@ OFFICE_ROUTE: tuple[Waypoint, ...] = (
     Waypoint(1.5, 7.5, spin=math.pi),
 )
 
-#: The benchmark's office route (about 10 simulated minutes): `OFFICE_ROUTE`, then the three
+#: The benchmark's office route (about 6.5 simulated minutes): `OFFICE_ROUTE`, then the three
 #: other open rooms (south-west, north-west with the meeting table, south-east) from the
-#: corridor, revisiting the corridor and the start twice more: about 85 m and nine spins.
+#: corridor, revisiting the corridor and the start twice more: about 89 m and nine spins.
 OFFICE_LONG_ROUTE: tuple[Waypoint, ...] = (
     *OFFICE_ROUTE,
     Waypoint(2.45, 7.5),
@@ -66,7 +66,7 @@ OFFICE_LONG_ROUTE: tuple[Waypoint, ...] = (
     Waypoint(1.5, 7.5, spin=math.pi),
 )
 
-#: The benchmark's warehouse route (30 × 20 m; about 10 simulated minutes): along the south
+#: The benchmark's warehouse route (30 × 20 m; about 6.5 simulated minutes): along the south
 #: wall, up the middle cross aisle, east down the central aisle to the far wall, back west to
 #: the pallet by the west wall, down the west side to the start, and round again through the
 #: aisle between the first two shelf rows (its pillars passed on the south side), closing

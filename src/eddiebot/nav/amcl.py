@@ -280,7 +280,7 @@ class Amcl:
         self.w_slow = self.w_fast = 0.0
         self._force_update = True
         self._odom_last = None
-        self._update_converged()
+        self.converged = False  # pf_init_converged: decided at the next resampling
         self._compute_estimate()
 
     def initialize_global(self) -> None:
@@ -289,7 +289,7 @@ class Amcl:
         self.particles = self._random_poses(n)
         self.weights = np.full(n, 1.0 / n)
         self._force_update = True
-        self._update_converged()
+        self.converged = False
         self._compute_estimate()
 
     def _random_poses(self, n: int) -> npt.NDArray[np.float64]:

@@ -21,7 +21,9 @@ three steps, each edge tested when it arrives, against the estimate of the graph
    ends within ``support_window`` nodes of its own, or a held one with which it passes the
    joint test (the conditional innovation of one given the other within the gate) — the
    "consistent over consecutive detections" check of visual loop closing. Until then it is
-   held (`held`); the oldest of more than 8 held edges is rejected.
+   held (`held`); the oldest of more than 8 held edges is rejected. A rejected edge goes back
+   through the gate when a loop accepted later closes the same place (its estimate there is
+   then better founded), so an early verdict is not final.
 
 Edges accepted in step 3 carry a Huber kernel at the gate (√χ²₃(p) σ): their residual is large
 until the graph absorbs them, and Huber pulls with bounded force rather than ignoring them as a
@@ -136,7 +138,7 @@ class PoseGraph:
         kernel_width: float = 1.0,
         gate_probability: float | None = 0.999,
         require_support: bool = True,
-        support_window: int = 10,
+        support_window: int = 30,
     ) -> None:
         if optimizer not in ("isam2", "levenberg_marquardt"):
             raise ValueError(
@@ -167,6 +169,8 @@ class PoseGraph:
         self._held: list[int] = []
         self._trusted: set[int] = set()
         self._closures: dict[int, list[int]] = {}  # accepted loop edges: later end -> earlier ends
+        self._dormant: dict[int, set[int]] = {}  # rejected robust edges by later end
+        self._due: set[int] = set()  # rejected edges a new closure nearby sends back to the gate
         self._pending_nodes: list[int] = []
         self._pending_edges: list[int] = []
         self._needs_full_solve = False
@@ -401,9 +405,14 @@ class PoseGraph:
         gate = self._gate
         accepted: list[int] = []
         surprising = False
-        # held edges a closure accepted since has come to support get another test
+        # held edges a closure accepted since has come to support get another test, and so do
+        # rejected ones it closes the same place as
         retry = [h for h in self._held if self._supported(h)]
         self._held = [h for h in self._held if h not in retry]
+        for k in sorted(self._due):
+            self._dormant.get(self._last_end(k), set()).discard(k)
+            retry.append(k)
+        self._due = set()
         for k in [*retry, *candidates]:
             self.gate_tests += 1
             self._rejected.discard(k)
@@ -414,7 +423,7 @@ class PoseGraph:
             self.marginal_queries += 1
             b, c = self._innovation([k], marginal)
             if float(b @ np.linalg.solve(c, b)) > gate:
-                self._rejected.add(k)
+                self._reject(k)
                 continue
             partner = -1
             if self.require_support and not self._supported(k):
@@ -437,7 +446,7 @@ class PoseGraph:
                 if partner < 0:
                     self._held.append(k)
                     if len(self._held) > _HOLD:
-                        self._rejected.add(self._held.pop(0))
+                        self._reject(self._held.pop(0))
                     continue
                 self._held.remove(partner)
                 accepted.append(partner)
@@ -449,9 +458,21 @@ class PoseGraph:
             self._note_closure(k)
         return accepted, surprising
 
+    def _last_end(self, k: int) -> int:
+        return max(self._edges[k].i, self._edges[k].j)
+
+    def _reject(self, k: int) -> None:
+        self._rejected.add(k)
+        self._dormant.setdefault(self._last_end(k), set()).add(k)
+
     def _note_closure(self, k: int) -> None:
-        e = self._edges[k]
-        self._closures.setdefault(max(e.i, e.j), []).append(min(e.i, e.j))
+        e, w = self._edges[k], self.support_window
+        lo, hi = min(e.i, e.j), max(e.i, e.j)
+        self._closures.setdefault(hi, []).append(lo)
+        for last in range(hi - w, hi + w + 1):
+            for r in self._dormant.get(last, ()):
+                if abs(min(self._edges[r].i, self._edges[r].j) - lo) <= w:
+                    self._due.add(r)
 
     def _supported(self, k: int) -> bool:
         """Whether an accepted loop edge closes the same place (both ends within
@@ -665,6 +686,12 @@ class PoseGraph:
         self._rejected = {order[k] for k in sub.rejected + sub.held}
         self._trusted = {order[k] for k in sub._trusted}
         self._held = []
+        self._closures, self._dormant, self._due = {}, {}, set()
+        for k, e in enumerate(self._edges):
+            if k in self._rejected:
+                self._dormant.setdefault(self._last_end(k), set()).add(k)
+            elif e.robust or e.kind is EdgeKind.LOOP:
+                self._closures.setdefault(max(e.i, e.j), []).append(min(e.i, e.j))
         self.gate_tests += sub.gate_tests
         self.marginal_queries += sub.marginal_queries
         self._store(self._lm(self._inlier_graph()))
@@ -716,5 +743,7 @@ class PoseGraph:
         self._held = []
         self._trusted = set()
         self._closures = {}
+        self._dormant = {}
+        self._due = set()
         self._solved = True
         self._reset_isam()

@@ -105,7 +105,8 @@ def precision_recall_curve(
     Per query image: `values` = its best hypothesis value, `verdicts` = 1 if that hypothesis is
     the same place, −1 if it is a wrong place, 0 if it is neither counted right nor wrong (a
     near place within the ground truth's tolerance); `n_positive` = query images that have a
-    same place among the loop candidates. Images accepted at a threshold t have value ≥ t.
+    same place among the loop candidates. Images accepted at a threshold t have value ≥ t;
+    precision is 1 while only near places have been accepted.
     """
     v = np.asarray(values, np.float64)
     d = np.asarray(verdicts, np.int64)
@@ -119,7 +120,8 @@ def precision_recall_curve(
             break
         if k + 1 < v.size and v[k + 1] == v[k]:
             continue  # ties: take all images with this value together
-        precision = tp[k] / max(1, tp[k] + fp[k])
+        counted = tp[k] + fp[k]
+        precision = tp[k] / counted if counted else 1.0  # only near places so far: no error
         out.append((float(v[k]), float(precision), float(tp[k] / max(1, n_positive))))
     return out
 

@@ -24,7 +24,6 @@ from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
 from eddiebot.vslam.graph import (
     GtsamPoseGraph,
     PoseGraphOptimizer,
-    discard_links,
     optimized_link_errors,
 )
 from eddiebot.vslam.icp import icp_2d
@@ -507,7 +506,6 @@ class Rtabmap:
             _, lin, ang = optimized_link_errors(self.optimizer, optimized, links)
             worst = max(float(lin.max(initial=0.0)), float(ang.max(initial=0.0)))
             if worst > thr:
-                discard_links(self.optimizer, new_links)
                 return False
         self.optimized_poses.update(optimized)
         return True
