@@ -232,6 +232,19 @@ def test_stop_reason_overrides_and_is_reported() -> None:
     assert out.publish == Twist2D(0.3, 0, 0) and out.state_changed and out.polygon_name == ""
 
 
+def test_lost_localization_stops_translation_but_lets_a_turn_in_place_through() -> None:
+    # AMCL only updates after the robot moves: a full stop would never let it recover
+    m = _monitor(Stop={"type": "circle", "radius": 0.3, "action_type": "stop", "min_points": 1})
+    out = m.process(Twist2D(0.3, 0, 0.8), _pts((2.0, 0.0)), 0, stop_reason="localization lost")
+    assert out.publish == Twist2D(0.0, 0.0, 0.8) and out.action == ActionType.STOP
+    assert out.polygon_name == "localization lost"
+    # ... but not when a stop zone holds too, nor when a source is stale
+    out = m.process(Twist2D(0.3, 0, 0.8), _pts((0.2, 0.0)), 1, stop_reason="localization lost")
+    assert out.publish == Twist2D()
+    out = m.process(Twist2D(0.3, 0, 0.8), {"scan": None}, 2, stop_reason="localization lost")
+    assert out.publish == Twist2D()
+
+
 def test_polygon_source_samples_outlines() -> None:
     pts = polygon_source_points([[[0, 0], [1, 0], [1, 0.25]]], sampling_distance=0.1)
     # edges of 1.0, 0.25 and hypot(1, 0.25) m: 10, 3 and 11 steps, both ends included

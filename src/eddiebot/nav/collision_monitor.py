@@ -336,17 +336,32 @@ class CollisionMonitor:
                 return z
         raise KeyError(name)
 
+    def _stop_zone_hit(self, cmd: Twist2D, sources: dict[str, Points | None]) -> bool:
+        for zone in self.zones:
+            if not zone.config.enabled or zone.action != ActionType.STOP:
+                continue
+            zone.update_polygon(cmd)
+            if zone.shape_set and zone.count_inside(self._points_for(zone, sources)) >= zone.min_points:
+                return True
+        return False
+
     def process(self, cmd: Twist2D, sources: dict[str, Points | None], now_ns: int,
                 stop_reason: str = "") -> MonitorOutput:
         """One incoming command. ``stop_reason`` (not upstream): stop for a reason outside the
-        zones (lost localization), reported as the polygon name like ``invalid source``."""
+        zones (lost localization), reported as the polygon name like ``invalid source``. Only
+        translation stops then: a turn in place sweeps no new ground for a round base and is
+        how a particle filter that updates on rotation (``update_min_a``) recovers, so the
+        recovery spin still gets through -- unless a stop zone or an invalid source also
+        holds, which stop everything."""
         action = ActionType.DO_NOTHING
         name = ""
         request = cmd
         invalid = [n for n in self.config.observation_sources
                    if n in sources and sources[n] is None]
         if stop_reason:
-            action, name, request = ActionType.STOP, stop_reason, Twist2D()
+            action, name, request = ActionType.STOP, stop_reason, Twist2D(0.0, 0.0, cmd.wz)
+            if invalid or self._stop_zone_hit(request, sources):
+                request = Twist2D()
         elif invalid:
             action, name, request = ActionType.STOP, INVALID_SOURCE, Twist2D()
         else:

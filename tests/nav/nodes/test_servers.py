@@ -116,3 +116,40 @@ def test_lost_tf_makes_the_controller_publish_zero(make_stack):
     assert result.result().result.error_code == 102  # TF_ERROR
     assert stack.robot.cmd == (0.0, 0.0)
     _ = math
+
+
+def test_lost_localization_holds_then_aborts_the_goal(make_stack, nav_stub_params):
+    from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
+
+    doc = nav_stub_params()
+    doc["controller_server"]["ros__parameters"]["localization_check"] = True
+    stack = make_stack(servers=("map_server", "planner_server", "controller_server"), params=doc)
+    cmds = []
+    stack.probe.create_subscription(Twist, "/cmd_vel_nav", cmds.append, 100)
+    amcl = stack.probe.create_publisher(PoseWithCovarianceStamped, "amcl_pose", 1)
+    confident = PoseWithCovarianceStamped()
+    confident.pose.covariance[0] = confident.pose.covariance[7] = 0.01
+    confident.pose.covariance[35] = 0.01
+    amcl.publish(confident)
+    plan = ActionClient(stack.probe, ComputePathToPose, "/compute_path_to_pose")
+    follow = ActionClient(stack.probe, FollowPath, "/follow_path")
+    fut = plan.send_goal_async(ComputePathToPose.Goal(goal=pose_stamped(4.5, 1.0, 0.0, "map")))
+    stack.spin(0.5)
+    res = fut.result().get_result_async()
+    stack.spin(0.5)
+    h = follow.send_goal_async(FollowPath.Goal(path=res.result().result.path))
+    stack.spin(1.5)
+    assert any(abs(c.linear.x) > 0.1 for c in cmds)  # confident: it drives
+    lost = PoseWithCovarianceStamped()
+    lost.pose.covariance[0] = lost.pose.covariance[7] = 0.8**2  # 0.8 m std > 0.5
+    lost.pose.covariance[35] = 0.01
+    amcl.publish(lost)
+    stack.spin(1.0)
+    assert cmds[-1].linear.x == 0.0 and cmds[-1].angular.z == 0.0  # held, not yet aborted
+    result = h.result().get_result_async()
+    assert not result.done()
+    stack.spin(1.5)  # past localization_lost_timeout (2 s)
+    assert result.done()
+    assert result.result().status == GoalStatus.STATUS_ABORTED
+    assert result.result().result.error_code == 102  # TF_ERROR
+    assert "localization lost" in result.result().result.error_msg

@@ -26,6 +26,7 @@ from eddiebot.core.lifecycle import State, TransitionCallbackReturn
 from eddiebot.core.tf import Buffer, TransformException, TransformListener
 from eddiebot.msgs.geometry_msgs import Twist
 from eddiebot.msgs.nav_msgs import Path
+from eddiebot.nav.amcl import LocalizationLimits
 from eddiebot.nav.controllers import ControllerServer as ControllerPlugins
 from eddiebot.nav.controllers import build_controller_server
 from eddiebot.nav.controllers.follow_path import FollowPathRun, RunStatus
@@ -39,6 +40,7 @@ from eddiebot.nav.errors import (
 )
 from eddiebot.nav.nodes._common import NavServer, path_from_msg, path_to_msg, twist_to_msg
 from eddiebot.nav.nodes._costmap import CostmapHost
+from eddiebot.nav.nodes.amcl import LocalizationWatch
 from eddiebot.nav.types import Twist2D
 
 __all__ = ["ControllerServer"]
@@ -61,6 +63,14 @@ class ControllerServer(NavServer):
         "odom_topic": "odom", "enable_stamped_cmd_vel": False,
         # eddiebot: odometry older than this (s) holds the robot at zero
         "odom_timeout": 0.5,
+        # eddiebot (never drive blind): with localization_check, a lost localization (see
+        # nav.amcl.LocalizationLimits) holds the robot at zero, and aborts the goal with
+        # a TF error once it has lasted localization_lost_timeout s -- the navigator's
+        # recovery spin, which the collision monitor lets through, then relocalizes
+        "localization_check": False, "global_frame_id": "map",
+        "localization_pose_topic": "amcl_pose", "localization_tf_timeout": 1.0,
+        "localization_max_xy_std": 0.5, "localization_max_yaw_std": 0.5,
+        "localization_lost_timeout": 2.0,
     }
 
     def __init__(self, node_name: str = "controller_server", **kwargs: Any) -> None:
@@ -79,14 +89,18 @@ class ControllerServer(NavServer):
         self._frun: FollowPathRun | None = None
         self._handle: ServerGoalHandle | None = None
         self._run_controller = ""
+        self._watch: LocalizationWatch | None = None
+        self._lost_since_ns: int | None = None
 
     # -- lifecycle ----------------------------------------------------------------------------
     def on_configure(self, state: State) -> TransitionCallbackReturn:
         def build() -> None:
             tree = self.params_tree()
             cm_params = tree.pop("local_costmap", {}) or {}
-            for key in ("odom_topic", "enable_stamped_cmd_vel", "odom_timeout"):
+            for key in ("odom_topic", "enable_stamped_cmd_vel", "odom_timeout", "global_frame_id"):
                 tree.pop(key, None)
+            for key in [k for k in tree if k.startswith("localization_")]:
+                tree.pop(key)
             self.plugins = build_controller_server(tree, server=self.get_name())
             self.costmap = build_costmap(cm_params, "local_costmap")
             self.host = CostmapHost(self, self.costmap, "local_costmap", self.tf_buffer)
@@ -106,6 +120,14 @@ class ControllerServer(NavServer):
             self.create_subscription(SpeedLimit, self.plugins.config.speed_limit_topic,
                                      self._on_speed_limit, 1),
         ]
+        if bool(self.param("localization_check")):
+            limits = LocalizationLimits(float(self.param("localization_max_xy_std")),
+                                        float(self.param("localization_max_yaw_std")),
+                                        float(self.param("localization_tf_timeout")))
+            self._watch = LocalizationWatch(
+                self, self.tf_buffer, limits, global_frame=str(self.param("global_frame_id")),
+                odom_frame=self.host.global_frame,
+                pose_topic=str(self.param("localization_pose_topic")))
         self._action = ActionServer(self, FollowPath, "follow_path", self._follow,
                                     cancel_callback=lambda _h: CancelResponse.ACCEPT)
         return TransitionCallbackReturn.SUCCESS
@@ -118,6 +140,9 @@ class ControllerServer(NavServer):
         for s in self._subs:
             self.destroy_subscription(s)
         self._subs = []
+        if self._watch is not None:
+            self._watch.destroy()
+            self._watch = None
         if self.host is not None:
             self.host.deactivate()
         if self._listener is not None:
@@ -235,7 +260,18 @@ class ControllerServer(NavServer):
             if pose is None:
                 return self._abort(handle, result, ControllerTFError(
                     f"lost the robot pose ({self.host.global_frame} -> {self.host.base_frame})"))
-            if not self._odom_fresh(now):
+            lost = self._watch.problem(now) if self._watch is not None else ""
+            if not lost:
+                self._lost_since_ns = None
+            if lost:
+                if self._lost_since_ns is None:
+                    self._lost_since_ns = now
+                    self.get_logger().warning(f"localization lost ({lost}): holding the robot")
+                if (now - self._lost_since_ns) * 1e-9 >= float(self.param("localization_lost_timeout")):
+                    self._lost_since_ns = None
+                    return self._abort(handle, result, ControllerTFError(f"localization lost: {lost}"))
+                self.publish_zero()
+            elif not self._odom_fresh(now):
                 self.get_logger().warning("odometry is stale: holding the robot", once=True)
                 self.publish_zero()
             else:
