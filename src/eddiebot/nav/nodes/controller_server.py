@@ -266,10 +266,10 @@ class ControllerServer(NavServer):
             if lost:
                 if self._lost_since_ns is None:
                     self._lost_since_ns = now
-                    self.get_logger().warning(f"localization lost ({lost}): holding the robot")
+                    self.get_logger().warning(f"{lost}: holding the robot")
                 if (now - self._lost_since_ns) * 1e-9 >= float(self.param("localization_lost_timeout")):
                     self._lost_since_ns = None
-                    return self._abort(handle, result, ControllerTFError(f"localization lost: {lost}"))
+                    return self._abort(handle, result, ControllerTFError(lost))
                 self.publish_zero()
             elif not self._odom_fresh(now):
                 self.get_logger().warning("odometry is stale: holding the robot", once=True)
