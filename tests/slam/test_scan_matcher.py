@@ -172,3 +172,73 @@ def test_fine_search_climb_follows_heading_translation_coupling() -> None:
         errors[climb] = worst
     assert errors[0] > 0.015  # the single box misses (documents the failure mode)
     assert errors[8] < 0.01
+
+
+def _icp_oracle(
+    points: np.ndarray, reference: np.ndarray, pose: np.ndarray, max_distance: float = 0.2
+) -> tuple[np.ndarray, float, np.ndarray | None]:
+    """Plain numpy / k-d tree point-to-line ICP (the compiled kernel must reproduce it)."""
+    from scipy.spatial import cKDTree
+
+    from eddiebot.slam.scan_matcher import point_normals
+
+    pose = pose.astype(np.float64).copy()
+    tree = cKDTree(reference)
+    normals = point_normals(reference, tree)
+    planar = np.isfinite(normals[:, 0])
+    normals = np.where(planar[:, None], normals, 0.0)
+    share, cov = 0.0, None
+    for it in range(11):
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        world = np.stack(
+            [pose[0] + c * points[:, 0] - s * points[:, 1],
+             pose[1] + s * points[:, 0] + c * points[:, 1]], axis=-1,
+        )
+        dist, idx = tree.query(world, k=1, distance_upper_bound=max_distance)
+        ok = np.isfinite(dist)
+        ok[ok] &= planar[idx[ok]]
+        share = float(np.count_nonzero(ok)) / points.shape[0]
+        if np.count_nonzero(ok) < 10:
+            cov = None
+            break
+        n, q, p = normals[idx[ok]], reference[idx[ok]], points[ok]
+        r = np.einsum("ij,ij->i", n, world[ok] - q)
+        dth = np.stack([-s * p[:, 0] - c * p[:, 1], c * p[:, 0] - s * p[:, 1]], axis=-1)
+        jac = np.column_stack([n[:, 0], n[:, 1], np.einsum("ij,ij->i", n, dth)])
+        w = np.minimum(1.0, 0.05 / np.maximum(np.abs(r), 1e-9))
+        h = jac.T @ (jac * w[:, None]) + 1e-9 * np.eye(3)
+        cov = float(np.sum(w * r * r)) / max(float(w.sum()) - 3.0, 1.0) * np.linalg.inv(h)
+        if it == 10:
+            break
+        delta = -np.linalg.solve(h, jac.T @ (w * r))
+        pose += delta
+        if abs(delta[0]) < 1e-5 and abs(delta[1]) < 1e-5 and abs(delta[2]) < 1e-6:
+            break
+    pose[2] = math.remainder(pose[2], 2 * math.pi)
+    return pose, share, None if cov is None else 0.5 * (cov + cov.T)
+
+
+def test_icp_kernel_matches_kd_tree_oracle() -> None:
+    rng = np.random.default_rng(3)
+    angles = np.linspace(-0.5, 0.5, 300)
+    truth = np.array([1.5, 1.2, 0.4])
+    pts = _points(truth, angles)
+    ref = se2_transform_points(truth, _points(truth, angles + 0.0007)) + rng.normal(
+        0, 0.004, (pts.shape[0], 2)
+    )
+    ref = np.concatenate([ref, rng.uniform(-1.0, 5.0, (40, 2))])  # clutter: non-planar normals
+    for k in range(12):
+        start = truth + np.array([rng.normal(0, 0.06), rng.normal(0, 0.06), rng.normal(0, 0.03)])
+        if k == 0:
+            start = truth + np.array([3.0, 3.0, 0.0])  # nothing within reach: no pairs
+        pose, share, cov = refine_icp_with_covariance(pts, ref, start)
+        opose, oshare, ocov = _icp_oracle(pts, ref, start)
+        np.testing.assert_allclose(pose, opose, rtol=0, atol=1e-12)  # same pairs, same sums
+        assert share == oshare
+        if ocov is None:
+            assert cov is None
+        else:
+            assert cov is not None
+            np.testing.assert_allclose(cov, ocov, rtol=1e-9, atol=1e-18)
+        if k > 0:
+            assert np.hypot(*(pose[:2] - truth[:2])) < 0.02

@@ -279,6 +279,7 @@ class SlamCore:
         self._pos_cache: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._bary_local = np.zeros((0, 2))
         self._normal_cache: dict[int, FloatArray] = {}
+        self._world_normal_cache: dict[int, tuple[FloatArray, FloatArray]] = {}
 
     @property
     def mode(self) -> str:
@@ -412,15 +413,21 @@ class SlamCore:
 
     def _world_normals(self, idx: int) -> FloatArray:
         """Normals of a node's end points in the map frame (computed once, in its own frame)."""
+        pose = self.graph.pose(idx)
+        cached = self._world_normal_cache.get(idx)
+        if cached is not None and np.array_equal(cached[0], pose):
+            return cached[1]
         local = self._normal_cache.get(idx)
         if local is None:
             local = point_normals(self.nodes[idx].points)
             self._normal_cache[idx] = local
-        th = float(se2_compose(self.graph.pose(idx), self.sensor_offset)[2])
+        th = float(se2_compose(pose, self.sensor_offset)[2])
         c, s = math.cos(th), math.sin(th)
-        return np.stack(
+        world = np.stack(
             [c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]], axis=-1
         )
+        self._world_normal_cache[idx] = (pose, world)
+        return world
 
     def _reference_position(self, idx: int) -> FloatArray:
         pose = self.graph.pose(idx)

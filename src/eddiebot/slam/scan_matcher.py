@@ -823,6 +823,113 @@ def match_scan(
     return MatchResult(pose, best_resp, cov)
 
 
+#: cells per ICP pairing distance in the nearest-neighbour buckets (cell = 0.1 m at 0.2 m)
+_ICP_CELLS_PER_RANGE = 2
+
+
+@njit(cache=True)
+def _bucket_grid(
+    reference: FloatArray, cell: float
+) -> tuple[float, float, int, int, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Reference points bucketed into square cells of side ``cell``: (x0, y0, nx, ny, start,
+    order); cell k = iy·nx + ix holds ``order[start[k]:start[k + 1]]``."""
+    n = reference.shape[0]
+    x0 = reference[0, 0]
+    y0 = reference[0, 1]
+    x1 = x0
+    y1 = y0
+    for i in range(1, n):
+        x0 = min(x0, reference[i, 0])
+        x1 = max(x1, reference[i, 0])
+        y0 = min(y0, reference[i, 1])
+        y1 = max(y1, reference[i, 1])
+    nx = int((x1 - x0) / cell) + 1
+    ny = int((y1 - y0) / cell) + 1
+    key = np.empty(n, np.int64)
+    start = np.zeros(nx * ny + 1, np.int64)
+    for i in range(n):
+        ix = min(int((reference[i, 0] - x0) / cell), nx - 1)
+        iy = min(int((reference[i, 1] - y0) / cell), ny - 1)
+        key[i] = iy * nx + ix
+        start[key[i] + 1] += 1
+    for k in range(nx * ny):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        order[fill[key[i]]] = i
+        fill[key[i]] += 1
+    return x0, y0, nx, ny, start, order
+
+
+@njit(cache=True)
+def _icp_pairs(
+    points: FloatArray,
+    reference: FloatArray,
+    normals: FloatArray,
+    planar: npt.NDArray[np.bool_],
+    pose: FloatArray,
+    max_distance: float,
+    x0: float,
+    y0: float,
+    nx: int,
+    ny: int,
+    start: npt.NDArray[np.int64],
+    order: npt.NDArray[np.int64],
+    jac: FloatArray,
+    r: FloatArray,
+) -> int:
+    """Point-to-line pairs at ``pose``: each point's nearest reference point closer than
+    ``max_distance`` (searched ring by ring over cells of ``max_distance`` /
+    `_ICP_CELLS_PER_RANGE`, stopping once no outer cell can hold a nearer one), kept when that
+    point's normal is line-like. Writes, in point order, each
+    pair's Jacobian row (n, n·R'p) into ``jac`` and its residual n·(world − q) into ``r``;
+    returns the number of pairs."""
+    c = math.cos(pose[2])
+    s = math.sin(pose[2])
+    md2 = max_distance * max_distance
+    cell = max_distance / _ICP_CELLS_PER_RANGE
+    rings = _ICP_CELLS_PER_RANGE
+    count = 0
+    for i in range(points.shape[0]):
+        px = points[i, 0]
+        py = points[i, 1]
+        wx = pose[0] + c * px - s * py
+        wy = pose[1] + s * px + c * py
+        cx = math.floor((wx - x0) / cell)
+        cy = math.floor((wy - y0) / cell)
+        best = -1
+        best_d2 = md2
+        for ring in range(rings + 1):
+            for iy in range(max(cy - ring, 0), min(cy + ring + 1, ny)):
+                edge = iy == cy - ring or iy == cy + ring
+                step = 1 if edge else 2 * ring
+                for ix in range(cx - ring, cx + ring + 1, max(step, 1)):
+                    if ix < 0 or ix >= nx:
+                        continue
+                    k = iy * nx + ix
+                    for m in range(start[k], start[k + 1]):
+                        j = order[m]
+                        dx = wx - reference[j, 0]
+                        dy = wy - reference[j, 1]
+                        d2 = dx * dx + dy * dy
+                        if d2 < best_d2 or (d2 == best_d2 and best >= 0 and j < best):
+                            best_d2 = d2
+                            best = j
+            # anything in an outer ring is at least ring·cell away
+            if best >= 0 and best_d2 < (ring * cell) ** 2:
+                break
+        if best < 0 or not planar[best]:
+            continue
+        n0 = normals[best, 0]
+        n1 = normals[best, 1]
+        r[count] = n0 * (wx - reference[best, 0]) + n1 * (wy - reference[best, 1])
+        jac[count, 0] = n0
+        jac[count, 1] = n1
+        jac[count, 2] = n0 * (-s * px - c * py) + n1 * (c * px - s * py)
+        count += 1
+    return count
+
 def pyramid_levels(params: MatcherParams) -> int:
     """Pyramid depth for a search window: 1 (plain grid search) for small windows, else ~log2."""
     half = max(1, round(0.5 * params.search_dimension / params.resolution))
@@ -898,50 +1005,46 @@ def refine_icp_with_covariance(
     (a corridor's length: the Hessian is nearly singular there). None when fewer than 10
     pairs match.
     """
-    from scipy.spatial import cKDTree
-
     pose = np.asarray(pose, dtype=np.float64).copy()
     if points.shape[0] < 10 or reference.shape[0] < normal_neighbours + 1:
         return pose, 0.0, None
-    tree = cKDTree(reference)
+    points = np.ascontiguousarray(points, dtype=np.float64)
+    reference = np.ascontiguousarray(reference, dtype=np.float64)
     if reference_normals is None:
-        normals = point_normals(reference, tree, normal_neighbours)
+        normals = point_normals(reference, neighbours=normal_neighbours)
     else:
         normals = reference_normals
     planar = np.isfinite(normals[:, 0])
-    normals = np.where(planar[:, None], normals, 0.0)
+    normals = np.ascontiguousarray(np.where(planar[:, None], normals, 0.0), dtype=np.float64)
+    x0, y0, nx, ny, start, order = _bucket_grid(reference, max_distance / _ICP_CELLS_PER_RANGE)
+    jac_buf = np.empty((points.shape[0], 3))
+    r_buf = np.empty(points.shape[0])
     inlier_share = 0.0
-    covariance: FloatArray | None = None
+    fit: tuple[FloatArray, float] | None = None
     for it in range(iterations + 1):
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        wx = pose[0] + c * points[:, 0] - s * points[:, 1]
-        wy = pose[1] + s * points[:, 0] + c * points[:, 1]
-        world = np.stack([wx, wy], axis=-1)
-        dist, idx = tree.query(world, k=1, distance_upper_bound=max_distance)
-        ok = np.isfinite(dist)
-        ok[ok] &= planar[idx[ok]]
-        inlier_share = float(np.count_nonzero(ok)) / points.shape[0]
-        if np.count_nonzero(ok) < 10:
-            covariance = None
+        count = _icp_pairs(
+            points, reference, normals, planar, pose, max_distance,
+            x0, y0, nx, ny, start, order, jac_buf, r_buf,
+        )
+        inlier_share = float(count) / points.shape[0]
+        if count < 10:
+            fit = None
             break
-        n = normals[idx[ok]]
-        q = reference[idx[ok]]
-        p = points[ok]
-        r = np.einsum("ij,ij->i", n, world[ok] - q)
-        # d(world)/d(theta) = R' p
-        dth = np.stack([-s * p[:, 0] - c * p[:, 1], c * p[:, 0] - s * p[:, 1]], axis=-1)
-        jac = np.column_stack([n[:, 0], n[:, 1], np.einsum("ij,ij->i", n, dth)])
+        jac = jac_buf[:count]
+        r = r_buf[:count]
         w = np.minimum(1.0, 0.05 / np.maximum(np.abs(r), 1e-9))
         h = jac.T @ (jac * w[:, None]) + 1e-9 * np.eye(3)
         sw = float(w.sum())
-        sigma2 = float(np.sum(w * r * r)) / max(sw - 3.0, 1.0)
-        covariance = sigma2 * np.linalg.inv(h)
+        fit = (h, float(np.sum(w * r * r)) / max(sw - 3.0, 1.0))
         if it == iterations:
             break
         delta = -np.linalg.solve(h, jac.T @ (w * r))
         pose += delta
         if abs(delta[0]) < 1e-5 and abs(delta[1]) < 1e-5 and abs(delta[2]) < 1e-6:
             break
+    covariance: FloatArray | None = None
+    if fit is not None:
+        covariance = np.asarray(fit[1] * np.linalg.inv(fit[0]), dtype=np.float64)
     pose[2] = float(wrap_angle(pose[2]))
     if covariance is not None:
         covariance = 0.5 * (covariance + covariance.T)
