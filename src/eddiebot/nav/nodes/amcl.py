@@ -94,6 +94,16 @@ class LocalizationWatch:
             self.node.destroy_subscription(self._sub)
             self._sub = None
 
+    @classmethod
+    def from_parameters(cls, node: Any, buffer: Buffer, odom_frame: str) -> LocalizationWatch:
+        """From a server's ``localization_*`` and ``global_frame_id`` parameters (the collision
+        monitor's and the controller server's)."""
+        limits = LocalizationLimits(float(node.param("localization_max_xy_std")),
+                                    float(node.param("localization_max_yaw_std")),
+                                    float(node.param("localization_tf_timeout")))
+        return cls(node, buffer, limits, global_frame=str(node.param("global_frame_id")),
+                   odom_frame=odom_frame, pose_topic=str(node.param("localization_pose_topic")))
+
 
 class AmclNode(NavServer):
     default_node_name = "amcl"

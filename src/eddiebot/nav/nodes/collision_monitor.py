@@ -39,7 +39,6 @@ from eddiebot.core.tf import Buffer, ExtrapolationException, TransformException,
 from eddiebot.core.time import stamp_to_ns
 from eddiebot.geometry import quaternion_to_matrix
 from eddiebot.msgs.geometry_msgs import Twist
-from eddiebot.nav.amcl import LocalizationLimits
 from eddiebot.nav.collision_monitor import (
     SOURCE_TYPES,
     CollisionMonitor,
@@ -178,13 +177,7 @@ class CollisionMonitorNode(NavServer):
         self._subs.append(self.create_subscription(
             Twist, self.monitor.config.cmd_vel_in_topic, self._on_cmd, 1))
         if bool(self.param("localization_check")):
-            limits = LocalizationLimits(float(self.param("localization_max_xy_std")),
-                                        float(self.param("localization_max_yaw_std")),
-                                        float(self.param("localization_tf_timeout")))
-            self._watch = LocalizationWatch(
-                self, self.tf_buffer, limits, global_frame=str(self.param("global_frame_id")),
-                odom_frame=self.monitor.config.odom_frame_id,
-                pose_topic=str(self.param("localization_pose_topic")))
+            self._watch = LocalizationWatch.from_parameters(self, self.tf_buffer, self.monitor.config.odom_frame_id)
         return TransitionCallbackReturn.SUCCESS
 
     def on_deactivate(self, state: State) -> TransitionCallbackReturn:

@@ -26,7 +26,6 @@ from eddiebot.core.lifecycle import State, TransitionCallbackReturn
 from eddiebot.core.tf import Buffer, TransformException, TransformListener
 from eddiebot.msgs.geometry_msgs import Twist
 from eddiebot.msgs.nav_msgs import Path
-from eddiebot.nav.amcl import LocalizationLimits
 from eddiebot.nav.controllers import ControllerServer as ControllerPlugins
 from eddiebot.nav.controllers import build_controller_server
 from eddiebot.nav.controllers.follow_path import FollowPathRun, RunStatus
@@ -121,13 +120,7 @@ class ControllerServer(NavServer):
                                      self._on_speed_limit, 1),
         ]
         if bool(self.param("localization_check")):
-            limits = LocalizationLimits(float(self.param("localization_max_xy_std")),
-                                        float(self.param("localization_max_yaw_std")),
-                                        float(self.param("localization_tf_timeout")))
-            self._watch = LocalizationWatch(
-                self, self.tf_buffer, limits, global_frame=str(self.param("global_frame_id")),
-                odom_frame=self.host.global_frame,
-                pose_topic=str(self.param("localization_pose_topic")))
+            self._watch = LocalizationWatch.from_parameters(self, self.tf_buffer, self.host.global_frame)
         self._action = ActionServer(self, FollowPath, "follow_path", self._follow,
                                     cancel_callback=lambda _h: CancelResponse.ACCEPT)
         return TransitionCallbackReturn.SUCCESS
