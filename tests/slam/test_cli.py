@@ -83,3 +83,25 @@ def test_posegraph_optimize_prints_chi2(tmp_path: Path, capsys) -> None:
     assert final < 1e-6
     assert out.read_text().count("VERTEX_SE2") == 4
     assert posegraph_cli.run(_parse(posegraph_cli, ["optimize", str(tmp_path / "none.g2o")])) == 1
+
+
+def test_posegraph_optimize_gate_rejects_a_false_loop(tmp_path: Path, capsys) -> None:
+    g2o = tmp_path / "false.g2o"
+    info = "100 0 0 100 0 1000"
+    rows = ["VERTEX_SE2 0 0 0 0", "VERTEX_SE2 1 1.1 0 1.6", "VERTEX_SE2 2 1.0 1.2 3.1",
+            "VERTEX_SE2 3 -0.1 1 -1.5"]
+    rows += [f"EDGE_SE2 {i} {i + 1} 1 0 1.5707963 {info}" for i in range(3)]
+    rows += [f"EDGE_SE2 3 0 1 0 1.5707963 {info}", f"EDGE_SE2 2 0 4 3 0.5 {info}"]  # last: false
+    g2o.write_text("\n".join(rows) + "\n")
+    out = tmp_path / "opt.g2o"
+    args = ["optimize", str(g2o), "--robust", "dcs", "-o", str(out)]
+    assert posegraph_cli.run(_parse(posegraph_cli, args)) == 0
+    text = capsys.readouterr().out
+    assert "rejected loops:   1" in text
+    rest = float(text.split("1/2 chi2 of the rest")[1].split(")")[0])
+    assert rest < 1e-6  # the true square closes exactly
+    node2 = next(line.split() for line in out.read_text().splitlines()
+                 if line.startswith("VERTEX_SE2 2 "))
+    assert abs(float(node2[2]) - 1.0) < 1e-3 and abs(float(node2[3]) - 1.0) < 1e-3
+    assert posegraph_cli.run(_parse(posegraph_cli, [*args, "--gate", "none"])) == 0
+    assert "rejected loops" not in capsys.readouterr().out
