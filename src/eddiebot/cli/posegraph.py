@@ -67,10 +67,9 @@ def run(args: argparse.Namespace) -> int:
     if args.posegraph_command != "optimize":
         print(f"eddie posegraph: unknown sub-command {args.posegraph_command!r}", file=sys.stderr)
         return 2
-    import numpy as np
 
-    from eddiebot.slam import EdgeKind, PoseGraph, PoseGraphFormatError
-    from eddiebot.slam.io import read_pose_graph
+    from eddiebot.slam import PoseGraphFormatError
+    from eddiebot.slam.io import build_pose_graph, read_pose_graph
 
     try:
         data = read_pose_graph(args.file)
@@ -89,24 +88,14 @@ def run(args: argparse.Namespace) -> int:
         )
         return 2
     t0 = time.perf_counter()
-    graph = PoseGraph(
+    graph = build_pose_graph(
+        data,
         optimizer=optimizer,
         robust_kernel=args.robust,
         kernel_width=args.kernel_width,
+        robust_loops=args.robust != "none",
         gate_probability=gate,
     )
-    for pose in data.poses:
-        graph.add_node(pose)
-    for (i, j), z, info in zip(data.edge_index, data.measurements, data.information):
-        loop = int(j) != int(i) + 1
-        graph.add_edge(
-            int(i),
-            int(j),
-            z,
-            np.linalg.inv(info),
-            kind=EdgeKind.LOOP if loop else EdgeKind.ODOMETRY,
-            robust=loop and args.robust != "none",
-        )
     initial = graph.half_chi2()
     t1 = time.perf_counter()
     graph.optimize()

@@ -151,12 +151,15 @@ def build_pose_graph(
     robust_kernel: str = "none",
     kernel_width: float = 1.0,
     robust_loops: bool = False,
+    gate_probability: float | None = 0.999,
 ) -> PoseGraph:
     """A `PoseGraph` holding the file's nodes (at their initial poses) and edges.
 
-    Edges with j != i + 1 are loop edges; ``robust_loops`` puts the kernel on them.
+    Edges with j != i + 1 are loop edges; ``robust_loops`` puts the kernel (and the χ² gate,
+    ``gate_probability``) on them.
     """
-    graph = PoseGraph(optimizer=optimizer, robust_kernel=robust_kernel, kernel_width=kernel_width)
+    graph = PoseGraph(optimizer=optimizer, robust_kernel=robust_kernel, kernel_width=kernel_width,
+                      gate_probability=gate_probability)
     for pose in data.poses:
         graph.add_node(pose)
     for (i, j), z, info in zip(data.edge_index, data.measurements, data.information):
