@@ -134,13 +134,24 @@ def likelihood_field(occ_map: OccupancyMap, max_dist: float) -> npt.NDArray[np.f
 
 
 @njit(cache=True)
+def _endpoint_distance(px: float, py: float, angle: float, r: float, dist: np.ndarray,
+                       ox: float, oy: float, res: float) -> float:
+    """Likelihood-field distance at a beam's endpoint; -1 when it falls off the map."""
+    h, w = dist.shape
+    mi = math.floor((px + r * math.cos(angle) - ox) / res)
+    mj = math.floor((py + r * math.sin(angle) - oy) / res)
+    if mi < 0 or mj < 0 or mi >= w or mj >= h:
+        return -1.0
+    return float(dist[mj, mi])
+
+
+@njit(cache=True)
 def _laser_weights(
     particles: np.ndarray, weights: np.ndarray, ranges: np.ndarray, bearings: np.ndarray,
     lx: float, ly: float, lyaw: float, dist: np.ndarray, ox: float, oy: float, res: float,
     max_occ_dist: float, range_max: float, z_hit: float, z_rand: float, sigma_hit: float,
 ) -> float:
     """LikelihoodFieldModel::sensorFunction; multiplies ``weights`` in place, returns the sum."""
-    h, w = dist.shape
     denom = 2.0 * sigma_hit * sigma_hit
     rand_mult = 1.0 / range_max
     total = 0.0
@@ -155,14 +166,9 @@ def _laser_weights(
             r = ranges[i]
             if r >= range_max or r != r:
                 continue
-            hx = px + r * math.cos(pth + bearings[i])
-            hy = py + r * math.sin(pth + bearings[i])
-            mi = math.floor((hx - ox) / res)
-            mj = math.floor((hy - oy) / res)
-            if mi < 0 or mj < 0 or mi >= w or mj >= h:
+            z = _endpoint_distance(px, py, pth + bearings[i], r, dist, ox, oy, res)
+            if z < 0.0:
                 z = max_occ_dist
-            else:
-                z = dist[mj, mi]
             pz = z_hit * math.exp(-(z * z) / denom) + z_rand * rand_mult
             p += pz * pz * pz
         weights[k] *= p
@@ -180,7 +186,6 @@ def _laser_beam_probs(
     """LikelihoodFieldModelProb's per-beam probabilities ``pz`` (particles x beams; 1.0 for
     beams it ignores: max range, NaN) and per beam the number of particles whose endpoint lies
     within ``beam_skip_distance`` of an obstacle."""
-    h, w = dist.shape
     n, m = particles.shape[0], ranges.shape[0]
     denom = 2.0 * sigma_hit * sigma_hit
     rand_mult = 1.0 / range_max
@@ -197,14 +202,10 @@ def _laser_beam_probs(
             r = ranges[i]
             if r >= range_max or r != r:
                 continue
-            hx = px + r * math.cos(pth + bearings[i])
-            hy = py + r * math.sin(pth + bearings[i])
-            mi = math.floor((hx - ox) / res)
-            mj = math.floor((hy - oy) / res)
-            if mi < 0 or mj < 0 or mi >= w or mj >= h:
+            z = _endpoint_distance(px, py, pth + bearings[i], r, dist, ox, oy, res)
+            if z < 0.0:
                 p = z_hit * max_dist_prob
             else:
-                z = dist[mj, mi]
                 if z < beam_skip_distance:
                     count[i] += 1
                 p = z_hit * math.exp(-(z * z) / denom)
