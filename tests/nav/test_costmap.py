@@ -180,7 +180,8 @@ def test_range_layer_marks_at_range_and_clears_inside() -> None:
     cm = build_costmap({"rolling_window": True, "width": 4, "height": 4, "resolution": 0.05,
                         "plugins": ["range_layer"],
                         "range_layer": {"plugin": "nav2_costmap_2d::RangeSensorLayer",
-                                        "clear_on_max_reading": True}}, "local")
+                                        "clear_on_max_reading": True,
+                                        "sensor_model": "deterministic"}}, "local")
     rl = cm.layer("range_layer")
     cm.update_map((0.0, 0.0, 0.0))
     rl.costmap.data[:] = 254  # pretend stale marks everywhere

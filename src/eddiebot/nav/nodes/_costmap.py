@@ -218,6 +218,10 @@ class CostmapHost:
                 return
             pose = self.pose
         self.pose = pose
+        now_ns = self.node.now().nanoseconds
+        for layer in self.costmap.layers:
+            if isinstance(layer, RangeLayer):
+                layer.set_time(now_ns)  # no_readings_timeout
         self.costmap.update_map(pose)
         self.updated = True
 
