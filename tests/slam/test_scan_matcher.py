@@ -242,3 +242,90 @@ def test_icp_kernel_matches_kd_tree_oracle() -> None:
             np.testing.assert_allclose(cov, ocov, rtol=1e-9, atol=1e-18)
         if k > 0:
             assert np.hypot(*(pose[:2] - truth[:2])) < 0.02
+
+
+def _naive_block(
+    grid: np.ndarray, px: np.ndarray, py: np.ndarray, x0: int, y0: int, n: int, step: int
+) -> np.ndarray:
+    """Candidate-major reference for `_response_block`: points added in scan order."""
+    h, w = grid.shape
+    out = np.zeros((n, n))
+    for ix in range(n):
+        for iy in range(n):
+            total = 0.0
+            for c, r in zip(px + x0 + step * ix, py + y0 + step * iy, strict=True):
+                if 0 <= c < w and 0 <= r < h:
+                    total += float(grid[r, c])
+            out[ix, iy] = total
+    return out * (1.0 / max(px.size, 1))
+
+
+def test_response_block_matches_candidate_major_sums() -> None:
+    # the compiled kernel reorders the loops and skips out-of-grid runs: the sums (and so
+    # every match) must stay the same bit for bit, also for points partly or wholly outside
+    from eddiebot.slam.scan_matcher import _response_block
+
+    rng = np.random.default_rng(7)
+    grid = rng.random((37, 53)).astype(np.float32)
+    for step, n in ((1, 9), (4, 7), (3, 5)):
+        px = rng.integers(-30, 80, 40)
+        py = rng.integers(-25, 60, 40)
+        for x0, y0 in ((-12, -12), (0, 5), (-40, 30)):
+            got = _response_block(grid, px, py, x0, y0, n, step)
+            np.testing.assert_array_equal(got, _naive_block(grid, px, py, x0, y0, n, step))
+    assert _response_block(grid, px[:0], py[:0], 0, 0, 3, 1).sum() == 0.0
+
+
+def test_coarse_pass_profile_is_the_heading_profile() -> None:
+    # the coarse pass's per-heading best replaces a second pass over the window
+    from eddiebot.slam.scan_matcher import _coarse_grid_search, _heading_profile
+
+    rng = np.random.default_rng(11)
+    grid = rng.random((120, 140)).astype(np.float32)
+    px = rng.integers(10, 130, (9, 60))
+    py = rng.integers(10, 110, (9, 60))
+    dth = 0.0349 * np.arange(-4, 5, dtype=np.float64)
+    for penalize in (True, False):
+        args = (grid, px, py, dth, 25, 4, 0.01, penalize, 0.5, 1.0, 0.5, 0.9)
+        profile = np.zeros(dth.size)
+        a, x, y, s = _coarse_grid_search(*args, profile)
+        np.testing.assert_array_equal(profile, _heading_profile(*args))
+        assert s == profile.max() and profile[a] == s
+        assert -25 <= x <= 25 and -25 <= y <= 25
+
+
+def test_normals_neighbour_sweep_matches_kd_tree() -> None:
+    from scipy.spatial import cKDTree
+
+    from eddiebot.slam.scan_matcher import _nearest_sweep, point_normals
+
+    rng = np.random.default_rng(5)
+    angles = np.linspace(-0.5, 0.5, 300)
+    pts = _points(np.array([1.5, 1.2, 0.4]), angles) + rng.normal(0, 0.003, (300, 2))
+    pts = np.concatenate([pts, rng.uniform(-1.0, 5.0, (40, 2))])  # clutter
+    tree = cKDTree(pts)
+    _, want = tree.query(pts, k=6)
+    got = _nearest_sweep(pts, np.argsort(pts[:, 0], kind="stable").astype(np.int64), 6)
+    np.testing.assert_array_equal(got, want)
+    # same neighbours in the same order: the same normals bit for bit as through a k-d tree
+    with_tree = point_normals(pts, tree)
+    np.testing.assert_array_equal(point_normals(pts), with_tree)
+    planar = np.isfinite(with_tree[:, 0])
+    assert planar[:300].mean() > 0.9 and planar[300:].mean() < 0.5
+    assert np.isnan(point_normals(pts[:5])).all()
+
+
+def test_rotated_cells_match_numpy_formula() -> None:
+    from eddiebot.slam.scan_matcher import CorrelationGrid, _cells_for_angles
+
+    rng = np.random.default_rng(2)
+    pts = rng.uniform(-4.0, 4.0, (200, 2))
+    grid = CorrelationGrid((np.zeros((4, 4), np.float32),), (-3.217, 1.093), 0.01)
+    prior = np.array([0.731, -2.113, 0.4])
+    thetas = prior[2] + 0.0349 * np.arange(-10, 11)
+    px, py = _cells_for_angles(pts, prior, thetas, grid)
+    c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
+    wx = c * pts[None, :, 0] - s * pts[None, :, 1] + prior[0]
+    wy = s * pts[None, :, 0] + c * pts[None, :, 1] + prior[1]
+    np.testing.assert_array_equal(px, np.floor((wx - grid.origin[0]) / 0.01).astype(np.int64))
+    np.testing.assert_array_equal(py, np.floor((wy - grid.origin[1]) / 0.01).astype(np.int64))

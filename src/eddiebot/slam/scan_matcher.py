@@ -23,6 +23,7 @@ candidate at the best heading whose response is within 0.1 of the best, floored 
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -119,23 +120,37 @@ def _splat(
     rows: npt.NDArray[np.int64],
     kernel: npt.NDArray[np.float32],
 ) -> None:
-    """grid = max(grid, kernel centred on each (row, col)) — Karto's smear."""
+    """grid = max(grid, kernel centred on each (row, col)) — Karto's smear.
+
+    Cells whose kernel misses the grid are skipped and a cell holding several points is
+    splatted once (the max does not depend on order or repetition).
+    """
     h, w = grid.shape
     k = kernel.shape[0] // 2
+    stride = w + 2 * k
+    seen = np.zeros((h + 2 * k) * stride, np.bool_)
     for i in range(cols.size):
         c0 = cols[i]
         r0 = rows[i]
+        if c0 < -k or c0 >= w + k or r0 < -k or r0 >= h + k:
+            continue
+        key = (r0 + k) * stride + (c0 + k)
+        if seen[key]:
+            continue
+        seen[key] = True
+        # kernel columns lo..hi-1 land inside the grid
+        lo = max(0, k - c0)
+        hi = min(2 * k + 1, w - c0 + k)
+        m = hi - lo
         for dr in range(-k, k + 1):
             r = r0 + dr
             if r < 0 or r >= h:
                 continue
-            for dc in range(-k, k + 1):
-                c = c0 + dc
-                if c < 0 or c >= w:
-                    continue
-                v = kernel[dr + k, dc + k]
-                if v > grid[r, c]:
-                    grid[r, c] = v
+            cells = grid[r, c0 - k + lo :]
+            weights = kernel[dr + k, lo:]
+            for q in range(m):
+                if weights[q] > cells[q]:
+                    cells[q] = weights[q]
 
 
 def _smear_kernel(resolution: float, smear_deviation: float) -> npt.NDArray[np.float32]:
@@ -169,12 +184,7 @@ def build_correlation_grid(
     if pts.size:
         col = np.floor((pts[:, 0] - xmin) / resolution).astype(np.int64)
         row = np.floor((pts[:, 1] - ymin) / resolution).astype(np.int64)
-        kernel = _smear_kernel(resolution, smear_deviation)
-        half = kernel.shape[0] // 2
-        ok = (col >= -half) & (col < width + half) & (row >= -half) & (row < height + half)
-        stride = width + 2 * half
-        cells = np.unique((row[ok] + half) * stride + (col[ok] + half))
-        _splat(like, cells % stride - half, cells // stride - half, kernel)
+        _splat(like, col, row, _smear_kernel(resolution, smear_deviation))
     pyramid = [like]
     for h in range(1, max(1, levels)):
         k = 1 << h
@@ -355,25 +365,41 @@ def _response_block(
     """Mean grid value under the points for translations x0 + step·ix, y0 + step·iy (n × n).
 
     Loops run point → row → column so that each point reads short runs of one grid row
-    (cache-friendly; the naive candidate-major order is several times slower).
+    (cache-friendly; the naive candidate-major order is several times slower). The sums are
+    kept row-major in (iy, ix) and each point's in-grid column range is found once, so the
+    innermost loop is a branch-free strided read; every candidate still adds the points in
+    scan order (the same sums, bit for bit).
     """
     h, w = grid.shape
-    out = np.zeros((n, n))
+    acc = np.zeros((n, n))
     for i in range(px.size):
+        c0 = px[i] + x0
+        # candidates ix in [lo, hi) read columns c0 + step·ix inside 0..w-1
+        lo = 0 if c0 >= 0 else (step - 1 - c0) // step
+        hi = min(n, (w - 1 - c0) // step + 1) if c0 <= w - 1 else 0
+        if lo >= hi:
+            continue
+        r0 = py[i] + y0
+        m = hi - lo
         for iy in range(n):
-            r = py[i] + y0 + step * iy
+            r = r0 + step * iy
             if r < 0 or r >= h:
                 continue
-            row = grid[r]
-            c = px[i] + x0
-            for ix in range(n):
-                if 0 <= c < w:
-                    out[ix, iy] += row[c]
-                c += step
+            # slices indexed from 0 carry no negative-index wraparound, so the contiguous
+            # case compiles to vector adds
+            run = grid[r, c0 + step * lo :]
+            out_run = acc[iy, lo:hi]
+            if step == 1:
+                for k in range(m):
+                    out_run[k] += run[k]
+            else:
+                for k in range(m):
+                    out_run[k] += run[step * k]
     inv = 1.0 / max(px.size, 1)
+    out = np.empty((n, n))
     for ix in range(n):
         for iy in range(n):
-            out[ix, iy] *= inv
+            out[ix, iy] = acc[iy, ix] * inv
     return out
 
 
@@ -391,24 +417,35 @@ def _coarse_grid_search(
     avp: float,
     mdp: float,
     map_: float,
+    profile: npt.NDArray[np.float64],
 ) -> tuple[int, int, int, float]:
-    """Karto's coarse pass: every heading, translations every ``step`` cells."""
+    """Karto's coarse pass: every heading, translations every ``step`` cells.
+
+    Also writes each heading's best (penalised) response into ``profile`` (what
+    `_heading_profile` returns for the same arguments), so the heading variance needs no
+    second pass over the window.
+    """
     best_a, best_x, best_y, best_s = -1, 0, 0, 0.0
     n = 2 * (window // step) + 1
     x0 = -(window // step) * step
     for a in range(px.shape[0]):
         block = _response_block(g0, px[a], py[a], x0, x0, n, step)
+        best_h = 0.0
         for ix in range(n):
             for iy in range(n):
                 s = block[ix, iy]
-                if s <= best_s:
+                # the penalty is at most 1: a raw response at or below both bests cannot win
+                if s <= best_s and s <= best_h:
                     continue
                 dx = x0 + step * ix
                 dy = x0 + step * iy
                 if penalize:
                     s *= _penalty(dx * res, dy * res, dth[a], dvp, avp, mdp, map_)
+                if s > best_h:
+                    best_h = s
                 if s > best_s:
                     best_a, best_x, best_y, best_s = a, dx, dy, s
+        profile[a] = best_h
     return best_a, best_x, best_y, best_s
 
 
@@ -604,16 +641,47 @@ def _refine(
     return x, y, th, total / max(n, 1)
 
 
+@njit(cache=True)
+def _rotated_cells(
+    points: FloatArray,
+    cos_t: FloatArray,
+    sin_t: FloatArray,
+    x: float,
+    y: float,
+    ox: float,
+    oy: float,
+    res: float,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Grid cells (A, M) of the points turned by each heading and moved to (x, y)."""
+    n_ang = cos_t.size
+    m = points.shape[0]
+    px = np.empty((n_ang, m), np.int64)
+    py = np.empty((n_ang, m), np.int64)
+    for a in range(n_ang):
+        c = cos_t[a]
+        s = sin_t[a]
+        for i in range(m):
+            wx = c * points[i, 0] - s * points[i, 1] + x
+            wy = s * points[i, 0] + c * points[i, 1] + y
+            px[a, i] = math.floor((wx - ox) / res)
+            py[a, i] = math.floor((wy - oy) / res)
+    return px, py
+
+
 def _cells_for_angles(
     points: FloatArray, prior: FloatArray, thetas: FloatArray, grid: CorrelationGrid
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    c = np.cos(thetas)[:, None]
-    s = np.sin(thetas)[:, None]
-    wx = c * points[None, :, 0] - s * points[None, :, 1] + prior[0]
-    wy = s * points[None, :, 0] + c * points[None, :, 1] + prior[1]
-    px = np.floor((wx - grid.origin[0]) / grid.resolution).astype(np.int64)
-    py = np.floor((wy - grid.origin[1]) / grid.resolution).astype(np.int64)
-    return np.ascontiguousarray(px), np.ascontiguousarray(py)
+    # the sines and cosines from numpy (the values every caller has always used)
+    return _rotated_cells(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.cos(thetas),
+        np.sin(thetas),
+        float(prior[0]),
+        float(prior[1]),
+        float(grid.origin[0]),
+        float(grid.origin[1]),
+        float(grid.resolution),
+    )
 
 
 def _thin(points: FloatArray, cell: float) -> FloatArray:
@@ -623,6 +691,18 @@ def _thin(points: FloatArray, cell: float) -> FloatArray:
     keys = np.floor(points / cell).astype(np.int64)
     _, first = np.unique(keys[:, 0] * 1_000_003 + keys[:, 1], return_index=True)
     return np.ascontiguousarray(points[np.sort(first)])
+
+
+@functools.lru_cache(maxsize=8)
+def _window_offsets(window: int, res: float) -> FloatArray:
+    """Translation offsets (m) of every candidate of a ±window search, flattened [ix, iy]
+    (read-only: shared by every match with the same window)."""
+    gx, gy = np.meshgrid(
+        np.arange(-window, window + 1) * res, np.arange(-window, window + 1) * res, indexing="ij"
+    )
+    coords = np.stack([gx.ravel(), gy.ravel()], axis=-1)
+    coords.flags.writeable = False
+    return coords
 
 
 def score_pose(points: FloatArray, pose: FloatArray, grid: CorrelationGrid) -> float:
@@ -678,6 +758,8 @@ def match_scan(
     # Karto steps 2 cells; a wide smear (σ >= 10 cells) is smooth enough for up to 4, and the
     # fine pass below covers ±(step/2 + 1) cells around the coarse best.
     coarse_step = int(max(2, min(4, math.floor(params.smear_deviation / (2.5 * res)))))
+    # per-heading best of the plain coarse pass (None after branch and bound)
+    profile: FloatArray | None = None
     for attempt in range(4 if params.use_response_expansion else 1):
         n_half = math.floor(offset / step + 1e-9)
         dth = step * np.arange(-n_half, n_half + 1, dtype=np.float64)
@@ -711,8 +793,9 @@ def match_scan(
                 order,
             )
         else:
+            profile = np.zeros(dth.size)
             best = _coarse_grid_search(
-                grid.likelihood, px, py, dth, window, coarse_step, res, *penalties
+                grid.likelihood, px, py, dth, window, coarse_step, res, *penalties, profile
             )
         if best[3] > 0.0 or attempt == 3:
             break
@@ -770,10 +853,7 @@ def match_scan(
         params.minimum_distance_penalty,
         params.minimum_angle_penalty,
     )[0]
-    gx, gy = np.meshgrid(
-        np.arange(-window, window + 1) * res, np.arange(-window, window + 1) * res, indexing="ij"
-    )
-    coords = np.stack([gx.ravel(), gy.ravel()], axis=-1)
+    coords = _window_offsets(window, res)
     ref = float(full.max())
     xy_cov = _weighted_covariance(full.ravel(), coords, ref, np.full(2, 0.1 * res * res))
     ang_vals = resp[:, fix, fiy]
@@ -782,21 +862,11 @@ def match_scan(
     cov[:2, :2] = xy_cov
     cov[2, 2] = th_cov[0, 0]
     if params.coarse_heading_variance and dth.size > 1:
-        cpx, cpy = _cells_for_angles(coarse_pts, prior, prior[2] + dth, grid)
-        profile = _heading_profile(
-            grid.likelihood,
-            cpx,
-            cpy,
-            dth,
-            window,
-            coarse_step,
-            res,
-            params.penalize,
-            params.distance_variance_penalty,
-            params.angle_variance_penalty,
-            params.minimum_distance_penalty,
-            params.minimum_angle_penalty,
-        )
+        if profile is None:
+            # branch and bound scores only part of the window: one full pass per heading
+            profile = _heading_profile(
+                grid.likelihood, px, py, dth, window, coarse_step, res, *penalties
+            )
         coarse_th = _weighted_covariance(
             profile, dth[:, None], float(profile.max()), np.array([0.1 * fine * fine])
         )
@@ -823,8 +893,9 @@ def match_scan(
     return MatchResult(pose, best_resp, cov)
 
 
-#: cells per ICP pairing distance in the nearest-neighbour buckets (cell = 0.1 m at 0.2 m)
-_ICP_CELLS_PER_RANGE = 2
+#: cells per ICP pairing distance in the nearest-neighbour buckets (cell = 5 cm at 0.2 m; any
+#: count gives the same pairs, a finer one fewer distance checks per point)
+_ICP_CELLS_PER_RANGE = 4
 
 
 @njit(cache=True)
@@ -878,12 +949,16 @@ def _icp_pairs(
     order: npt.NDArray[np.int64],
     jac: FloatArray,
     r: FloatArray,
+    jac_w: FloatArray,
+    w: FloatArray,
 ) -> int:
     """Point-to-line pairs at ``pose``: each point's nearest reference point closer than
     ``max_distance`` (searched ring by ring over cells of ``max_distance`` /
     `_ICP_CELLS_PER_RANGE`, stopping once no outer cell can hold a nearer one), kept when that
     point's normal is line-like. Writes, in point order, each
-    pair's Jacobian row (n, n·R'p) into ``jac`` and its residual n·(world − q) into ``r``;
+    pair's Jacobian row (n, n·R'p) into ``jac``, its residual n·(world − q) into ``r``, its
+    Huber weight (5 cm) into ``w`` and the weighted row into ``jac_w`` (the values the numpy
+    expressions gave, element by element);
     returns the number of pairs."""
     c = math.cos(pose[2])
     s = math.sin(pose[2])
@@ -927,6 +1002,11 @@ def _icp_pairs(
         jac[count, 0] = n0
         jac[count, 1] = n1
         jac[count, 2] = n0 * (-s * px - c * py) + n1 * (c * px - s * py)
+        wk = min(1.0, 0.05 / max(abs(r[count]), 1e-9))
+        w[count] = wk
+        jac_w[count, 0] = n0 * wk
+        jac_w[count, 1] = n1 * wk
+        jac_w[count, 2] = jac[count, 2] * wk
         count += 1
     return count
 
@@ -938,17 +1018,80 @@ def pyramid_levels(params: MatcherParams) -> int:
     return max(1, min(_MAX_LEVELS, int(math.log2(2 * half + 1))))
 
 
+@njit(cache=True)
+def _insert_neighbour(
+    best_d: FloatArray, best_i: npt.NDArray[np.int64], filled: int, d: float, j: int
+) -> int:
+    """Insert candidate j at squared distance d into the sorted k-best lists; new fill."""
+    k = best_d.size
+    if filled == k and d >= best_d[k - 1]:
+        return filled
+    pos = filled if filled < k else k - 1
+    while pos > 0 and best_d[pos - 1] > d:
+        if pos < k:
+            best_d[pos] = best_d[pos - 1]
+            best_i[pos] = best_i[pos - 1]
+        pos -= 1
+    best_d[pos] = d
+    best_i[pos] = j
+    return filled + 1 if filled < k else filled
+
+
+@njit(cache=True)
+def _nearest_sweep(
+    points: FloatArray, by_x: npt.NDArray[np.int64], k: int
+) -> npt.NDArray[np.int64]:
+    """Indices (M, k) of each point's k nearest points (itself included), nearest first.
+
+    ``by_x`` orders the points by x; each point's search walks outwards in that order and
+    stops on either side once the x gap alone exceeds its k-th best distance (exact).
+    """
+    m = points.shape[0]
+    out = np.empty((m, k), np.int64)
+    best_d = np.empty(k)
+    best_i = np.empty(k, np.int64)
+    for p in range(m):
+        i = by_x[p]
+        xi = points[i, 0]
+        yi = points[i, 1]
+        filled = 0
+        q = p
+        while q >= 0:
+            j = by_x[q]
+            dx = points[j, 0] - xi
+            if filled == k and dx * dx > best_d[k - 1]:
+                break
+            dy = points[j, 1] - yi
+            filled = _insert_neighbour(best_d, best_i, filled, dx * dx + dy * dy, j)
+            q -= 1
+        q = p + 1
+        while q < m:
+            j = by_x[q]
+            dx = points[j, 0] - xi
+            if filled == k and dx * dx > best_d[k - 1]:
+                break
+            dy = points[j, 1] - yi
+            filled = _insert_neighbour(best_d, best_i, filled, dx * dx + dy * dy, j)
+            q += 1
+        for q in range(k):
+            out[i, q] = best_i[q]
+    return out
+
+
 def point_normals(
     points: FloatArray, tree: Any = None, neighbours: int = 6
 ) -> FloatArray:
     """Unit normals (M, 2) from a PCA of each point's nearest neighbours; NaN where the
-    neighbourhood is not line-like (corners, clutter)."""
-    from scipy.spatial import cKDTree
-
+    neighbourhood is not line-like (corners, clutter). Without a ``tree`` the neighbours are
+    found by a compiled sweep along x (exact, nearest first, as a k-d tree query)."""
+    points = np.ascontiguousarray(points, dtype=np.float64)
     if points.shape[0] < neighbours:
         return np.full(points.shape, np.nan)
-    kd = tree if tree is not None else cKDTree(points)
-    _, nn = kd.query(points, k=neighbours)
+    if tree is None:
+        by_x = np.argsort(points[:, 0], kind="stable").astype(np.int64)
+        nn = _nearest_sweep(points, by_x, neighbours)
+    else:
+        _, nn = tree.query(points, k=neighbours)
     nb = points[nn]
     centred = nb - nb.mean(axis=1, keepdims=True)
     cov = np.einsum("mki,mkj->mij", centred, centred)
@@ -1018,27 +1161,32 @@ def refine_icp_with_covariance(
     normals = np.ascontiguousarray(np.where(planar[:, None], normals, 0.0), dtype=np.float64)
     x0, y0, nx, ny, start, order = _bucket_grid(reference, max_distance / _ICP_CELLS_PER_RANGE)
     jac_buf = np.empty((points.shape[0], 3))
+    jac_w_buf = np.empty((points.shape[0], 3))
     r_buf = np.empty(points.shape[0])
+    w_buf = np.empty(points.shape[0])
+    damping = 1e-9 * np.eye(3)
     inlier_share = 0.0
     fit: tuple[FloatArray, float] | None = None
     for it in range(iterations + 1):
         count = _icp_pairs(
             points, reference, normals, planar, pose, max_distance,
-            x0, y0, nx, ny, start, order, jac_buf, r_buf,
+            x0, y0, nx, ny, start, order, jac_buf, r_buf, jac_w_buf, w_buf,
         )
         inlier_share = float(count) / points.shape[0]
         if count < 10:
             fit = None
             break
+        # normal equations with numpy (BLAS), as the results were established with
         jac = jac_buf[:count]
         r = r_buf[:count]
-        w = np.minimum(1.0, 0.05 / np.maximum(np.abs(r), 1e-9))
-        h = jac.T @ (jac * w[:, None]) + 1e-9 * np.eye(3)
+        w = w_buf[:count]
+        wr = w * r
+        h = jac.T @ jac_w_buf[:count] + damping
         sw = float(w.sum())
-        fit = (h, float(np.sum(w * r * r)) / max(sw - 3.0, 1.0))
+        fit = (h, float(np.sum(wr * r)) / max(sw - 3.0, 1.0))
         if it == iterations:
             break
-        delta = -np.linalg.solve(h, jac.T @ (w * r))
+        delta = -np.linalg.solve(h, jac.T @ wr)
         pose += delta
         if abs(delta[0]) < 1e-5 and abs(delta[1]) < 1e-5 and abs(delta[2]) < 1e-6:
             break
