@@ -5,10 +5,10 @@ encoder noise), Eddie's base stack, depthimage_to_laserscan and the SLAM node
 (``config/slam.yaml``, sync processing) on a simulated clock, a scripted operator driving a
 fixed route:
 
-* ``office``: `OFFICE_LONG_ROUTE` (about 6.5 simulated minutes, 89 m: every open room, the
-  corridor and the start revisited);
-* ``warehouse``: `WAREHOUSE_ROUTE` (about 6.5 simulated minutes, 105 m: two loops through the
-  aisles);
+* ``office``: `OFFICE_10MIN_ROUTE` (about 10.5 simulated minutes, 141 m: every open room,
+  the corridor and the start revisited, a third pass through five rooms);
+* ``warehouse``: `WAREHOUSE_10MIN_ROUTE` (about 10.5 simulated minutes, 174 m: three loops
+  through the aisles);
 * ``corridor``: `CORRIDOR_ROUTE` of the RGB-D benchmark (down a 40 m low-feature hallway and
   back) — the low-feature warning and the end-point error against odometry alone;
 * ``office-demo``: the demo's own `OFFICE_ROUTE` (about 3.5 minutes), to check the demo stage.
@@ -29,7 +29,8 @@ offline instead: each bag through `SlamCore` (as ``eddie slam replay`` does: eve
 moved enough, no node time gate) with ``--set NAME:=VALUE`` overrides on config/slam.yaml —
 how the parameters below were chosen. Writes ``benchmarks/results/<--name>.json``.
 
-    .venv/bin/python benchmarks/bench_slam_sim.py --replay DIR [--worlds ...] [--set K:=V ...]
+    .venv/bin/python benchmarks/bench_slam_sim.py --replay DIR [DIR ...] [--worlds ...]
+        [--set K:=V ...]
 """
 
 from __future__ import annotations
@@ -48,13 +49,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import print_table, write_results
 
 from eddiebot.demo.mapping import run_mapping
-from eddiebot.demo.route import OFFICE_LONG_ROUTE, OFFICE_ROUTE, WAREHOUSE_ROUTE
+from eddiebot.demo.route import OFFICE_10MIN_ROUTE, OFFICE_ROUTE, WAREHOUSE_10MIN_ROUTE
 from eddiebot.demo.vslam_stage import CORRIDOR_ROUTE
 
 #: name → (world, route)
 RUNS = {
-    "office": ("office", OFFICE_LONG_ROUTE),
-    "warehouse": ("warehouse", WAREHOUSE_ROUTE),
+    "office": ("office", OFFICE_10MIN_ROUTE),
+    "warehouse": ("warehouse", WAREHOUSE_10MIN_ROUTE),
     "corridor": ("corridor", CORRIDOR_ROUTE),
     "office-demo": ("office", OFFICE_ROUTE),
 }
@@ -157,7 +158,8 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any]) -> dict[str, Any
         "nodes": len(poses), "loop_closures": len(res.core.loop_closures),
         "ate_rmse_m": float(np.sqrt(np.mean(err**2))), "ate_max_m": float(err.max()),
         "slam_end_m": float(err[-1]), "odom_ate_rmse_m": float(np.sqrt(np.mean(oerr**2))),
-        "odom_end_m": float(oerr[-1]), "heading_drift_max_deg": drift(est),
+        "odom_end_m": float(oerr[-1]), "end_ratio": float(err[-1] / oerr[-1]),
+        "heading_drift_max_deg": drift(est),
         "odom_heading_drift_max_deg": drift(od),
         "scan_cpu_median_ms": float(np.median(cpu)), "scan_cpu_p99_ms": float(np.percentile(cpu, 99)),
     }
@@ -171,15 +173,17 @@ def main_replay(args: argparse.Namespace) -> int:
         key, value = item.split(":=", 1)
         overrides[key.strip()] = yaml.safe_load(value)
     rows = []
-    for name in args.worlds:
-        bag = args.replay / name / "mapping_bag"
-        if not bag.exists():
-            print(f"{name}: no {bag}, skipped")
-            continue
-        rows.append(replay_one(name, bag, overrides))
-        print(rows[-1], flush=True)
-    print_table(rows, ["run", "nodes", "loop_closures", "ate_rmse_m", "ate_max_m", "slam_end_m",
-                       "odom_ate_rmse_m", "odom_end_m", "heading_drift_max_deg",
+    for folder in args.replay:
+        for name in args.worlds:
+            bag = folder / name / "mapping_bag"
+            if not bag.exists():
+                print(f"{name}: no {bag}, skipped")
+                continue
+            rows.append({"drive": folder.name, **replay_one(name, bag, overrides)})
+            print(rows[-1], flush=True)
+    print_table(rows, ["drive", "run", "nodes", "loop_closures", "ate_rmse_m", "ate_max_m",
+                       "slam_end_m", "odom_ate_rmse_m", "odom_end_m", "end_ratio",
+                       "heading_drift_max_deg",
                        "odom_heading_drift_max_deg", "scan_cpu_median_ms", "overrides"])
     print(f"\nwrote {write_results(args.name, rows)}")
     return 0
@@ -197,8 +201,9 @@ def main() -> int:
     ap.add_argument("--record", action="store_true",
                     help="record /scan, /odom, /ground_truth/odom and TF of each run into "
                     "--keep DIR/<run>/mapping_bag (for eddie slam replay)")
-    ap.add_argument("--replay", type=Path, default=None,
-                    help="score the bags of an earlier --keep DIR --record run offline")
+    ap.add_argument("--replay", type=Path, nargs="+", default=None, metavar="DIR",
+                    help="score the bags of earlier --keep DIR --record runs offline "
+                    "(several DIRs: several drives)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME:=VALUE",
                     help="with --replay: override one SLAM parameter (repeatable)")
     args = ap.parse_args()

@@ -278,3 +278,117 @@ def test_fine_search_climb_sharpens_correlative_only_mapping() -> None:
     assert errors[0].mean() > 0.01
     assert errors[4].mean() < 0.009
     assert errors[4].max() < 0.025
+
+
+# -- degeneracy handling along a featureless corridor (57° scans, as Eddie's Kinect)
+
+NARROW = np.linspace(-0.5, 0.5, 120)
+
+
+def _corridor_scan(pose: np.ndarray, stamp_ns: int, range_bias: float = 0.0) -> Scan:
+    from slam_world import CORRIDOR
+
+    r = raycast(CORRIDOR, pose, NARROW, 8.0)
+    # a depth camera's scan taken as the nearest of several rows reads short by ~k·r²
+    seen = np.isfinite(r)
+    r[seen] -= range_bias * r[seen] ** 2
+    return Scan(r, NARROW.copy(), 0.05, 8.0, stamp_ns)
+
+
+def test_scan_geometry_shows_the_corridor_degeneracy() -> None:
+    from eddiebot.slam.mapper import scan_position_covariance
+    from eddiebot.slam.scan import scan_points
+    from eddiebot.slam.scan_matcher import point_normals
+
+    def cov_at(x: float, quadratic: float) -> np.ndarray:
+        pts = scan_points(_corridor_scan(np.array([x, 1.0, 0.0]), 0), 8.0)
+        return scan_position_covariance(pts, point_normals(pts), 0.01, quadratic)
+
+    # side walls only (the end wall 20 m away): nothing pins the position along the corridor
+    mid = cov_at(10.0, 2.5e-3)
+    assert mid[0, 0] > 1.0e3
+    assert mid[1, 1] < 2.0e-3
+    assert abs(mid[0, 1]) < 1e-6
+    # the end wall 7 m ahead pins it, but only as well as its range error there (σ ≈ 0.13 m)
+    far = cov_at(23.0, 2.5e-3)
+    assert 0.01 < far[0, 0] < 0.05
+    assert far[1, 1] < 2.0e-3
+    # 2.5 m ahead it pins it well; without range growth every wall does
+    assert cov_at(27.5, 2.5e-3)[0, 0] < 2.0e-3
+    assert cov_at(23.0, 0.0)[0, 0] < 2.0e-3
+
+
+def test_constrained_covariance_drops_only_the_unobserved_direction() -> None:
+    from eddiebot.slam.mapper import constrained_covariance
+
+    th = math.radians(30.0)
+    rot = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
+    cov = np.diag([0.02, 4.0e-4, 1.0e-3])
+    cov[:2, :2] = rot @ cov[:2, :2] @ rot.T
+    out = constrained_covariance(cov, 0.01)
+    along, across = rot[:, 0], rot[:, 1]
+    assert along @ out[:2, :2] @ along > 1.0e3
+    assert math.isclose(across @ out[:2, :2] @ across, 4.0e-4, rel_tol=1e-6)
+    assert math.isclose(out[2, 2], 1.0e-3, rel_tol=1e-6)
+    # nothing above the threshold: unchanged
+    small = np.diag([0.005, 4.0e-4, 1.0e-3])
+    assert np.array_equal(constrained_covariance(small, 0.01), small)
+
+
+@pytest.mark.parametrize("analysis", [False, True])
+def test_corridor_graph_takes_odometry_along_a_far_end_wall(analysis: bool) -> None:
+    # Approaching the corridor's end wall from 13 to 6.5 m: scans read it short by 2.5e-3·r²
+    # (0.12 m at 7 m) and the wheel odometry is exact along the corridor but slips 1 cm
+    # sideways per step. The match alone is pulled towards the wall by the bias; with the
+    # degeneracy analysis that direction is left to odometry, across it the walls still win.
+    truth = np.array([[17.0 + 0.5 * k, 1.0, 0.0] for k in range(14)])
+    odom = truth + np.array([[0.0, 0.01 * k, 0.0] for k in range(14)])
+    core = SlamCore(
+        SlamConfig(
+            fuse_odometry=True,
+            match_degeneracy_analysis=analysis,
+            scan_range_sigma_quadratic=2.5e-3,
+            max_laser_range=8.0,
+            do_loop_closing=False,
+        )
+    )
+    for k, (p, o) in enumerate(zip(truth, odom)):
+        assert core.process(_corridor_scan(p, k * 100_000_000, 2.5e-3), o).processed
+    err = core.node_poses() - truth
+    assert np.abs(err[:, 1]).max() < 0.04 < np.abs(odom[:, 1] - truth[:, 1]).max()
+    if analysis:
+        assert np.abs(err[:, 0]).max() < 0.002
+    else:
+        assert err[-1, 0] < -0.015
+
+
+def test_corrected_scan_removes_a_quadratic_range_bias() -> None:
+    from eddiebot.slam.mapper import corrected_scan
+
+    scan = Scan(np.array([1.0, 4.0, 7.9, np.inf, np.nan, 0.01]), np.zeros(6), 0.05, 8.0, 7)
+    out = corrected_scan(scan, 2.5e-3)
+    assert np.allclose(out.ranges[:3], [1.0025, 4.04, 8.0])  # 7.9 + 0.156 capped at range_max
+    assert np.isinf(out.ranges[3]) and np.isnan(out.ranges[4]) and out.ranges[5] == 0.01
+    assert out.stamp_ns == 7 and np.array_equal(scan.ranges[:3], [1.0, 4.0, 7.9])
+
+
+@pytest.mark.parametrize("correct", [False, True])
+def test_range_bias_correction_keeps_a_corridor_end_wall_in_place(correct: bool) -> None:
+    # The match alone (slam_toolbox's behaviour) sets each pose: with the end wall read
+    # short (7.5 m to 5 m ahead) the robot seems to approach it more slowly than it does;
+    # corrected, it does not.
+    truth = np.array([[22.5 + 0.5 * k, 1.0, 0.0] for k in range(6)])
+    core = SlamCore(
+        SlamConfig(
+            scan_range_bias_quadratic=2.5e-3 if correct else 0.0,
+            max_laser_range=8.0,
+            do_loop_closing=False,
+        )
+    )
+    for k, p in enumerate(truth):
+        assert core.process(_corridor_scan(p, k * 100_000_000, 2.5e-3), p).processed
+    err = core.node_poses() - truth
+    if correct:
+        assert np.abs(err[:, :2]).max() < 0.01
+    else:
+        assert err[-1, 0] < -0.03

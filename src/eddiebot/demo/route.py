@@ -19,7 +19,15 @@ from eddiebot.geometry import quaternion_to_yaw, wrap_angle
 from eddiebot.msgs.geometry_msgs import Twist
 from eddiebot.msgs.nav_msgs import Odometry
 
-__all__ = ["OFFICE_LONG_ROUTE", "OFFICE_ROUTE", "WAREHOUSE_ROUTE", "RouteDriver", "Waypoint"]
+__all__ = [
+    "OFFICE_10MIN_ROUTE",
+    "OFFICE_LONG_ROUTE",
+    "OFFICE_ROUTE",
+    "WAREHOUSE_10MIN_ROUTE",
+    "WAREHOUSE_ROUTE",
+    "RouteDriver",
+    "Waypoint",
+]
 
 
 @dataclass(frozen=True)
@@ -86,6 +94,49 @@ WAREHOUSE_ROUTE: tuple[Waypoint, ...] = (
     Waypoint(15.2, 6.3),
     Waypoint(5.8, 6.3, spin=2 * math.pi),
     Waypoint(2.0, 6.3),
+    Waypoint(2.0, 3.0),
+    Waypoint(2.5, 2.0, spin=math.pi),
+)
+
+
+#: The benchmark's ten-minute office route (about 10.5 simulated minutes, 140 m):
+#: `OFFICE_LONG_ROUTE`, then a third pass revisiting the corridor end to end and five of the
+#: rooms seen before (south-west, north-west, the room by the start, north-east and the
+#: corridor's east end), closing the loop at the start a third time.
+OFFICE_10MIN_ROUTE: tuple[Waypoint, ...] = (
+    *OFFICE_LONG_ROUTE,
+    Waypoint(2.45, 7.5),
+    Waypoint(2.45, 5.0, spin=2 * math.pi),
+    Waypoint(2.45, 7.5),
+    Waypoint(3.45, 7.5),
+    Waypoint(3.45, 9.7, spin=2 * math.pi),
+    Waypoint(3.45, 7.5),
+    Waypoint(7.45, 7.5),
+    Waypoint(7.45, 5.0, spin=2 * math.pi),
+    Waypoint(7.45, 7.5),
+    Waypoint(16.45, 7.5),
+    Waypoint(16.45, 10.3, spin=2 * math.pi),
+    Waypoint(16.45, 7.5),
+    Waypoint(18.5, 7.5, spin=2 * math.pi),
+    Waypoint(3.0, 7.5),
+    Waypoint(1.5, 7.5, spin=math.pi),
+)
+
+#: The benchmark's ten-minute warehouse route (about 10.5 simulated minutes, 175 m):
+#: `WAREHOUSE_ROUTE`, then a third loop up the west side to the aisle between the third and
+#: fourth shelf rows (its pillars passed on the south side), east along it past the cross
+#: aisle and back, down the cross aisle, west along the central aisle and down the west side
+#: to the start, revisiting the places of the first two loops.
+WAREHOUSE_10MIN_ROUTE: tuple[Waypoint, ...] = (
+    *WAREHOUSE_ROUTE,
+    Waypoint(2.0, 3.0),
+    Waypoint(2.0, 14.3, spin=2 * math.pi),
+    Waypoint(24.0, 14.3, spin=2 * math.pi),
+    Waypoint(15.2, 14.3),
+    Waypoint(15.2, 11.0),
+    Waypoint(5.6, 11.0, spin=2 * math.pi),
+    Waypoint(4.8, 12.0),
+    Waypoint(2.0, 12.0),
     Waypoint(2.0, 3.0),
     Waypoint(2.5, 2.0, spin=math.pi),
 )

@@ -148,6 +148,30 @@ class SlamConfig:
     loop_match_maximum_variance_fine: float = 0.0
     """Reject a loop closure whose fine match has a position variance (m², along its weakest
     direction) above this: an aliased corridor match constrains only one direction; 0 = off."""
+    scan_range_bias_quadratic: float = 0.0
+    """Known range bias of the scan, corrected before use: every valid range r becomes
+    ``r + scan_range_bias_quadratic · r²`` (capped at the scan's range_max) for matching and
+    for the map (1/m). A depth camera's scan taken as the nearest of several image rows, as
+    depthimage_to_laserscan does, reads short by about 1.5 σ of the camera's range noise,
+    which grows as r²; 0 = ranges as they are."""
+    match_degeneracy_analysis: bool = False
+    """Check every scan match against what the scan's own geometry and range noise allow
+    (`eddiebot.slam.mapper.scan_position_covariance`: a degeneracy analysis of the
+    point-to-line Hessian, Zhang et al. 2016): a direction no line observes (a corridor's
+    length) or only far points pin (a corridor's end wall seen from metres away), with a
+    variance above ``corridor_covariance_threshold``, gets that variance added to the match's
+    covariance, so fusion with odometry and ``loop_match_constrained_variance`` drop it and
+    the low-feature warning sees it. Off: the correlative search's covariance alone (Karto's)."""
+    scan_range_sigma: float = 0.01
+    """Range error σ (m) of a scan point at zero range, for the degeneracy analysis."""
+    scan_range_sigma_quadratic: float = 0.0
+    """Range error σ growth with the squared range (1/m), for the degeneracy analysis: a
+    depth camera's error grows as z² (a Kinect's disparity steps are 2.85e-3·z²)."""
+    loop_match_constrained_variance: float = 0.0
+    """A loop closure constrains the graph only along the position directions its fine match
+    observes with a variance below this (m²); along the others (a corridor's length, seen only
+    on a far end wall) the edge carries no information, as a sequential match fused with
+    odometry does. 0 = the match's covariance as it is."""
     map_max_laser_range: float = 0.0
     """Range (m) beyond which beams leave no hit in the occupancy grid (cut there, clearing
     up to it), when shorter than ``max_laser_range`` (which still bounds scan matching): a

@@ -205,6 +205,68 @@ def constrained_information(
     return info, int(np.count_nonzero(~keep))
 
 
+def corrected_scan(scan: Scan, bias_quadratic: float) -> Scan:
+    """``scan`` with each finite range r in [range_min, range_max] read as
+    ``r + bias_quadratic · r²`` (capped at range_max): a quadratic range bias removed."""
+    r = np.array(scan.ranges, dtype=np.float64)
+    ok = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
+    r[ok] = np.minimum(r[ok] + bias_quadratic * r[ok] ** 2, scan.range_max)
+    return dataclasses.replace(scan, ranges=r)
+
+
+def scan_position_covariance(
+    points: FloatArray,
+    normals: FloatArray,
+    range_sigma: float,
+    range_sigma_quadratic: float = 0.0,
+) -> FloatArray:
+    """Position covariance (2, 2; the points' frame, m²) a scan's geometry allows a match.
+
+    Degeneracy analysis of the point-to-line fit (Zhang, Kaess and Singh 2016, "On degeneracy
+    of optimization-based state estimation problems"): the position block of its Hessian,
+    ``H = Σ n nᵀ / σ²`` over the points with a normal (``σ = range_sigma +
+    range_sigma_quadratic · r²``, each point's range error at range r), has eigen-directions
+    ``d`` with information ``λ_d``. The variance along ``d`` is ``(Σ (n·d)² + 1) / λ_d``:
+    the information-weighted mean range variance of the points whose normals pin ``d`` — an
+    error they share, such as a depth camera's range bias, does not average out over many
+    points — plus one point's worth of random error. Along a direction no line observes (a
+    corridor's length) λ_d is near zero and the variance unbounded; along one only far points
+    pin (a corridor's end wall seen from metres away) it is their range variance.
+    """
+    ok = np.isfinite(normals[:, 0])
+    n = normals[ok]
+    if n.shape[0] == 0:
+        return np.eye(2) * 1.0e6
+    r2 = np.einsum("ij,ij->i", points[ok], points[ok])
+    sigma = range_sigma + range_sigma_quadratic * r2
+    w = 1.0 / np.maximum(sigma * sigma, 1e-12)
+    h = (n * w[:, None]).T @ n
+    lam, v = np.linalg.eigh(0.5 * (h + h.T))
+    count = np.sum((n @ v) ** 2, axis=0)
+    var = np.minimum((count + 1.0) / np.maximum(lam, 1e-12), 1.0e6)
+    return np.asarray((v * var) @ v.T)
+
+
+def constrained_covariance(
+    covariance: FloatArray, max_variance: float, unobserved_variance: float = 1.0e4
+) -> FloatArray:
+    """A match covariance with its poorly observed position directions made uninformative.
+
+    The position directions `constrained_information` drops get ``unobserved_variance`` (m²;
+    an edge with no information there, still invertible for the optimiser); the others and
+    the heading are kept as `constrained_information` keeps them.
+    """
+    info, dropped = constrained_information(covariance, max_variance)
+    if dropped == 0:
+        return np.asarray(covariance, dtype=np.float64)
+    cov = 0.5 * (covariance + covariance.T)
+    w, v = np.linalg.eigh(cov[:2, :2])
+    drop = v[:, np.maximum(w, 1e-12) > max_variance]
+    info[:2, :2] += (drop @ drop.T) / unobserved_variance
+    out = np.linalg.inv(info)
+    return np.asarray(0.5 * (out + out.T))
+
+
 def fuse_increments(
     z_odom: FloatArray, cov_odom: FloatArray, z_match: FloatArray, info_match: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -371,6 +433,8 @@ class SlamCore:
             self._warn(warnings, kind, f"scan at {stamp} ns skipped: {check.reason}", stamp)
             return ProcessResult(ProcessStatus.SKIPPED, self.map_to_odom, warnings=tuple(warnings))
         st.last_stamp_ns = stamp
+        if self.config.scan_range_bias_quadratic > 0.0:
+            scan = corrected_scan(scan, self.config.scan_range_bias_quadratic)
         if not self._moved_enough(odom):
             return ProcessResult(
                 ProcessStatus.NOT_MOVED, self.map_to_odom, warnings=tuple(warnings)
@@ -531,6 +595,36 @@ class SlamCore:
             cov[2, :2] = 0.0
         return cov
 
+    def _scan_normals(self, idx: int, points: FloatArray) -> FloatArray:
+        """Sensor-frame normals of node ``idx``'s points (cached; ``idx`` may be the next node)."""
+        local = self._normal_cache.get(idx)
+        if local is None or local.shape[0] != points.shape[0]:
+            local = point_normals(points)
+            self._normal_cache[idx] = local
+        return local
+
+    def _with_scan_geometry(self, match: MatchResult, points: FloatArray, idx: int) -> MatchResult:
+        """A match whose covariance also shows the directions its scan's geometry leaves
+        degenerate: along each eigen-direction of `scan_position_covariance` with a variance
+        above ``corridor_covariance_threshold`` that variance is added (the others, which the
+        scan's lines pin, keep the correlative search's covariance)."""
+        cfg = self.config
+        geo = scan_position_covariance(
+            points,
+            self._scan_normals(idx, points),
+            cfg.scan_range_sigma,
+            cfg.scan_range_sigma_quadratic,
+        )
+        w, v = np.linalg.eigh(geo)
+        weak = w > cfg.corridor_covariance_threshold
+        if not np.any(weak):
+            return match
+        c, s = math.cos(float(match.pose[2])), math.sin(float(match.pose[2]))
+        d = np.array([[c, -s], [s, c]]) @ v[:, weak]
+        cov = np.array(match.covariance, dtype=np.float64)
+        cov[:2, :2] += (d * w[weak]) @ d.T
+        return MatchResult(match.pose, match.response, cov)
+
     def _check_covariance(
         self, match: MatchResult, warnings: list[SlamWarning], stamp: int
     ) -> None:
@@ -568,6 +662,8 @@ class SlamCore:
             match = self._recover_slip(
                 running, points, prior_sensor, match, warnings, stamp, odo_delta
             )
+            if cfg.match_degeneracy_analysis:
+                match = self._with_scan_geometry(match, points, len(self.nodes))
             response, covariance = match.response, match.covariance
             if match.response >= cfg.link_match_minimum_response_fine:
                 pose = se2_compose(match.pose, se2_inverse(self.sensor_offset))
@@ -757,7 +853,12 @@ class SlamCore:
             base = se2_compose(found.match.pose, se2_inverse(self.sensor_offset))
             cand_pose = self.graph.pose(found.candidate)
             delta = se2_between(cand_pose, base)
-            cov = _rotate_covariance(found.match.covariance, float(cand_pose[2]))
+            match = found.match
+            if cfg.match_degeneracy_analysis:
+                match = self._with_scan_geometry(match, points, idx)
+            cov = _rotate_covariance(match.covariance, float(cand_pose[2]))
+            if cfg.loop_match_constrained_variance > 0.0:
+                cov = constrained_covariance(cov, cfg.loop_match_constrained_variance)
             self.graph.add_edge(found.candidate, idx, delta, cov, kind=EdgeKind.LOOP, robust=True)
             self.loop_closures.append(found)
             self.graph.optimize(full=True)
