@@ -100,7 +100,9 @@ def bench_vo(syn, world, n_frames: int) -> dict[str, dict[str, float]]:
 
 
 def bench_loop_closure(syn, world, n_nodes: int, extra: int,
-                       memory_thr: int = 0, cpu_parts: bool = False) -> dict[str, object]:
+                       memory_thr: int = 0, cpu_parts: bool = False,
+                       frame_cache: Path | None = None,
+                       compare_relinearize: float | None = None) -> dict[str, object]:
     cam = syn.kinect_camera(640, 480)
     # ~Eddie at 1 Hz: 0.25 m or 0.25 rad between nodes; laps repeat, so revisits start at lap 2
     traj = corridor_loop(step=0.25, turn_step=0.25)
@@ -110,6 +112,16 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
                                  strategy=params.kp_detector_strategy)
     # with cpu_parts the core's own Timing/* statistics are CPU time (the machine is shared)
     slam = Rtabmap(params, timer=time.process_time if cpu_parts else time.perf_counter)
+    # optional same-process A/B: a second core with another iSAM2 relinearisation threshold,
+    # fed the same frames in alternating order, so that both see the same machine load
+    other = None
+    if compare_relinearize is not None:
+        other = Rtabmap(params, timer=time.process_time)
+        inner = getattr(other.optimizer, "incremental", None)
+        assert inner is not None
+        inner.relinearize_threshold = compare_relinearize
+    other_cpu: list[float] = []
+    other_loops = 0
     rng = np.random.default_rng(0)
     odom = np.eye(4)
     prev_truth = syn.planar_pose(*laps[0])
@@ -129,13 +141,30 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
         odom = odom @ step
         prev_truth = truth
         t0 = time.perf_counter()
-        rgb, depth = syn.render(world, truth, cam)
+        cached = frame_cache / f"{k:05d}.npz" if frame_cache else None
+        if cached is not None and cached.exists():
+            with np.load(cached) as z:
+                rgb, depth = z["rgb"], z["depth"]
+        else:
+            rgb, depth = syn.render(world, truth, cam)
+            if cached is not None:
+                np.savez(cached, rgb=rgb, depth=depth)
         feats = extractor.extract(rgb, depth, cam)
         render_s += time.perf_counter() - t0
+        if other is not None and k % 2 == 0:
+            c1 = time.process_time()
+            other_loops += bool(other.process(rgb, depth, cam, odom, k * 1_000_000_000,
+                                              features=feats).loop_closure_id)
+            other_cpu.append((time.process_time() - c1) * 1e3)
         t0, c0 = time.perf_counter(), time.process_time()
         r = slam.process(rgb, depth, cam, odom, k * 1_000_000_000, features=feats)
         times.append((time.perf_counter() - t0) * 1e3)
         cpu.append((time.process_time() - c0) * 1e3)
+        if other is not None and k % 2 == 1:
+            c1 = time.process_time()
+            other_loops += bool(other.process(rgb, depth, cam, odom, k * 1_000_000_000,
+                                              features=feats).loop_closure_id)
+            other_cpu.append((time.process_time() - c1) * 1e3)
         wm.append(int(r.statistics["Memory/Working_memory_size/"]))
         parts.append({k: v for k, v in r.statistics.items() if k.startswith("Timing/")})
         loops += bool(r.loop_closure_id)
@@ -148,7 +177,13 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
     keys = sorted({k for p in parts for k in p})
     breakdown = {k: float(np.median([parts[i].get(k, 0.0) for i in (near or range(len(parts)))]))
                  for k in keys}
+    compare = {}
+    if other is not None:
+        compare = {"relinearize_threshold": compare_relinearize, "loop_closures": other_loops,
+                   "at_1000_wm_cpu": _stats([other_cpu[k] for k in near] or other_cpu[-50:]),
+                   "this_at_1000_wm_cpu": _stats(at_1000_cpu or cpu[-50:])}
     return {
+        "compare": compare,
         "at_1000_wm_breakdown_median_ms": breakdown,
         "at_1000_wm_cpu": _stats(at_1000_cpu or cpu[-50:]),
         "nodes": len(times), "wm_final": wm[-1], "loop_closures": loops,
@@ -167,6 +202,10 @@ def main() -> int:
     ap.add_argument("--memory-thr", type=int, default=0, help="Rtabmap/MemoryThr for the SLAM run")
     ap.add_argument("--cpu-parts", action="store_true",
                     help="per-part breakdown in CPU time instead of wall time")
+    ap.add_argument("--compare-relinearize", type=float, metavar="THRESHOLD",
+                    help="also run a core with this iSAM2 relinearisation threshold, interleaved")
+    ap.add_argument("--frame-cache", type=Path,
+                    help="folder keeping the rendered loop-closure frames between runs")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     cv2.setNumThreads(1)  # one core, as the published figures
@@ -179,7 +218,10 @@ def main() -> int:
     }
     vo = bench_vo(syn, world, args.vo_frames) if args.vo_frames > 1 else {}
     results["vo"] = vo
-    lc = bench_loop_closure(syn, world, args.nodes, args.extra, args.memory_thr, args.cpu_parts)
+    if args.frame_cache:
+        args.frame_cache.mkdir(parents=True, exist_ok=True)
+    lc = bench_loop_closure(syn, world, args.nodes, args.extra, args.memory_thr, args.cpu_parts,
+                            args.frame_cache, args.compare_relinearize)
     lc["memory_thr"] = args.memory_thr
     lc["breakdown_clock"] = "cpu" if args.cpu_parts else "wall"
     results["loop_closure"] = lc
@@ -207,6 +249,11 @@ def main() -> int:
           f"active words {lc['dictionary_words']}")
     for k, v in lc["at_1000_wm_breakdown_median_ms"].items():
         print(f"  {k:42s} {v:9.1f}")
+    comp = lc["compare"]
+    if comp:
+        o = comp["at_1000_wm_cpu"]
+        print(f"  interleaved core, relinearisation {comp['relinearize_threshold']}: CPU "
+              f"{o['median_ms']:.1f} / {o['p95_ms']:.1f} ms, loop closures {comp['loop_closures']}")
     if args.tum:
         print(json.dumps(results["tum"], indent=2))
     print(f"wrote {args.out}")

@@ -44,6 +44,7 @@ _INFO_IGNORED = 1e-4
 _MIN_VARIANCE = 1e-6  # (1 mm)², (1 mrad)²: floor of link variances in the incremental graph
 # anchor of the incremental graph's root (as `eddiebot.slam.pose_graph.PoseGraph`'s node 0)
 _PRIOR_NOISE = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-4, 1e-4, 1e-5]))
+_RELINEARIZE_THRESHOLD = 0.01  # iSAM2 relinearisation of the incremental graph (m or rad)
 
 
 @dataclass(frozen=True)
@@ -209,8 +210,12 @@ class IncrementalPose2Graph:
     at ~1,000 nodes is the iSAM2 update itself (a few ms), not Python loops over the graph.
     """
 
-    def __init__(self, epsilon: float = 1e-5) -> None:
+    def __init__(self, epsilon: float = 1e-5,
+                 relinearize_threshold: float = _RELINEARIZE_THRESHOLD) -> None:
         self.epsilon = epsilon
+        self.relinearize_threshold = relinearize_threshold
+        """iSAM2 relinearises a pose whose update exceeds this (m or rad); read when the iSAM2
+        graph is (re)built."""
         self.rebuilds = 0
         """How often the incremental graph had to be rebuilt."""
         self.recoveries = 0
@@ -324,7 +329,9 @@ class IncrementalPose2Graph:
     def _start(self, root_id: int, root_pose: F64) -> None:
         self.reset()
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(0.01)
+        # 0.01 by default (gtsam's own default is 0.1); 0.05 was faster on a synthetic circle
+        # but not on the 1,000-node benchmark (docs/benchmarks/vslam.md#vslam-loop)
+        params.setRelinearizeThreshold(self.relinearize_threshold)
         params.relinearizeSkip = 1
         self._isam = gtsam.ISAM2(params)
         self._root = root_id

@@ -106,6 +106,7 @@ class Memory:
         self.store = store
         self.nodes: dict[int, Node] = {}
         self.links: dict[int, dict[int, Link]] = {}
+        self._pairs: dict[tuple[int, int], Link] = {}  # (a, b), a < b → links[a][b]
         self.stm: list[int] = []
         self.wm: dict[int, int] = {}  # id → insertion counter
         self.ltm: set[int] = set()
@@ -186,26 +187,31 @@ class Memory:
         self._unindex_words(node)
         for other in list(self.links.get(node_id, {})):
             self.links.get(other, {}).pop(node_id, None)
+            self._pairs.pop((min(node_id, other), max(node_id, other)), None)
         self.links.pop(node_id, None)
 
     # -- links ------------------------------------------------------------------------------
     def add_link(self, link: Link) -> None:
         """Add a link (stored under both ends)."""
-        self.links.setdefault(link.from_id, {})[link.to_id] = link
-        self.links.setdefault(link.to_id, {})[link.from_id] = link.inverse()
+        a, b = link.from_id, link.to_id
+        self.links.setdefault(a, {})[b] = link
+        inverse = link.inverse()
+        self.links.setdefault(b, {})[a] = inverse
+        if a != b:
+            self._pairs[(a, b) if a < b else (b, a)] = link if a < b else inverse
 
     def remove_link(self, a: int, b: int) -> None:
         """Remove the link between two nodes."""
         self.links.get(a, {}).pop(b, None)
         self.links.get(b, {}).pop(a, None)
+        self._pairs.pop((a, b) if a < b else (b, a), None)
 
     def unique_links(self, ids: Iterable[int] | None = None) -> list[Link]:
         """Each link once (from < to orientation as stored by `from_id`), among `ids` if given."""
         if ids is None:
-            return [link for a, nb in self.links.items() for b, link in nb.items() if a < b]
+            return list(self._pairs.values())
         allowed = ids if isinstance(ids, (set, frozenset)) else set(ids)
-        return [link for a, nb in self.links.items() if a in allowed
-                for b, link in nb.items() if a < b and b in allowed]
+        return [link for (a, b), link in self._pairs.items() if a in allowed and b in allowed]
 
     def neighbours(self, node_id: int, max_depth: int, *, exclude_stm: bool = True,
                    wm_only: bool = True) -> dict[int, int]:

@@ -166,14 +166,12 @@ class Vocabulary:
         return _Level(ids, index)
 
     def _maintain(self) -> None:
-        # Drop unreferenced words from the tail; they are re-added if referenced again.
-        if self._tail:
+        # Drop unreferenced words from an overfull tail; they are re-added if referenced again.
+        if len(self._tail) > self._exact_max:
             tail = np.asarray(self._tail, np.int64)
-            dead = tail[self._refs[tail] <= 0]
-            if tail.size > self._exact_max:
-                self._indexed[dead] = False
-                tail = tail[self._refs[tail] > 0]
-            self._tail = [int(i) for i in tail]
+            alive = self._refs[tail] > 0
+            self._indexed[tail[~alive]] = False
+            self._tail = tail[alive].tolist()
         if len(self._tail) >= self._exact_max:
             self._levels.append(self._build(np.asarray(self._tail, np.int64)))
             self._tail = []
@@ -205,8 +203,8 @@ class Vocabulary:
         active = self._active_mask()
         candidates_i = []
         candidates_d = []
-        if self._tail:
-            tail = np.asarray(self._tail, np.int64)
+        tail = np.asarray(self._tail, np.int64)
+        if tail.size:
             ti, td = knn2_hamming(as_words64(desc), as_words64(self._desc[tail]))
             candidates_i.append(np.where(ti >= 0, tail[np.maximum(ti, 0)], -1))
             candidates_d.append(td)
@@ -225,7 +223,7 @@ class Vocabulary:
         all_i = np.concatenate(candidates_i, axis=1)
         all_d = np.concatenate(candidates_d, axis=1)
         usable = all_i >= 0
-        usable[usable] = active[all_i[usable]] | self._in_tail(all_i[usable])
+        usable[usable] = active[all_i[usable]] | self._in_tail(all_i[usable], tail)
         all_d = np.where(usable, all_d, 1 << 30)
         all_i = np.where(usable, all_i, -1)
         order = np.argsort(all_d, axis=1, kind="stable")[:, :2]
@@ -234,10 +232,10 @@ class Vocabulary:
         best_i[best_d >= (1 << 30)] = -1
         return best_i, best_d
 
-    def _in_tail(self, ids: NDArray[np.int64]) -> NDArray[np.bool_]:
+    def _in_tail(self, ids: NDArray[np.int64], tail: NDArray[np.int64]) -> NDArray[np.bool_]:
         # Unreferenced words in the exact tail were created by recent frames whose node is not
         # stored (yet): they stay searchable, like RTAB-Map's not-yet-referenced new words.
         # Unreferenced words inside an LSH level are dead and skipped.
-        if not self._tail:
+        if not tail.size:
             return np.zeros(ids.size, bool)
-        return np.isin(ids, np.asarray(self._tail, np.int64))
+        return np.isin(ids, tail)
