@@ -17,13 +17,24 @@ three steps, each edge tested when it arrives, against the estimate of the graph
    what this test would accept, and only surprising edges pay for the marginal.
 3. **Support** (``require_support``, default on). A surprising edge that passes the gate is one
    the graph cannot yet confirm: a long drift, or covariances too loose for the gate to mean
-   much. It is taken when another loop closes the same place — an accepted loop edge with both
-   ends within ``support_window`` nodes of its own, or a held one with which it passes the
-   joint test (the conditional innovation of one given the other within the gate) — the
-   "consistent over consecutive detections" check of visual loop closing. Until then it is
-   held (`held`); the oldest of more than 8 held edges is rejected. A rejected edge goes back
-   through the gate when a loop accepted later closes the same place (its estimate there is
-   then better founded), so an early verdict is not final.
+   much. It is taken when its gate is narrow — a false match spread uniformly over
+   ±``false_loop_extent`` (x, y, θ) would land inside the gate ellipsoid with probability at
+   most ``isolated_false_pass`` — or when another loop closes the same place: an accepted loop
+   edge with both ends within ``support_window`` nodes of its own, or a held one with which it
+   passes the joint test (the conditional innovation of one given the other within the gate;
+   pairwise consistency as in PCM), the "consistent over consecutive detections" check of
+   visual loop closing. Until then it is held (`held`).
+
+**No verdict is final (deferred acceptance).** Held and rejected edges stay in a pool. Whenever
+the estimate moves materially (a surprising edge was accepted) or every ``retest_interval``
+nodes, each pooled edge's residual is recomputed at the current estimate (vectorised, no
+marginal): one now within the gate on its own covariance is accepted outright; a rejected one
+whose residual shrank enough that its innovation statistic, scaled alike, would pass, and a held
+one whose residual halved or doubled or that waited ``retest_interval`` nodes, goes through
+steps 2–3 again (at most ``max_retests`` per update, as each needs a marginal). A rejected edge
+also goes back through the gate when a loop accepted later closes the same place.
+`reconsider` is the final consistency pass: every pooled edge re-tested until nothing changes,
+then a Levenberg–Marquardt polish of the accepted edges.
 
 Edges accepted in step 3 carry a Huber kernel at the gate (√χ²₃(p) σ): their residual is large
 until the graph absorbs them, and Huber pulls with bounded force rather than ignoring them as a
@@ -44,7 +55,8 @@ quote), whatever optimiser produced the estimate.
 from __future__ import annotations
 
 import enum
-from collections.abc import Iterable, Sequence
+import math
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -53,6 +65,8 @@ import numpy as np
 import numpy.typing as npt
 from scipy.special import gammaincinv
 
+from eddiebot.geometry import se2_between
+
 __all__ = ["Edge", "EdgeKind", "PoseGraph"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -60,8 +74,6 @@ FloatArray = npt.NDArray[np.float64]
 _PRIOR_SIGMAS = np.array([1e-4, 1e-4, 1e-5])
 _EXTRA_ROUNDS = 4
 """At most this many extra iSAM2 relinearisation rounds after a loop closure."""
-_HOLD = 8
-"""Surprising edges waiting for a consistent partner; the oldest is rejected beyond this."""
 
 
 class EdgeKind(str, enum.Enum):
@@ -113,6 +125,15 @@ def _joint(marginal: Any, keys: list[int]) -> FloatArray:
     return np.block([[marginal.at(a, b) for b in keys] for a in keys])
 
 
+def _marginal_fn(source: Any) -> Callable[[list[int]], FloatArray]:
+    """``keys -> joint covariance`` from an ISAM2 or a Marginals object."""
+
+    def marginal(keys: list[int]) -> FloatArray:
+        return _joint(source.jointMarginalCovariance(keys), keys)
+
+    return marginal
+
+
 def chi2_quantile(probability: float, dof: int = 3) -> float:
     """χ²_dof quantile: the squared Mahalanobis distance under which ``probability`` of a
     correct measurement's residuals fall."""
@@ -125,9 +146,11 @@ class PoseGraph:
     ``optimizer`` is ``"isam2"`` (each `optimize` call folds the new nodes and edges into
     iSAM2; after a loop closure it relinearises until nothing moves, at most 4 extra rounds) or
     ``"levenberg_marquardt"`` (each call re-solves the whole graph from the current estimate).
-    ``robust_kernel``, the χ² gate (``gate_probability``; None disables it) and the support
-    rule (``require_support``, ``support_window`` in nodes) apply to edges added with
-    ``robust=True``; see the module docstring.
+    ``robust_kernel``, the χ² gate (``gate_probability``; None disables it), the support
+    rule (``require_support``, ``support_window`` in nodes), the narrow-gate rule
+    (``isolated_false_pass`` over ±``false_loop_extent``; None disables it) and the re-tests of
+    held and rejected edges (``retest_interval`` nodes, ``max_retests`` per update) apply to
+    edges added with ``robust=True``; see the module docstring and `reconsider`.
     """
 
     def __init__(
@@ -139,6 +162,10 @@ class PoseGraph:
         gate_probability: float | None = 0.999,
         require_support: bool = True,
         support_window: int = 30,
+        isolated_false_pass: float | None = 0.005,
+        false_loop_extent: tuple[float, float, float] = (3.0, 3.0, math.pi),
+        retest_interval: int = 50,
+        max_retests: int = 2,
     ) -> None:
         if optimizer not in ("isam2", "levenberg_marquardt"):
             raise ValueError(
@@ -153,8 +180,20 @@ class PoseGraph:
         self.kernel_width = float(kernel_width)
         self.gate_probability = gate_probability
         self._gate = None if gate_probability is None else chi2_quantile(gate_probability)
+        self._innovation_gate: float | None = None  # the final pass's family-wise gate
         self.require_support = bool(require_support)
         self.support_window = int(support_window)
+        if isolated_false_pass is not None and not 0.0 < isolated_false_pass < 1.0:
+            raise ValueError(
+                f"isolated_false_pass must be in (0, 1) or None, got {isolated_false_pass}"
+            )
+        self.isolated_false_pass = isolated_false_pass
+        ext = np.asarray(false_loop_extent, dtype=np.float64).reshape(3)
+        if np.any(ext <= 0.0):
+            raise ValueError(f"false_loop_extent must be positive, got {false_loop_extent}")
+        self.false_loop_extent = (float(ext[0]), float(ext[1]), float(ext[2]))
+        self.retest_interval = int(retest_interval)
+        self.max_retests = int(max_retests)
         # with the gate on, an accepted edge keeps full weight anywhere inside the gate
         self._accept_width = self.kernel_width
         if self._gate is not None:
@@ -171,6 +210,10 @@ class PoseGraph:
         self._closures: dict[int, list[int]] = {}  # accepted loop edges: later end -> earlier ends
         self._dormant: dict[int, set[int]] = {}  # rejected robust edges by later end
         self._due: set[int] = set()  # rejected edges a new closure nearby sends back to the gate
+        # pooled edge -> (eᵀe, innovation statistic, node count) when it was last gated
+        self._tested: dict[int, tuple[float, float, int]] = {}
+        self._info_cache: dict[int, FloatArray] = {}
+        self._last_retest = 0  # node count at the last periodic pool re-test
         self._pending_nodes: list[int] = []
         self._pending_edges: list[int] = []
         self._needs_full_solve = False
@@ -182,6 +225,8 @@ class PoseGraph:
         """Robust edges tested by the χ² gate."""
         self.marginal_queries = 0
         """Gate tests that needed the joint marginal covariance (residual above the gate)."""
+        self.late_accepts = 0
+        """Robust edges accepted after being held or rejected (deferred acceptance)."""
         self._isam: gtsam.ISAM2 | None = None
         self._isam_keys: set[int] = set()
         self._reset_isam()
@@ -413,20 +458,25 @@ class PoseGraph:
             self._dormant.get(self._last_end(k), set()).discard(k)
             retry.append(k)
         self._due = set()
-        for k in [*retry, *candidates]:
+        for k in dict.fromkeys([*retry, *candidates]):
+            if k in accepted:
+                continue
             self.gate_tests += 1
             self._rejected.discard(k)
             _, b = self._linearized(k)
-            if float(b @ b) <= gate:
+            r2 = float(b @ b)
+            if r2 <= gate:
                 accepted.append(k)
                 continue
             self.marginal_queries += 1
             b, c = self._innovation([k], marginal)
-            if float(b @ np.linalg.solve(c, b)) > gate:
+            stat = float(b @ np.linalg.solve(c, b))
+            if stat > (self._innovation_gate or gate):
                 self._reject(k)
+                self._tested[k] = (r2, stat, self._n)
                 continue
             partner = -1
-            if self.require_support and not self._supported(k):
+            if self.require_support and not self._supported(k) and not self._selective(k, c):
                 ek = self._edges[k]
                 for h in reversed(self._held):
                     eh = self._edges[h]
@@ -444,9 +494,9 @@ class PoseGraph:
                         partner = h
                         break
                 if partner < 0:
+                    # held in the pool until support arrives or the estimate decides it
                     self._held.append(k)
-                    if len(self._held) > _HOLD:
-                        self._reject(self._held.pop(0))
+                    self._tested[k] = (r2, stat, self._n)
                     continue
                 self._held.remove(partner)
                 accepted.append(partner)
@@ -455,8 +505,95 @@ class PoseGraph:
             self._trusted.add(k)
             surprising = True
         for k in accepted:
+            if self._tested.pop(k, None) is not None:
+                self.late_accepts += 1
             self._note_closure(k)
         return accepted, surprising
+
+    def _selective(self, k: int, innovation_cov: FloatArray) -> bool:
+        """Whether edge k's gate is narrow enough to take it without a partner: a false match
+        spread uniformly over ±``false_loop_extent`` would fall inside it with probability at
+        most ``isolated_false_pass``.
+
+        The gate is the ellipsoid eᵀ C⁻¹ e ≤ γ of the innovation, C = Σ^½ (I + A S Aᵀ) Σ^½ in
+        metric units (Σ the edge covariance); its volume is (4/3)π γ^{3/2} √det C.
+        """
+        if self.isolated_false_pass is None or self._gate is None:
+            return False
+        det = float(np.linalg.det(self._edges[k].covariance) * np.linalg.det(innovation_cov))
+        volume = 4.0 / 3.0 * math.pi * self._gate**1.5 * math.sqrt(max(det, 0.0))
+        ex, ey, et = self.false_loop_extent
+        return volume <= self.isolated_false_pass * 8.0 * ex * ey * et
+
+    def _pool_residuals(self, pool: Sequence[int]) -> FloatArray:
+        """eᵀ Ω e of edges ``pool`` at the current estimate (vectorised; GTSAM's Pose2 Logmap
+        error, as `_linearized`)."""
+        ii = np.array([self._edges[k].i for k in pool])
+        jj = np.array([self._edges[k].j for k in pool])
+        if self._stale and len(pool) > 32:
+            self._sync()
+        if self._stale:
+            xi = np.array([self._current(int(v)) for v in ii])
+            xj = np.array([self._current(int(v)) for v in jj])
+        else:
+            xi, xj = self._p[ii], self._p[jj]
+        z = np.array([self._edges[k].measurement for k in pool])
+        info = np.array([self._information(k) for k in pool])
+        d = se2_between(z, se2_between(xi, xj))
+        t = np.arctan2(np.sin(d[:, 2]), np.cos(d[:, 2]))
+        h = 0.5 * t
+        small = np.abs(t) < 1e-6
+        a = np.where(small, 1.0 - h * h / 3.0, h / np.tan(np.where(small, 1.0, h)))
+        e = np.stack([a * d[:, 0] + h * d[:, 1], -h * d[:, 0] + a * d[:, 1], t], axis=-1)
+        return np.asarray(np.einsum("ni,nij,nj->n", e, info, e))
+
+    def _information(self, k: int) -> FloatArray:
+        info = self._info_cache.get(k)
+        if info is None:
+            info = self._info_cache[k] = self._edges[k].information
+        return info
+
+    def _retest_pool(
+        self, marginal: Any, limit: int | None, *, every_held: bool = False
+    ) -> tuple[list[int], bool]:
+        """Deferred acceptance: send held and rejected edges back through the gate against the
+        current estimate.
+
+        Each pooled edge's residual is recomputed (cheap, no marginal). An edge whose residual
+        is now within the gate on its own covariance agrees with the graph and is accepted
+        outright. A rejected one whose residual has shrunk so far that its innovation statistic,
+        scaled alike, would now pass (the estimate moved its way), or a held one whose residual
+        has halved or doubled or that was not tested for ``retest_interval`` nodes (its marginal
+        has shrunk since), is gated afresh — at most ``limit`` of those per call, largest
+        relative change first, since each needs the joint marginal.
+        """
+        assert self._gate is not None
+        pool = sorted(self._rejected.union(self._held))
+        if not pool:
+            return [], False
+        held = set(self._held)
+        r2 = self._pool_residuals(pool)
+        chosen: list[int] = []
+        ranked: list[tuple[float, int]] = []
+        for k, r in zip(pool, r2.tolist()):
+            last, stat, at = self._tested.get(k, (math.inf, math.inf, -self.retest_interval))
+            if r <= self._gate:
+                chosen.append(k)
+            elif k not in held:
+                if stat * r <= (self._innovation_gate or self._gate) * last:
+                    ranked.append((r / last, k))
+            elif every_held or self._n - at >= self.retest_interval or not 0.5 <= r / last <= 2.0:
+                ranked.append((min(r / last, last / r), k))
+        ranked.sort()
+        chosen += [k for _, k in (ranked if limit is None else ranked[:limit])]
+        if not chosen:
+            return [], False
+        for k in chosen:
+            self._rejected.discard(k)
+            if k in held:
+                self._held.remove(k)
+            self._dormant.get(self._last_end(k), set()).discard(k)
+        return self._gate_edges(chosen, marginal)
 
     def _last_end(self, k: int) -> int:
         return max(self._edges[k].i, self._edges[k].j)
@@ -571,11 +708,11 @@ class PoseGraph:
         isam.update(graph, self._values(new))
         self._isam_keys.update(new)
         self._stale = True
+
+        def marginal(keys: list[int]) -> FloatArray:
+            return _joint(isam.jointMarginalCovariance(keys), keys)
+
         if gated:
-
-            def marginal(keys: list[int]) -> FloatArray:
-                return _joint(isam.jointMarginalCovariance(keys), keys)
-
             accepted, surprised = self._gate_edges(gated, marginal)
             surprising |= surprised
             if accepted:
@@ -584,9 +721,29 @@ class PoseGraph:
                     graph.add(self._edge_factor(k))
                 isam.update(graph, gtsam.Values())
         if loop and surprising:
-            for _ in range(_EXTRA_ROUNDS):
-                if not isam.update().getVariablesRelinearized():
-                    break
+            self._relinearize()
+        if (
+            self._gate is not None
+            and (self._rejected or self._held)
+            and (surprising or self._n - self._last_retest >= self.retest_interval)
+        ):
+            # the estimate has moved materially (or a while has passed): deferred acceptance
+            self._last_retest = self._n
+            accepted, surprised = self._retest_pool(marginal, self.max_retests)
+            if accepted:
+                graph = gtsam.NonlinearFactorGraph()
+                for k in accepted:
+                    graph.add(self._edge_factor(k))
+                isam.update(graph, gtsam.Values())
+                if surprised:
+                    self._relinearize()
+
+    def _relinearize(self) -> None:
+        """Extra iSAM2 rounds until nothing is relinearised (at most ``_EXTRA_ROUNDS``)."""
+        assert self._isam is not None
+        for _ in range(_EXTRA_ROUNDS):
+            if not self._isam.update().getVariablesRelinearized():
+                break
 
     def _optimize_lm(self) -> None:
         self._sync()
@@ -664,6 +821,12 @@ class PoseGraph:
             robust_kernel=self.robust_kernel,
             kernel_width=self.kernel_width,
             gate_probability=self.gate_probability,
+            require_support=self.require_support,
+            support_window=self.support_window,
+            isolated_false_pass=self.isolated_false_pass,
+            false_loop_extent=self.false_loop_extent,
+            retest_interval=self.retest_interval,
+            max_retests=self.max_retests,
         )
         order: list[int] = []
         for node in range(n):
@@ -685,6 +848,7 @@ class PoseGraph:
         self._p[:n] = sub.poses
         self._rejected = {order[k] for k in sub.rejected + sub.held}
         self._trusted = {order[k] for k in sub._trusted}
+        self._tested = {order[k]: v for k, v in sub._tested.items()}
         self._held = []
         self._closures, self._dormant, self._due = {}, {}, set()
         for k, e in enumerate(self._edges):
@@ -694,8 +858,67 @@ class PoseGraph:
                 self._closures.setdefault(max(e.i, e.j), []).append(min(e.i, e.j))
         self.gate_tests += sub.gate_tests
         self.marginal_queries += sub.marginal_queries
+        self.late_accepts += sub.late_accepts
         self._store(self._lm(self._inlier_graph()))
         return True
+
+    def reconsider(self, *, polish: bool = True) -> int:
+        """Final consistency pass: fold in anything pending, then send the held and rejected
+        robust edges back through the gate against the current estimate (every held one, and
+        each rejected one whose residual has shrunk enough to pass), until none is accepted.
+        With ``polish`` the accepted edges are then solved to convergence by
+        Levenberg–Marquardt (iSAM2 restarted from the result): the incremental estimate only
+        relinearises what moved more than its threshold.
+
+        The live gate decides each loop on its own, so over a session of N loops it turns
+        away about N·(1 − ``gate_probability``) true ones by chance (two on a graph with 2,000
+        loops at 0.999). This pass, which sees the whole session, tests innovations against
+        the family-wise (Bonferroni) gate χ²₃(1 − (1 − ``gate_probability``)/N) instead, N the
+        number of robust edges; acceptance on the edge's own covariance, the narrow-gate and
+        support rules are unchanged.
+
+        Returns how many edges it accepted.
+        """
+        if self._gate is None or self.gate_probability is None or not self._n:
+            return 0
+        self.optimize()
+        before = self.late_accepts
+        n_robust = max(1, sum(1 for e in self._edges if e.robust))
+        self._innovation_gate = chi2_quantile(1.0 - (1.0 - self.gate_probability) / n_robust)
+        try:
+            self._settle_pool()
+        finally:
+            self._innovation_gate = None
+        if polish:
+            self._sync()
+            self._store(self._lm(self._inlier_graph()))
+            if self.optimizer == "isam2" and not self._isam_broken:
+                self._restart_isam()
+        return self.late_accepts - before
+
+    def _settle_pool(self) -> None:
+        """Re-test the pool (every held edge) until nothing more is accepted."""
+        for _ in range(8):
+            if self.optimizer == "isam2" and not self._isam_broken:
+                isam = self._isam
+                assert isam is not None
+                accepted, _ = self._retest_pool(_marginal_fn(isam), None, every_held=True)
+                if not accepted:
+                    break
+                graph = gtsam.NonlinearFactorGraph()
+                for k in accepted:
+                    graph.add(self._edge_factor(k))
+                isam.update(graph, gtsam.Values())
+                self._stale = True
+                self._relinearize()
+            else:
+                self._sync()
+                inliers = self._inlier_graph()
+                marginals = gtsam.Marginals(inliers, self._values(range(self._n)))
+                accepted, _ = self._retest_pool(_marginal_fn(marginals), None, every_held=True)
+                if not accepted:
+                    break
+                self._store(self._lm(self._inlier_graph()))
 
     def optimize_batch(self) -> None:
         """Re-solve the whole graph from the current estimate, deciding every robust edge
@@ -745,5 +968,6 @@ class PoseGraph:
         self._closures = {}
         self._dormant = {}
         self._due = set()
+        self._tested = {}
         self._solved = True
         self._reset_isam()
