@@ -23,7 +23,7 @@ Runs:
 * ``door``: the office with the kitchen door (x 16.0–16.9 on y = 8.5) closed after
   mapping (open in the map, closed in the world); from the corridor, a goal in the kitchen
   must be reached another way (there is none) or aborted with a typed reason within 60 s.
-  The maze with a door closed in one of its loops has another way.
+  The house with its door at (7.0, 2.0–2.9) closed has another way, through the hall.
 
 Collisions are the simulator's contacts (the robot's own motion blocked by an obstacle or a
 person); contacts with a person near are counted apart.
@@ -233,6 +233,15 @@ def world_variant(name: str, out_dir: Path, *, people: bool, closed_doors: tuple
     return path
 
 
+def with_start(world_file: Path, start: tuple[float, float, float], out_dir: Path) -> Path:
+    """A copy of a world file whose robot starts at ``start`` (x, y, yaw)."""
+    doc = yaml.safe_load(world_file.read_text())
+    doc["start"] = {"x": float(start[0]), "y": float(start[1]), "theta": float(start[2])}
+    path = out_dir / f"{world_file.stem}-from-{start[0]:.2f}-{start[1]:.2f}.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
 def map_of(world: World, out_dir: Path) -> tuple[Path, OccupancyMap]:
     from eddiebot.sim.ground_truth import footprint_map
 
@@ -424,8 +433,12 @@ def goal_timeout(shortest_m: float) -> float:
 def run_goals(name: str, world_name: str, world_file: Path, n_goals: int, seed: int,
               tmp: Path, verbose: bool = True,
               goals: list[tuple[float, float, float]] | None = None,
-              checkpoint: Callable[[RunResult], None] | None = None) -> RunResult:
-    """Goals one after another in one launch; ``checkpoint`` sees the result after each goal."""
+              checkpoint: Callable[[RunResult], None] | None = None,
+              first: int = 0) -> RunResult:
+    """Goals one after another in one launch; ``checkpoint`` sees the result after each goal.
+
+    ``first`` > 0 resumes the seeded sequence at that goal: the robot starts on goal
+    ``first - 1`` (its position and yaw), as if the earlier goals had just been driven."""
     from eddiebot.sim.worlds import load_world
 
     world = load_world(world_file)
@@ -434,13 +447,17 @@ def run_goals(name: str, world_name: str, world_file: Path, n_goals: int, seed: 
     truth_space = FreeSpace.of(map_of(world, tmp)[1])
     if goals is None:
         goals = sample_goals(truth_space, world.start[:2], n_goals, seed)
+    start_pose = world.start
+    if first > 0:
+        start_pose = goals[first - 1]
+        world_file = with_start(world_file, start_pose, tmp)
     graph = PathGraph(truth_space)
     result = RunResult(name, world_name)
     t_wall, t_cpu = time.perf_counter(), time.process_time()
-    run = NavRun(world_file, map_yaml, world.start, tmp / f"{name}-{world_name}", seed=seed)
+    run = NavRun(world_file, map_yaml, start_pose, tmp / f"{name}-{world_name}", seed=seed)
     try:
         run.spin(3.0)
-        for i, goal in enumerate(goals):
+        for i, goal in enumerate(goals[first:], start=first):
             start = run.pose()
             rec = GoalRecord(i, goal, start)
             try:
@@ -538,6 +555,64 @@ def run_door(case: DoorCase, seed: int, tmp: Path) -> dict[str, Any]:
 
 
 # --------------------------------------------------------------------------- main
+# --------------------------------------------------------------------------- plans only
+def plan_ratios(world_name: str, n_goals: int, seed: int,
+                overrides: dict[str, Any] | None = None) -> dict[str, Any]:
+    """NavFn's plans (not driven) through the seeded goals in sequence on the footprint map,
+    with the global costmap of ``config/nav2.yaml`` (static + inflation layers; ``overrides``
+    replace ``footprint_padding``, ``inflation_radius``, ``cost_scaling_factor``): plan length
+    over the reference, the highest cost on a plan, and whether every goal is in the start's
+    connected component of the costmap (cost < INSCRIBED)."""
+    from eddiebot.cli.nav import default_params
+    from eddiebot.nav.costmap import build_costmap
+    from eddiebot.nav.planners.navfn import NavfnPlanner
+    from eddiebot.sim.ground_truth import footprint_map
+    from eddiebot.sim.worlds import load_world, world_path
+
+    overrides = overrides or {}
+    world = load_world(world_path(world_name))
+    grid = footprint_map(world)
+    space = FreeSpace.of(grid)
+    goals = sample_goals(space, world.start[:2], n_goals, seed)
+    graph = PathGraph(space)
+    doc = yaml.safe_load(default_params().read_text())
+    params = dict(doc["global_costmap"]["global_costmap"]["ros__parameters"])
+    params["plugins"] = ["static_layer", "inflation_layer"]
+    infl = dict(params["inflation_layer"])
+    for key in ("inflation_radius", "cost_scaling_factor"):
+        if key in overrides:
+            infl[key] = overrides[key]
+    params["inflation_layer"] = infl
+    if "footprint_padding" in overrides:
+        params["footprint_padding"] = overrides["footprint_padding"]
+    cm = build_costmap(params, "global_costmap")
+    cm.set_static_map(grid)
+    cm.update_map(np.array([*world.start[:2], 0.0]))
+    m = cm.master
+    labels, _ = ndimage.label(m.data < 253, structure=np.ones((3, 3)))
+
+    def label(x: float, y: float) -> int:
+        c = m.world_to_map(x, y)
+        return -1 if c is None else int(labels[c[1], c[0]])
+
+    planner = NavfnPlanner()
+    prev = (world.start[0], world.start[1], 0.0)
+    ratios, max_cost, cut_off = [], 0, 0
+    for g in goals:
+        if label(g[0], g[1]) != label(prev[0], prev[1]):
+            cut_off += 1
+        path = planner.create_plan(np.array(prev), np.array(g), m)
+        length = float(np.sum(np.hypot(np.diff(path[:, 0]), np.diff(path[:, 1]))))
+        ratios.append(length / graph.shortest(prev[:2], g[:2]))
+        cells = [m.world_to_map(x, y) for x, y in path[:, :2]]
+        max_cost = max(max_cost, max(int(m.get_cost(*c)) for c in cells if c is not None))
+        prev = g
+    return {"world": world_name, "goals": n_goals, "overrides": overrides,
+            "inscribed_radius": cm.inscribed_radius, "mean_plan_ratio": float(np.mean(ratios)),
+            "max_plan_ratio": float(np.max(ratios)), "max_cost_on_plan": max_cost,
+            "goals_cut_off": cut_off}
+
+
 PERSON_WORLDS = ("office", "warehouse", "depot", "house")
 COLUMNS = ["run", "world", "goals", "succeeded", "reached", "reached_pct", "collisions", "person_collisions",
            "mean_ratio", "max_ratio", "mean_amcl_err", "sim_s", "wall_s", "cpu_s"]
@@ -547,6 +622,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--worlds", nargs="+", default=list(WORLDS), choices=WORLDS)
     ap.add_argument("--goals", type=int, default=50)
+    ap.add_argument("--first", type=int, default=0,
+                    help="static runs: start at this goal of the seeded sequence (the robot placed on the goal before it), to split one world's goals over several runs")
     ap.add_argument("--person-goals", type=int, default=10)
     ap.add_argument("--runs", nargs="+", default=["static", "person", "door"],
                     choices=["static", "person", "door"])
@@ -557,9 +634,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quiet", action="store_true")
     ap.add_argument("--merge", nargs="+", type=Path, default=None, metavar="JSON",
                     help="combine the results of earlier runs (e.g. worlds run in parallel) into --out")
+    ap.add_argument("--plans-only", action="store_true",
+                    help="no simulation: NavFn's plans through the seeded goals (plan_ratios)")
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="with --plans-only: global costmap footprint_padding, inflation_radius, "
+                         "cost_scaling_factor overrides")
     args = ap.parse_args(argv)
     if args.merge:
         return merge(args.merge, args.out)
+    if args.plans_only:
+        overrides = {k: float(v) for k, v in (kv.split("=", 1) for kv in args.set)}
+        plans = [plan_ratios(w, args.goals, args.seed, overrides) for w in args.worlds]
+        print_table(plans, ["world", "goals", "inscribed_radius", "mean_plan_ratio",
+                            "max_plan_ratio", "max_cost_on_plan", "goals_cut_off"])
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps({"machine": machine(), "overrides": overrides,
+                                        "plans": plans}, indent=1) + "\n")
+        print(f"wrote {args.out}")
+        return 0
 
     rows: list[dict[str, Any]] = []
     details: dict[str, Any] = {}
@@ -590,7 +682,7 @@ def main(argv: list[str] | None = None) -> int:
                     _write(args, partial, doors, details)
 
                 r = run_goals(kind, w, wf, n, args.seed, tmp, verbose=not args.quiet,
-                              checkpoint=save)
+                              checkpoint=save, first=args.first if kind == "static" else 0)
                 s = r.summary()
                 rows.append(s)
                 save(r, final=True)
