@@ -17,6 +17,13 @@ parameters and the ``--set`` overrides) and scores it against the stored ground 
 instead of minutes, for comparing loop-closure settings on the same data. It also prints the
 error of every accepted closure against the true relative pose, next to its claimed σ.
 
+``--replay-vo DIR [DIR ...]`` re-runs the visual odometry alone on the frames a
+``--record-vo --keep`` run stored (``vo_frames.npz``: every frame's features, camera and ground
+truth), with `VO_PARAMETERS` and the ``--set`` overrides: drift in a minute of CPU.
+
+``--vo-ideal ROUTE [ROUTE ...]`` runs the visual odometry alone on frames the simulator's
+renderer makes along a route driven with ideal kinematics (no base stack, no people).
+
 ``--graph`` times the pose-graph back end alone (optimisation + the OptimizeMaxError check) on a
 synthetic 1,100-node SE(2) graph with a loop closure at every node from the second lap on (a
 300-node lap), incremental (iSAM2 on `eddiebot.slam.pose_graph.PoseGraph`) against gtsam batch
@@ -93,6 +100,96 @@ def bench_graph(n_nodes: int = 1100, lap: int = 300) -> dict[str, dict[str, floa
                      "nodes": len(poses), "links": len(links)}
         print(f"{name:12s} {out[name]}", flush=True)
     return out
+
+
+def ideal_route_poses(start: tuple[float, float, float], route: tuple, speed: float = 0.35,
+                      turn_speed: float = 0.7, rate: float = 10.0) -> list[tuple[float, float, float]]:
+    """Camera-frame poses of `route` driven with ideal kinematics: turn in place towards each
+    waypoint, drive straight at `speed`, spin as the waypoint asks; one pose per frame."""
+    import math
+
+    dt = 1.0 / rate
+    x, y, th = start
+    poses = [(x, y, th)]
+
+    def turn(angle: float) -> None:
+        nonlocal th
+        left = angle
+        while abs(left) > 1e-9:
+            step = math.copysign(min(abs(left), turn_speed * dt), left)
+            th += step
+            left -= step
+            poses.append((x, y, th))
+
+    for wp in route:
+        d = math.hypot(wp.x - x, wp.y - y)
+        if d > 0.05:
+            turn(math.remainder(math.atan2(wp.y - y, wp.x - x) - th, 2 * math.pi))
+            n = max(1, math.ceil(d / (speed * dt)))
+            x0, y0 = x, y
+            for i in range(1, n + 1):
+                x, y = x0 + (wp.x - x0) * i / n, y0 + (wp.y - y0) * i / n
+                poses.append((x, y, th))
+        if wp.spin > 0:
+            turn(wp.spin)
+    return poses
+
+
+def vo_ideal_route(world_name: str, route_name: str, overrides: dict[str, str],
+                   size: tuple[int, int] = (320, 240)) -> dict[str, float]:
+    """Visual odometry alone on frames the simulator's renderer makes along a route driven
+    with ideal kinematics (no base stack, no people): Kinect depth model, depth registered to
+    the RGB camera as the node does, the camera where the URDF puts it. VO drift as the live
+    benchmark computes it."""
+    import math
+    import time
+
+    import numpy as np
+
+    from eddiebot.demo.vslam_stage import VO_PARAMETERS
+    from eddiebot.geometry import se2_compose
+    from eddiebot.perception.register import register_depth_array
+    from eddiebot.sim.camera import KinectConfig
+    from eddiebot.sim.render import Renderer
+    from eddiebot.sim.worlds import load_world
+    from eddiebot.vslam.camera import CameraIntrinsics
+    from eddiebot.vslam.odometry import VisualOdometry
+    from eddiebot.vslam.parameters import RtabmapParameters
+    from eddiebot.vslam.transforms import OPTICAL_ROTATION, se3_inverse
+
+    world = load_world(world_name)
+    cfg = KinectConfig(seed=0).at_resolution(*size)
+    renderer = Renderer(world, cfg)
+
+    def mount(pos: tuple[float, float, float]) -> np.ndarray:
+        t = np.eye(4)
+        t[:3, 3] = pos
+        return t @ OPTICAL_ROTATION
+
+    lt = mount(cfg.rgb_position)
+    t_rgb_depth = se3_inverse(lt) @ mount(cfg.depth_position)
+    r, d = cfg.rgb, cfg.depth
+    cam = CameraIntrinsics(r.fx, r.fy, r.cx, r.cy, r.width, r.height, lt)
+    poses = np.array(ideal_route_poses(world.start, ROUTES[route_name][1]))
+    vo = VisualOdometry(RtabmapParameters.from_dict({**VO_PARAMETERS, **overrides}))
+    tracked: list[tuple[int, np.ndarray]] = []
+    c0 = time.process_time()
+    for i, pose in enumerate(poses):
+        depth = register_depth_array(renderer.depth(pose, i), (d.fx, d.fy, d.cx, d.cy),
+                                     (r.fx, r.fy, r.cx, r.cy), (r.width, r.height), t_rgb_depth)
+        res = vo.process(renderer.rgb(pose), depth, cam, round(i * 1e8))
+        if res.pose is not None:
+            tracked.append((i, res.pose))
+    cpu = time.process_time() - c0
+    dist = float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T)))
+    (i0, first), (i1, last) = tracked[0], tracked[-1]
+    rel = np.linalg.inv(first) @ last
+    end = se2_compose(poses[i0], np.array([rel[0, 3], rel[1, 3], math.atan2(rel[1, 0], rel[0, 0])]))
+    err = float(np.hypot(*(end[:2] - poses[i1][:2])))
+    return {"frames": float(len(poses)), "lost": float(len(poses) - len(tracked)),
+            "distance_m": dist, "end_error_m": err, "drift_percent": 100.0 * err / dist,
+            "yaw_error_deg": math.degrees(math.remainder(end[2] - poses[i1][2], 2 * math.pi)),
+            "cpu_s": cpu}
 
 
 def replay_session(folder: Path, overrides: dict[str, str], verbose: bool = False,
@@ -219,6 +316,8 @@ def main() -> int:
     ap.add_argument("--out", type=Path, default=RESULTS)
     ap.add_argument("--record-vo", action="store_true",
                     help="write vo_frames.npz (VO input) per route, for --replay-vo (with --keep)")
+    ap.add_argument("--record-images", action="store_true",
+                    help="with --record-vo: also write vo_images.npz (RGB, registered and raw depth)")
     ap.add_argument("--timeout", type=float, default=7200.0, help="wall-clock limit per route (s)")
     ap.add_argument("--keep", type=Path, default=None, help="keep databases/trajectories here")
     ap.add_argument("--graph", action="store_true", help="back-end timing only")
@@ -227,7 +326,46 @@ def main() -> int:
     ap.add_argument("--odom-variance", nargs=2, type=float, default=None, metavar=("LIN", "ANG"),
                     help="with --replay: odom_tf_linear/angular_variance (default: the core's 0.001)")
     ap.add_argument("-v", "--verbose", action="store_true", help="with --replay: every closure")
+    ap.add_argument("--replay-vo", nargs="+", type=Path, default=None, metavar="DIR",
+                    help="re-run the visual odometry offline on vo_frames.npz kept with "
+                         "--record-vo --keep (VO_PARAMETERS plus --set)")
+    ap.add_argument("--vo-ideal", nargs="+", default=None, choices=sorted(ROUTES),
+                    metavar="ROUTE", help="visual odometry alone on rendered frames along the "
+                    "route(s) driven with ideal kinematics (no base stack, no people; --set)")
     args = ap.parse_args()
+    if args.vo_ideal:
+        overrides = dict(item.split("=", 1) for item in args.set)
+        rows_ideal = {}
+        for name in args.vo_ideal:
+            r = vo_ideal_route(ROUTES[name][0], name, overrides)
+            rows_ideal[name] = r
+            print(f"{name:14s} frames {r['frames']:6.0f} lost {r['lost']:5.0f} dist "
+                  f"{r['distance_m']:5.1f} m end error {r['end_error_m']:6.3f} m drift "
+                  f"{r['drift_percent']:6.2f} % yaw {r['yaw_error_deg']:+6.2f} deg "
+                  f"CPU {r['cpu_s']:5.1f} s", flush=True)
+        out = RESULTS.with_name("vslam_vo_ideal.json") if args.out == RESULTS else args.out
+        out.write_text(json.dumps({
+            "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+            "overrides": overrides, "routes": rows_ideal}, indent=2))
+        print(f"wrote {out}")
+        return 0
+    if args.replay_vo:
+        from eddiebot.demo.vslam_stage import VO_PARAMETERS, replay_vo_frames
+
+        overrides = dict(item.split("=", 1) for item in args.set)
+        rows_vo = []
+        for d in args.replay_vo:
+            r = replay_vo_frames(d / "vo_frames.npz", overrides)
+            rows_vo.append({"session": str(d), **r})
+            print(f"{str(d)[-30:]:30s} frames {r['frames']:6.0f} lost {r['lost']:5.0f} "
+                  f"end error {r['end_error_m']:6.3f} m drift {r['drift_percent']:6.2f} % "
+                  f"CPU {r['cpu_s']:5.1f} s", flush=True)
+        out = RESULTS.with_name("vslam_vo_replay.json") if args.out == RESULTS else args.out
+        out.write_text(json.dumps({
+            "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+            "parameters": {**VO_PARAMETERS, **overrides}, "sessions": rows_vo}, indent=2))
+        print(f"wrote {out}")
+        return 0
     if args.replay:
         overrides = dict(item.split("=", 1) for item in args.set)
         rows = [replay_session(d, overrides, args.verbose,
@@ -273,7 +411,7 @@ def main() -> int:
             r = run_vslam(out, world=world_name, route=route, seed=args.seed,
                           camera=(w, h, float(rate)), parameters=extra or None,
                           visual_odometry=not args.no_vo, wall_timeout_s=args.timeout,
-                          record_vo=args.record_vo)
+                          record_vo=args.record_vo, record_images=args.record_images)
             worlds[world] = r.summary()
             print(f"{world}: {json.dumps(r.summary(), default=str)}", flush=True)
     results["worlds"] = worlds

@@ -33,7 +33,8 @@ from eddiebot.geometry import quaternion_to_yaw, se2_compose
 from eddiebot.msgs.nav_msgs import Odometry
 from eddiebot.registry import NODES
 
-__all__ = ["CORRIDOR_LONG_ROUTE", "CORRIDOR_ROUTE", "VslamResult", "replay_vo_frames", "run_vslam"]
+__all__ = ["CORRIDOR_LONG_ROUTE", "CORRIDOR_ROUTE", "VO_PARAMETERS", "VslamResult", "replay_vo_frames",
+           "run_vslam"]
 
 #: Down the ``corridor`` world (40 × 2.2 m) and back, looking around at both ends and again at
 #: the start: about 34 m, the return leg revisits every place of the outward one.
@@ -53,6 +54,15 @@ CORRIDOR_LONG_ROUTE: tuple[Waypoint, ...] = (
     Waypoint(18.0, 1.1, spin=2 * math.pi),
     Waypoint(2.5, 1.1, spin=2 * math.pi),
 )
+
+
+#: Parameters of the visual odometry run beside the SLAM (VO-only drift): the report's
+#: 3-DoF mode, with the inliers' x, y, yaw re-solve (`Vis/PnPRefineIterations`; upstream
+#: refines its F2M odometry by local bundle adjustment instead, which is not implemented here)
+#: and the check that keeps the tracked motion when a walking person carries the RANSAC vote
+#: (`Odom/MotionConsistencyReprojError`, not upstream).
+VO_PARAMETERS: dict[str, str] = {"Reg/Force3DoF": "true", "Vis/PnPRefineIterations": "1",
+                                 "Odom/MotionConsistencyReprojError": "1.0"}
 
 
 @dataclass
@@ -115,13 +125,15 @@ class _VoProbe(Node):
 
         super().__init__("vo_probe", **kwargs)
         self.slam = slam
-        self.vo = VisualOdometry(RtabmapParameters.from_dict({"Reg/Force3DoF": "true"}))
+        self.vo = VisualOdometry(RtabmapParameters.from_dict(VO_PARAMETERS))
         self.depth: dict[int, Any] = {}
         self.rgb: dict[int, Any] = {}
         self.poses: list[tuple[int, np.ndarray]] = []
         self.lost = 0
         #: (stamp, features, camera) of every frame, when recording for offline VO replays
         self.recorded: list[tuple[int, Any, Any]] | None = None
+        #: (rgb, registered depth, raw depth) of every frame, when recording the images too
+        self.images: list[tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self.create_subscription(Image, "/depth/image_raw", self._on_depth, 5)
         self.create_subscription(Image, "/image_raw", self._on_rgb, 5)
 
@@ -154,6 +166,10 @@ class _VoProbe(Node):
         r = self.vo.process(rgb, depth, cam, t)
         if self.recorded is not None:
             self.recorded.append((t, r.frame_features, cam))
+        if self.images is not None:
+            raw = np.asarray(d.data, np.uint8).view(
+                np.uint16 if d.encoding == "16UC1" else np.float32).reshape(int(d.height), int(d.width))
+            self.images.append((rgb.copy(), np.asarray(depth).copy(), raw.copy()))
         if r.pose is None:
             self.lost += 1
             return
@@ -163,12 +179,15 @@ class _VoProbe(Node):
 def run_vslam(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ...] = OFFICE_ROUTE,
               seed: int = 0, camera: tuple[int, int, float] = (320, 240, 10.0),
               parameters: dict[str, Any] | None = None, visual_odometry: bool = False,
-              wall_timeout_s: float = 1800.0, record_vo: bool = False) -> VslamResult:
+              wall_timeout_s: float = 1800.0, record_vo: bool = False,
+              record_images: bool = False) -> VslamResult:
     """Map ``world`` along ``route`` with the vSLAM node; write database and trajectory under
     ``out_dir``. ``parameters`` are extra node parameters (RTAB-Map ``Group/Name`` strings or the
     node's own, e.g. ``odom_stamp_offset``). ``record_vo`` (with ``visual_odometry``) also writes
     the visual odometry's input — every frame's features, camera and ground truth — to
-    ``vo_frames.npz`` for offline odometry replays (`replay_vo_frames`)."""
+    ``vo_frames.npz`` for offline odometry replays (`replay_vo_frames`); ``record_images``
+    adds every frame's RGB, registered and raw depth (``vo_images.npz``), for work on the
+    feature extraction offline."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     result = VslamResult(world)
@@ -203,6 +222,8 @@ def run_vslam(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ..
         nodes.append(vo_probe)
         if record_vo:
             vo_probe.recorded = []
+        if record_images:
+            vo_probe.images = []
     frame_ms: list[float] = []
     process = slam.core.process
 
@@ -235,6 +256,11 @@ def run_vslam(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ..
         if vo_probe is not None and vo_probe.recorded:
             _save_vo_frames(out_dir / "vo_frames.npz", vo_probe.recorded, truth,
                             result.distance_m)
+        if vo_probe is not None and vo_probe.images:
+            np.savez_compressed(out_dir / "vo_images.npz",
+                                rgb=np.stack([i[0] for i in vo_probe.images]),
+                                depth=np.stack([i[1] for i in vo_probe.images]),
+                                raw_depth=np.stack([i[2] for i in vo_probe.images]))
     finally:
         for n in reversed(nodes):
             n.destroy_node()  # the vSLAM node closes (and completes) its database
@@ -275,8 +301,7 @@ def replay_vo_frames(path: Path, parameters: dict[str, str] | None = None) -> di
     data = np.load(path)
     w, h = (int(v) for v in data["size"])
     cam = CameraIntrinsics.from_k(data["k"].ravel(), w, h, data["local_transform"])
-    vo = VisualOdometry(RtabmapParameters.from_dict({"Reg/Force3DoF": "true",
-                                                     **(parameters or {})}))
+    vo = VisualOdometry(RtabmapParameters.from_dict({**VO_PARAMETERS, **(parameters or {})}))
     offsets = np.concatenate([[0], np.cumsum(data["counts"])])
     fields = {name: data[name] for name in _FEATURE_FIELDS}
     poses: list[tuple[int, np.ndarray]] = []

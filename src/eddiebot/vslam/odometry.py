@@ -7,7 +7,7 @@ publishes as a "null" odometry); a pose is never made up.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -15,12 +15,24 @@ from numpy.typing import NDArray
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
 from eddiebot.vslam.parameters import ODOM_STRATEGY_F2F, RtabmapParameters
-from eddiebot.vslam.registration import LOST_VARIANCE, RegistrationResult, register
-from eddiebot.vslam.transforms import from_xyz_rpy, se3_inverse, to_3dof, xyz_rpy
+from eddiebot.vslam.registration import (
+    LOST_VARIANCE,
+    RegistrationResult,
+    estimate_covariance,
+    refine_pnp,
+    register,
+    reprojection_errors,
+)
+from eddiebot.vslam.transforms import from_xyz_rpy, se3_inverse, to_3dof, xyz_rpy, yaw_of
 
 __all__ = ["OdometryResult", "VisualOdometry"]
 
 F64 = NDArray[np.float64]
+# A result this close to the prediction is the tracked motion (m, rad)...
+_SAME_AS_PREDICTED = (0.02, np.radians(1.0))
+# ...and a re-solve this close to the result found the same solution.
+_SAME_SOLUTION = (0.01, np.radians(0.5))
+_MIN_SECOND_MOTION_SHARE = 0.25  # of the result's inliers
 
 
 def _lost_covariance() -> F64:
@@ -123,10 +135,16 @@ class VisualOdometry:
             assert self._keyframe is not None
             guess = se3_inverse(self._keyframe_pose) @ predicted
             result = register(self._keyframe, features, camera, p, guess)
+            if p.odom_motion_consistency > 0 and self._velocity is not None:
+                result = self._keep_tracked_motion(result, self._keyframe, features, camera,
+                                                   guess)
             new_pose = None if result.transform is None else self._keyframe_pose @ result.transform
         else:
             assert self._map is not None
-            result = register(self._map.as_features(), features, camera, p, predicted)
+            local_map = self._map.as_features()
+            result = register(local_map, features, camera, p, predicted)
+            if p.odom_motion_consistency > 0 and self._velocity is not None:
+                result = self._keep_tracked_motion(result, local_map, features, camera, predicted)
             new_pose = result.transform
         if new_pose is None:
             return self._lost(features, result)
@@ -158,6 +176,49 @@ class VisualOdometry:
         v = self._velocity * dt
         motion = from_xyz_rpy(*(float(x) for x in v))
         return to_3dof(motion) if self.params.reg_force_3dof else motion
+
+    def _keep_tracked_motion(
+        self,
+        result: RegistrationResult,
+        old: FrameFeatures,
+        new: FrameFeatures,
+        camera: CameraIntrinsics,
+        guess: F64,
+    ) -> RegistrationResult:
+        """`Odom/MotionConsistencyReprojError`. RANSAC keeps the motion with the most support, so a
+        textured person walking towards the robot can carry it (the odometry then reports the
+        closing speed). When the result leaves the prediction, re-solve from the prediction
+        on the matches it explains within the tighter gate; if that converges elsewhere with
+        enough inliers, the matches hold two rigid motions: keep the one that continues the
+        tracked motion. One rigid scene has one solution, so both starts agree there."""
+        p = self.params
+        if not result.ok or result.transform is None or result.match_from_index.size == 0:
+            return result
+        if p.reg_force_3dof:
+            guess = to_3dof(guess)
+        d = se3_inverse(guess) @ result.transform
+        if (np.hypot(d[0, 3], d[1, 3]) < _SAME_AS_PREDICTED[0]
+                and abs(yaw_of(d)) < _SAME_AS_PREDICTED[1]):
+            return result
+        mf, mt = result.match_from_index, result.match_to_index
+        gate = float(p.odom_motion_consistency)
+        err = reprojection_errors(guess, old.points[mf], new.uv[mt], camera)
+        fit = np.flatnonzero(err < gate).astype(np.intp)
+        if fit.size < p.vis_min_inliers:
+            return result
+        tight = replace(p, vis_pnp_reproj_error=gate,
+                        vis_pnp_refine_iterations=max(3, p.vis_pnp_refine_iterations))
+        transform, inl = refine_pnp(guess, old.points[mf], new.uv[mt], fit, camera, tight)
+        if inl.size < max(p.vis_min_inliers, _MIN_SECOND_MOTION_SHARE * result.inliers):
+            return result
+        d = se3_inverse(transform) @ result.transform
+        if np.hypot(d[0, 3], d[1, 3]) < _SAME_SOLUTION[0] and abs(yaw_of(d)) < _SAME_SOLUTION[1]:
+            return result
+        fi, ti = mf[inl], mt[inl]
+        cov = estimate_covariance(transform, old.points[fi], new.points[ti], new.uv[ti], camera,
+                                  p.vis_pnp_variance_median_ratio)
+        return RegistrationResult(transform, cov, int(inl.size), int(mf.size), fi, ti,
+                                  match_from_index=mf, match_to_index=mt)
 
     def _lost(self, features: FrameFeatures, result: RegistrationResult) -> OdometryResult:
         self._velocity = None

@@ -61,6 +61,10 @@ class RtabmapParameters:
     vis_inlier_distance: float = _p("Vis/InlierDistance", 0.1, "m, 3D inlier gate")
     vis_pnp_reproj_error: float = _p("Vis/PnPReprojError", 2.0, "px")
     vis_iterations: int = _p("Vis/Iterations", 300, "RANSAC iterations")
+    vis_pnp_refine_iterations: int = _p(
+        "Vis/PnPRefineIterations", 0,
+        "re-solve on the inliers, then re-select them among all matches (upstream: 0 when "
+        "built with g2o, else 1); with Reg/Force3DoF the re-solve is in x, y, yaw only")
     vis_cor_nndr: float = _p("Vis/CorNNDR", 0.8, "registration NNDR")
     vis_cor_guess_win_size: int = _p("Vis/CorGuessWinSize", 40, "px, projection matching window")
     vis_pnp_variance_median_ratio: int = _p("Vis/PnPVarianceMedianRatio", 4, "")
@@ -76,6 +80,12 @@ class RtabmapParameters:
     odom_vis_key_frame_thr: int = _p("Odom/VisKeyFrameThr", 150, "inliers")
     odom_guess_motion: bool = _p("Odom/GuessMotion", True, "constant-velocity prediction")
     odom_reset_countdown: int = _p("Odom/ResetCountdown", 0, "frames lost before reset, 0 = off")
+    odom_motion_consistency: float = _p(
+        "Odom/MotionConsistencyReprojError", 0.0,
+        "not upstream; px, 0 = off: when the registration leaves the predicted motion, re-solve "
+        "from the prediction on the matches within this reprojection error; if that keeps "
+        "Vis/MinInliers and a quarter of the inliers, another rigid motion (a person walking "
+        "through the view) took the RANSAC vote: keep the one that continues the tracked motion")
     odom_f2m_max_size: int = _p("OdomF2M/MaxSize", 2000, "local map words")
     odom_f2m_max_new_features: int = _p("OdomF2M/MaxNewFeatures", 0, "0 = all")
     # --- loop closure ---

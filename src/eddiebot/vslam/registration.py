@@ -23,7 +23,7 @@ from eddiebot.vslam.matching import (
     nndr_one_to_one,
 )
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.transforms import se3_inverse, to_3dof
+from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, to_3dof, yaw_of
 
 __all__ = [
     "LOST_VARIANCE",
@@ -32,7 +32,9 @@ __all__ = [
     "match_by_projection",
     "match_descriptors",
     "pnp_jacobian_covariance",
+    "refine_pnp",
     "register",
+    "reprojection_errors",
     "solve_pnp",
 ]
 
@@ -43,6 +45,8 @@ _LINEAR_VARIANCE_FLOOR = 1e-8
 _ANGULAR_VARIANCE_FLOOR = 3e-8
 _CHI2_FACTOR = 2.1981
 _MIN_PIXEL_SIGMA = 0.5  # px: keypoint localisation floor of the Jacobian covariance
+_HUBER_PX = 1.0  # px: robust kernel width of the refinement
+_REFINE_STEPS = 10  # Gauss-Newton steps per refinement
 
 
 def _huge_covariance() -> F64:
@@ -60,6 +64,9 @@ class RegistrationResult:
     from_index: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     to_index: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
     reason: str = ""
+    #: every match the transform was estimated from (inliers or not): old / new indices
+    match_from_index: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
+    match_to_index: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
 
     @property
     def ok(self) -> bool:
@@ -166,6 +173,99 @@ def solve_pnp(
     p[:3, :3] = rot
     p[:3, 3] = np.asarray(tvec_out).ravel()
     return se3_inverse(lt @ p), inliers.ravel().astype(np.intp)
+
+
+def reprojection_errors(
+    transform: F64, object_points: F64, image_points: NDArray[np.floating], camera: CameraIntrinsics
+) -> NDArray[np.float64]:
+    """Pixel distance between each old 3D point (old base frame) projected into the new image
+    (`transform` = pose of the new base frame in the old one) and its keypoint; inf behind."""
+    m = se3_inverse(camera.local_transform) @ se3_inverse(transform)
+    pc = object_points @ m[:3, :3].T + m[:3, 3]
+    z = pc[:, 2]
+    front = z > 1e-6
+    zs = np.where(front, z, 1.0)
+    du = camera.fx * pc[:, 0] / zs + camera.cx - image_points[:, 0]
+    dv = camera.fy * pc[:, 1] / zs + camera.cy - image_points[:, 1]
+    return np.where(front, np.hypot(du, dv), np.inf)
+
+
+def _refine_3dof(
+    transform: F64, object_points: F64, image_points: NDArray[np.floating], camera: CameraIntrinsics
+) -> F64:
+    """Gauss-Newton (Huber-weighted) on x, y, yaw of `transform` minimising the reprojection
+    error: the planar pose the inliers support, instead of a 6-DoF solution projected to 3 DoF
+    (whose yaw carries what the free pitch, roll and z absorbed)."""
+    x, y, yaw = float(transform[0, 3]), float(transform[1, 3]), yaw_of(transform)
+    m = se3_inverse(camera.local_transform)
+    a, b = m[:3, :3], m[:3, 3]
+    pts = np.asarray(object_points, np.float64)
+    uv = np.asarray(image_points, np.float64)
+    for _ in range(_REFINE_STEPS):
+        c, s = np.cos(yaw), np.sin(yaw)
+        dx, dy = pts[:, 0] - x, pts[:, 1] - y
+        q = np.stack([c * dx + s * dy, -s * dx + c * dy, pts[:, 2]], axis=1)  # new base frame
+        pc = q @ a.T + b
+        z = pc[:, 2]
+        if np.any(z <= 1e-6):
+            break
+        iz = 1.0 / z
+        r = np.concatenate([camera.fx * pc[:, 0] * iz + camera.cx - uv[:, 0],
+                            camera.fy * pc[:, 1] * iz + camera.cy - uv[:, 1]])
+        # d q / d(x, y, yaw), then through the camera rotation and the projection
+        dq = np.empty((pts.shape[0], 3, 3))
+        dq[:, :, 0] = (-c, s, 0.0)
+        dq[:, :, 1] = (-s, -c, 0.0)
+        dq[:, 0, 2], dq[:, 1, 2], dq[:, 2, 2] = q[:, 1], -q[:, 0], 0.0
+        dpc = np.einsum("ij,njk->nik", a, dq)
+        ju = camera.fx * (dpc[:, 0, :] * iz[:, None] - (pc[:, 0] * iz * iz)[:, None] * dpc[:, 2, :])
+        jv = camera.fy * (dpc[:, 1, :] * iz[:, None] - (pc[:, 1] * iz * iz)[:, None] * dpc[:, 2, :])
+        jac = np.concatenate([ju, jv])
+        w = np.minimum(1.0, _HUBER_PX / np.maximum(np.abs(r), 1e-12))
+        h = jac.T @ (jac * w[:, None])
+        try:
+            step = np.linalg.solve(h, -(jac.T @ (w * r)))
+        except np.linalg.LinAlgError:
+            break
+        x, y, yaw = x + float(step[0]), y + float(step[1]), yaw + float(step[2])
+        if abs(step[0]) + abs(step[1]) < 1e-7 and abs(step[2]) < 1e-8:
+            break
+    return from_xyz_yaw(x, y, yaw)
+
+
+def refine_pnp(
+    transform: F64,
+    object_points: F64,
+    image_points: NDArray[np.floating],
+    inliers: NDArray[np.intp],
+    camera: CameraIntrinsics,
+    params: RtabmapParameters,
+) -> tuple[F64, NDArray[np.intp]]:
+    """`Vis/PnPRefineIterations` rounds of: re-solve on the inliers (x, y, yaw only with
+    `Reg/Force3DoF`, else OpenCV's Levenberg-Marquardt in 6 DoF), then re-select the inliers
+    among all matches by `Vis/PnPReprojError`. A round that would leave fewer than
+    `Vis/MinInliers` inliers is not taken."""
+    lt = camera.local_transform
+    for _ in range(params.vis_pnp_refine_iterations):
+        if params.reg_force_3dof:
+            refined = _refine_3dof(transform, object_points[inliers], image_points[inliers], camera)
+        else:
+            p = se3_inverse(lt) @ se3_inverse(transform)
+            rvec = np.asarray(cv2.Rodrigues(p[:3, :3])[0], dtype=np.float64)
+            tvec = p[:3, 3].reshape(3, 1).copy()
+            r_out, t_out = cv2.solvePnPRefineLM(
+                object_points[inliers].astype(np.float64),
+                image_points[inliers].astype(np.float64), camera.matrix, None, rvec, tvec)
+            q = np.eye(4)
+            q[:3, :3] = cv2.Rodrigues(np.asarray(r_out, np.float64))[0]
+            q[:3, 3] = np.asarray(t_out, np.float64).ravel()
+            refined = se3_inverse(lt @ q)
+        err = reprojection_errors(refined, object_points, image_points, camera)
+        selected = np.flatnonzero(err < float(params.vis_pnp_reproj_error)).astype(np.intp)
+        if not np.all(np.isfinite(refined)) or selected.size < params.vis_min_inliers:
+            break
+        transform, inliers = refined, selected
+    return transform, inliers
 
 
 def estimate_covariance(
@@ -312,6 +412,8 @@ def register(
             )
         if force:
             transform = to_3dof(transform)
+        if params.vis_pnp_refine_iterations > 0:
+            transform, inl = refine_pnp(transform, old.points[fi], new.uv[ti], inl, camera, params)
         fi_in, ti_in = fi[inl], ti[inl]
         cov = estimate_covariance(
             transform, old.points[fi_in], new.points[ti_in], new.uv[ti_in], camera,
@@ -321,7 +423,8 @@ def register(
             jac = pnp_jacobian_covariance(se3_inverse(transform), old.points[fi_in],
                                           new.uv[ti_in], camera, force)
             cov = np.maximum(cov, jac)
-        return RegistrationResult(transform, cov, int(inl.size), int(fi.size), fi_in, ti_in)
+        return RegistrationResult(transform, cov, int(inl.size), int(fi.size), fi_in, ti_in,
+                                  match_from_index=fi, match_to_index=ti)
 
     result = _once(guess)
     if guess is not None and not result.ok:
