@@ -710,19 +710,41 @@ def _write(args: argparse.Namespace, rows: list[dict[str, Any]], doors: list[dic
 
 
 def merge(files: list[Path], out: Path) -> int:
-    rows: list[dict[str, Any]] = []
+    """Combine runs made in parallel or in parts (``--first``): the goals of one run and world
+    from several files are joined by goal index and its summary is computed afresh."""
     doors: list[dict[str, Any]] = []
-    details: dict[str, Any] = {}
+    parts: dict[str, list[tuple[dict[str, Any], dict[str, Any]]]] = {}
     runs: list[dict[str, Any]] = []
     for f in files:
         doc = json.loads(f.read_text())
-        rows += doc.get("results", [])
         doors += doc.get("doors", [])
-        details.update(doc.get("details", {}))
+        details_in = doc.get("details", {})
+        for r in doc.get("results", []):
+            key = f"{r['run']}/{r['world']}"
+            parts.setdefault(key, []).append((r, details_in.get(key, {})))
         runs.append({"file": f.name, "machine": doc.get("machine"), "args": doc.get("args")})
-    for r in rows:  # navigator-reported successes (``reached`` also needs the true pose in tolerance)
-        goals = details.get(f"{r['run']}/{r['world']}", {}).get("goals", [])
-        r["succeeded"] = sum(1 for g in goals if g["status"] == "succeeded")
+    rows: list[dict[str, Any]] = []
+    details: dict[str, Any] = {}
+    for key, items in parts.items():
+        first_row = items[0][0]
+        by_index: dict[int, dict[str, Any]] = {}
+        for _, det in items:
+            for g in det.get("goals", []):
+                by_index[int(g["index"])] = g
+        result = RunResult(first_row["run"], first_row["world"])
+        result.goals = [GoalRecord(**{**g, "goal": tuple(g["goal"]), "start": tuple(g["start"])})
+                        for _, g in sorted(by_index.items())]
+        result.collisions = sum(int(r.get("collisions", 0)) for r, _ in items)
+        result.person_collisions = sum(int(r.get("person_collisions", 0)) for r, _ in items)
+        result.collision_points = [tuple(p) for _, det in items
+                                   for p in det.get("collision_points", [])]
+        result.sim_s = sum(float(r.get("sim_s", 0.0)) for r, _ in items)
+        result.wall_s = sum(float(r.get("wall_s", 0.0)) for r, _ in items)
+        result.cpu_s = sum(float(r.get("cpu_s", 0.0)) for r, _ in items)
+        rows.append(result.summary())
+        details[key] = {"goals": [asdict(g) for g in result.goals],
+                        "collision_points": result.collision_points,
+                        "complete": all(det.get("complete", False) for _, det in items)}
     print_table(rows, COLUMNS)
     for d in doors:
         print(f"door {d['world']}: {d['status']} ({d['error_code']}: {d['error_msg']}) in "
