@@ -39,17 +39,19 @@ class Waypoint:
     spin: float = 0.0
 
 
+
+def _room_visit(x: float, y: float, corridor_y: float = 7.5) -> tuple[Waypoint, ...]:
+    """From the office corridor at ``x`` into a room to (x, y), one full turn there, and back."""
+    return (Waypoint(x, corridor_y), Waypoint(x, y, spin=2 * math.pi), Waypoint(x, corridor_y))
+
+
 #: Down the office corridor and back, into a room on each side through open doors (the
 #: doors at x 10.0–10.9 north and 12.0–12.9 south are closed), closing the loop at the start:
 #: about 45 m and five spins.
 OFFICE_ROUTE: tuple[Waypoint, ...] = (
     Waypoint(3.4, 7.5, spin=2 * math.pi),
-    Waypoint(7.45, 7.5),
-    Waypoint(7.45, 5.0, spin=2 * math.pi),
-    Waypoint(7.45, 7.5),
-    Waypoint(16.45, 7.5),
-    Waypoint(16.45, 10.3, spin=2 * math.pi),
-    Waypoint(16.45, 7.5),
+    *_room_visit(7.45, 5.0),
+    *_room_visit(16.45, 10.3),
     Waypoint(18.5, 7.5, spin=2 * math.pi),
     Waypoint(12.5, 7.6),
     Waypoint(3.0, 7.5),
@@ -61,15 +63,9 @@ OFFICE_ROUTE: tuple[Waypoint, ...] = (
 #: corridor, revisiting the corridor and the start twice more: about 89 m and nine spins.
 OFFICE_LONG_ROUTE: tuple[Waypoint, ...] = (
     *OFFICE_ROUTE,
-    Waypoint(2.45, 7.5),
-    Waypoint(2.45, 5.0, spin=2 * math.pi),
-    Waypoint(2.45, 7.5),
-    Waypoint(3.45, 7.5),
-    Waypoint(3.45, 9.7, spin=2 * math.pi),
-    Waypoint(3.45, 7.5),
-    Waypoint(17.45, 7.5),
-    Waypoint(17.45, 5.0, spin=2 * math.pi),
-    Waypoint(17.45, 7.5),
+    *_room_visit(2.45, 5.0),
+    *_room_visit(3.45, 9.7),
+    *_room_visit(17.45, 5.0),
     Waypoint(3.0, 7.5),
     Waypoint(1.5, 7.5, spin=math.pi),
 )
@@ -105,18 +101,10 @@ WAREHOUSE_ROUTE: tuple[Waypoint, ...] = (
 #: corridor's east end), closing the loop at the start a third time.
 OFFICE_10MIN_ROUTE: tuple[Waypoint, ...] = (
     *OFFICE_LONG_ROUTE,
-    Waypoint(2.45, 7.5),
-    Waypoint(2.45, 5.0, spin=2 * math.pi),
-    Waypoint(2.45, 7.5),
-    Waypoint(3.45, 7.5),
-    Waypoint(3.45, 9.7, spin=2 * math.pi),
-    Waypoint(3.45, 7.5),
-    Waypoint(7.45, 7.5),
-    Waypoint(7.45, 5.0, spin=2 * math.pi),
-    Waypoint(7.45, 7.5),
-    Waypoint(16.45, 7.5),
-    Waypoint(16.45, 10.3, spin=2 * math.pi),
-    Waypoint(16.45, 7.5),
+    *_room_visit(2.45, 5.0),
+    *_room_visit(3.45, 9.7),
+    *_room_visit(7.45, 5.0),
+    *_room_visit(16.45, 10.3),
     Waypoint(18.5, 7.5, spin=2 * math.pi),
     Waypoint(3.0, 7.5),
     Waypoint(1.5, 7.5, spin=math.pi),
