@@ -1,6 +1,5 @@
 """Single servers: velocity smoother limits, collision monitor, lifecycle errors, lost TF."""
 
-import math
 
 from eddiebot.core import Context, Node, SingleThreadedExecutor
 from eddiebot.core.action import ActionClient, GoalStatus
@@ -88,17 +87,22 @@ def test_collision_monitor_stops_before_obstacle(make_stack):
     assert stack.robot.cmd == (0.0, 0.0)
 
 
+def _plan(stack, x: float, y: float):
+    """A path from the planner server to (x, y) in the map frame."""
+    plan = ActionClient(stack.probe, ComputePathToPose, "/compute_path_to_pose")
+    fut = plan.send_goal_async(ComputePathToPose.Goal(goal=pose_stamped(x, y, 0.0, "map")))
+    stack.spin(0.5)
+    res = fut.result().get_result_async()
+    stack.spin(0.5)
+    return res.result().result.path
+
+
 def test_lost_tf_makes_the_controller_publish_zero(make_stack):
     stack = make_stack(servers=("map_server", "planner_server", "controller_server"))
     cmds = []
     stack.probe.create_subscription(Twist, "/cmd_vel_nav", cmds.append, 100)
-    plan = ActionClient(stack.probe, ComputePathToPose, "/compute_path_to_pose")
     follow = ActionClient(stack.probe, FollowPath, "/follow_path")
-    fut = plan.send_goal_async(ComputePathToPose.Goal(goal=pose_stamped(4.5, 1.0, 0.0, "map")))
-    stack.spin(0.5)
-    res = fut.result().get_result_async()
-    stack.spin(0.5)
-    path = res.result().result.path
+    path = _plan(stack, 4.5, 1.0)
     # Drive the stub from the controller directly.
     stack.robot.destroy_subscription(stack.robot.subscriptions[-1])
     stack.robot.create_subscription(Twist, "/cmd_vel_nav", stack.robot._on_cmd, 10)
@@ -115,7 +119,6 @@ def test_lost_tf_makes_the_controller_publish_zero(make_stack):
     assert result.result().status == GoalStatus.STATUS_ABORTED
     assert result.result().result.error_code == 102  # TF_ERROR
     assert stack.robot.cmd == (0.0, 0.0)
-    _ = math
 
 
 def test_lost_localization_holds_then_aborts_the_goal(make_stack, nav_stub_params):
@@ -131,13 +134,8 @@ def test_lost_localization_holds_then_aborts_the_goal(make_stack, nav_stub_param
     confident.pose.covariance[0] = confident.pose.covariance[7] = 0.01
     confident.pose.covariance[35] = 0.01
     amcl.publish(confident)
-    plan = ActionClient(stack.probe, ComputePathToPose, "/compute_path_to_pose")
     follow = ActionClient(stack.probe, FollowPath, "/follow_path")
-    fut = plan.send_goal_async(ComputePathToPose.Goal(goal=pose_stamped(4.5, 1.0, 0.0, "map")))
-    stack.spin(0.5)
-    res = fut.result().get_result_async()
-    stack.spin(0.5)
-    h = follow.send_goal_async(FollowPath.Goal(path=res.result().result.path))
+    h = follow.send_goal_async(FollowPath.Goal(path=_plan(stack, 4.5, 1.0)))
     stack.spin(1.5)
     assert any(abs(c.linear.x) > 0.1 for c in cmds)  # confident: it drives
     lost = PoseWithCovarianceStamped()
