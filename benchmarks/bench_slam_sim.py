@@ -22,7 +22,7 @@ the low-feature warnings (episodes logged, matches over the threshold). Prints a
 writes ``benchmarks/results/slam_sim.json``.
 
     .venv/bin/python benchmarks/bench_slam_sim.py [--worlds office warehouse corridor office-demo]
-        [--seed 0] [--params FILE] [--keep DIR [--record]]
+        [--seed 0] [--params FILE] [--keep DIR [--record]] [--noise-correlation-px N]
 
 ``--replay DIR`` scores the bags a ``--keep DIR --record`` run left (``DIR/<run>/mapping_bag``)
 offline instead: each bag through `SlamCore` (as ``eddie slam replay`` does: every scan that
@@ -68,6 +68,28 @@ TARGETS = {"ate_rmse_m": 0.05, "agreement": 0.95, "scan_cpu_median_ms": 10.0,
 RECORD_TOPICS = ["/scan", "/odom", "/ground_truth/odom", "/tf", "/tf_static"]
 
 
+#: the simulator's noise_correlation_px in the runs (None: the node's default)
+_NOISE_CORRELATION_PX: float | None = None
+
+
+def _sim_parameters(values: dict[str, Any]) -> None:
+    """Give the simulator node of every following `run_mapping` these parameters (a global
+    parameter source on the run's Context, as a ``--ros-args -p`` would)."""
+    import eddiebot.demo.mapping as mapping
+    from eddiebot.core.context import Context
+    from eddiebot.core.parameters import ParameterOverride
+
+    class _Context(Context):
+        def __init__(self, **kwargs: Any) -> None:
+            super().__init__(**kwargs)
+            self.parameter_sources.extend(ParameterOverride("simulator", k, v, "bench_slam_sim")
+                                          for k, v in values.items())
+
+    global _NOISE_CORRELATION_PX
+    _NOISE_CORRELATION_PX = values.get("noise_correlation_px", _NOISE_CORRELATION_PX)
+    mapping.Context = _Context  # type: ignore[misc]
+
+
 def run_one(name: str, out: Path, seed: int, params: Path | None,
             record: bool = False) -> dict[str, Any]:
     world, route = RUNS[name]
@@ -79,6 +101,7 @@ def run_one(name: str, out: Path, seed: int, params: Path | None,
     scan = r.scan_cpu_ms
     row: dict[str, Any] = {
         "run": name, "world": world, "seed": seed, "finished": r.finished,
+        "noise_correlation_px": _NOISE_CORRELATION_PX,
         "distance_m": r.distance_m, "sim_s": r.sim_seconds, "wall_s": wall, "cpu_s": cpu,
         "nodes": r.nodes, "loop_closures": r.loop_closures, "collisions": r.collisions,
         "ate_rmse_m": r.ate_rmse_m, "ate_max_m": r.ate_max_m, "odom_ate_rmse_m": r.odom_ate_rmse_m,
@@ -206,7 +229,12 @@ def main() -> int:
                     "(several DIRs: several drives)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME:=VALUE",
                     help="with --replay: override one SLAM parameter (repeatable)")
+    ap.add_argument("--noise-correlation-px", type=float, default=None,
+                    help="the simulator's noise_correlation_px (Kinect depth-noise correlation "
+                    "window, native pixels; default: the node's default)")
     args = ap.parse_args()
+    if args.noise_correlation_px is not None:
+        _sim_parameters({"noise_correlation_px": args.noise_correlation_px})
     if args.replay is not None:
         if args.name == "slam_sim":
             args.name = "slam_sim_replay"

@@ -83,6 +83,24 @@ class KinectConfig:
     with probability ``edge_dropout``; every pixel is dropped with probability ``dropout``.
     No return (0) closer than ``min_range`` or beyond ``max_range``. Noise is seeded:
     the same ``seed`` and frame index give the same image.
+
+    ``noise_correlation_px`` makes the disparity noise spatially correlated, as the real
+    sensor's is: the PS1080 finds each pixel's disparity by correlating a window of the IR
+    speckle image (9×9 or 9×7 pixels, Konolige & Mihelich, ROS wiki
+    ``kinect_calibration/technical``) with the stored reference pattern, so neighbouring
+    pixels share most of their window and their errors; the depth image is accordingly
+    shifted by about half a window against the IR image (≈ 3 px ibid., −4.8 / −3.9 px in
+    Smisek et al. 2011, "3D with Kinect"), and its true lateral resolution is coarser than
+    640×480 (Khoshelham & Elberink 2012; Nguyen et al. 2012, "Modeling Kinect sensor
+    noise", measure a lateral edge noise of ≈ 0.8 px, i.e. edges blurred over about a
+    pixel, beside the axial σ that grows with z²). The value is the side of a square box
+    window in pixels of the native 640×480 image (9 models the 9×9 window); it scales with
+    the rendered width (4.5 px at 320×240). The noise is white noise summed over that
+    window and renormalised, so every pixel's σ stays ``noise_disparity_sigma`` while two
+    pixels d apart along a row or column correlate by 1 − d/window (the overlap of their
+    windows: a triangle, zero beyond the window; a fractional window in rendered pixels is
+    a mix of the two nearest whole boxes with that slope, `eddiebot.sim.render.noise_boxes`).
+    0 (or anything up to one rendered pixel) keeps independent per-pixel noise.
     """
 
     rgb: CameraIntrinsics = KINECT_RGB
@@ -95,6 +113,8 @@ class KinectConfig:
     max_range: float = 8.0
     disparity_step_coeff: float = 2.85e-3
     noise_disparity_sigma: float = 0.5
+    noise_correlation_px: float = 0.0
+    """Side of the disparity-noise correlation window in native 640×480 pixels (0: independent)."""
     edge_threshold: float = 0.05
     edge_noise_factor: float = 3.0
     edge_dropout: float = 0.3

@@ -124,7 +124,8 @@ class SimulatorNode(Node):
         self._last_wheels = self.emulator.plant.wheel_positions
         self._last_ns = self.get_clock().now_ns()
         self.collisions = 0
-        config = KinectConfig(seed=self.seed)
+        config = KinectConfig(seed=self.seed, noise_correlation_px=float(self.declare_parameter(
+            "noise_correlation_px", KinectConfig.noise_correlation_px).value))
         if (width, height) != (config.depth.width, config.depth.height):
             config = config.at_resolution(width, height)
         self.kinect = config
