@@ -329,3 +329,181 @@ def test_rotated_cells_match_numpy_formula() -> None:
     wy = s * pts[None, :, 0] + c * pts[None, :, 1] + prior[1]
     np.testing.assert_array_equal(px, np.floor((wx - grid.origin[0]) / 0.01).astype(np.int64))
     np.testing.assert_array_equal(py, np.floor((wy - grid.origin[1]) / 0.01).astype(np.int64))
+
+
+def _numpy_weighted_covariance(
+    values: np.ndarray, coords: np.ndarray, best: float, floor: np.ndarray
+) -> np.ndarray:
+    keep = values >= best - 0.1
+    w = values[keep]
+    c = coords[keep]
+    norm = float(w.sum())
+    if norm <= 1e-12:
+        return np.diag(floor)
+    mean = (w[:, None] * c).sum(axis=0) / norm
+    d = c - mean
+    cov = (w[:, None, None] * d[:, :, None] * d[:, None, :]).sum(axis=0) / norm
+    return cov + np.diag(floor)
+
+
+def test_weighted_covariance_kernel_matches_numpy_bit_for_bit() -> None:
+    # the covariance feeds the graph's edges: the compiled sums must be numpy's (pairwise for
+    # the weights and for one-dimensional coordinates, candidate order for (K, 2))
+    from eddiebot.slam.scan_matcher import _pairwise_sum, _weighted_covariance, _window_offsets
+
+    rng = np.random.default_rng(13)
+    for n in (1, 7, 8, 9, 127, 128, 129, 300, 1000, 2601, 6561):
+        a = rng.random(n) * 10.0 ** rng.uniform(-3, 3, n)
+        assert _pairwise_sum(a, 0, n) == a.sum()
+    for window in (1, 3, 25, 40):
+        coords = _window_offsets(window, 0.01)
+        for power in (1.0, 3.0, 8.0):
+            values = rng.random(coords.shape[0]) ** power
+            for best in (float(values.max()), float(values.max()) - 0.05):
+                floor = np.full(2, 1e-5)
+                got = _weighted_covariance(values, coords, best, floor)
+                np.testing.assert_array_equal(
+                    got, _numpy_weighted_covariance(values, coords, best, floor)
+                )
+    for n in (3, 8, 11, 21, 61, 200):
+        resp = rng.random((n, 5, 5))
+        thetas = 0.0349 * np.arange(n, dtype=np.float64) - 0.3
+        vals = resp[:, 2, 3]  # strided, as match_scan passes it
+        floor = np.array([1e-6])
+        got = _weighted_covariance(vals, thetas[:, None], float(vals.max()), floor)
+        want = _numpy_weighted_covariance(vals, thetas[:, None], float(vals.max()), floor)
+        np.testing.assert_array_equal(got, want)
+    # nothing kept above the floor: the floor alone
+    zero = np.zeros(9)
+    np.testing.assert_array_equal(
+        _weighted_covariance(zero, _window_offsets(1, 0.01), 0.0, np.full(2, 2e-5)),
+        np.diag([2e-5, 2e-5]),
+    )
+
+
+def test_eigh2_is_lapack_bit_for_bit() -> None:
+    from eddiebot.slam.scan_matcher import _eigh2
+
+    rng = np.random.default_rng(17)
+    a = rng.normal(size=(4000, 2, 2)) * 10.0 ** rng.uniform(-6, 2, (4000, 1, 1))
+    spd = a @ a.transpose(0, 2, 1)
+    sym = a + a.transpose(0, 2, 1)
+    diag = np.zeros((200, 2, 2))
+    diag[:, 0, 0] = rng.random(200)
+    diag[100:, 1, 1] = rng.random(100)
+    tiny_off = spd[:200].copy()
+    tiny_off[:, 0, 1] = tiny_off[:, 1, 0] = 1e-20 * tiny_off[:, 0, 0]
+    mats = np.concatenate([spd, sym, diag, tiny_off, np.zeros((1, 2, 2))])
+    vals, vecs = np.linalg.eigh(mats)
+    got = np.array([_eigh2(m[0, 0], m[1, 0], m[1, 1]) for m in mats])
+    assert got[:, 6].all()
+    np.testing.assert_array_equal(got[:, :2], vals)
+    np.testing.assert_array_equal(got[:, [2, 4, 3, 5]].reshape(-1, 2, 2), vecs)
+    assert not _eigh2(1e-200, 0.0, 1e-200)[-1]  # LAPACK would rescale: numpy's path
+
+
+def test_compiled_normals_match_numpy_pca_bit_for_bit() -> None:
+    from eddiebot.slam.scan_matcher import _nearest_sweep, point_normals
+
+    rng = np.random.default_rng(19)
+    for trial in range(24):
+        k = (3, 4, 6, 8, 10, 16)[trial % 6]
+        n = int(rng.integers(k, 400))
+        if trial % 2:
+            th = rng.uniform(-0.5, 0.5, n)
+            r = rng.uniform(0.5, 5.0, n)
+            pts = np.stack([r * np.cos(th), r * np.sin(th)], axis=-1)
+        else:
+            pts = rng.normal(size=(n, 2)) * 10.0 ** rng.uniform(-4, 2)
+        nn = _nearest_sweep(pts, np.argsort(pts[:, 0], kind="stable").astype(np.int64), k)
+        nb = pts[nn]
+        centred = nb - nb.mean(axis=1, keepdims=True)
+        vals, vecs = np.linalg.eigh(np.einsum("mki,mkj->mij", centred, centred))
+        want = vecs[:, :, 0].copy()
+        want[~(vals[:, 0] < 0.1 * vals[:, 1] + 1e-12)] = np.nan
+        np.testing.assert_array_equal(point_normals(pts, neighbours=k), want)
+
+
+def test_pyramid_levels_are_the_anchored_dilation() -> None:
+    # level h = max over the 2^h × 2^h cells from (r, c), zero past the edges: what
+    # cv2.dilate anchored at (0, 0) with a constant 0 border gives
+    import cv2
+
+    rng = np.random.default_rng(23)
+    for trial in range(6):
+        pts = rng.uniform(-3.0, 3.0, (int(rng.integers(1, 300)), 2))
+        grid = build_correlation_grid(pts, (-3.0, -3.0, 3.0 + trial, 3.0), 0.05, 0.03, 6)
+        assert len(grid.levels) == 6
+        for h in range(1, 6):
+            k = 1 << h
+            want = cv2.dilate(
+                grid.levels[0],
+                np.ones((k, k), np.uint8),
+                anchor=(0, 0),
+                borderType=cv2.BORDER_CONSTANT,
+                borderValue=0,
+            )
+            np.testing.assert_array_equal(grid.levels[h], want)
+
+
+def test_phased_response_block_matches_strided_block() -> None:
+    from eddiebot.slam.scan_matcher import (
+        _column_phases,
+        _response_block,
+        _response_block_phased,
+    )
+
+    rng = np.random.default_rng(29)
+    for _ in range(40):
+        h, w = (int(v) for v in rng.integers(5, 90, 2))
+        grid = rng.random((h, w)).astype(np.float32)
+        step = int(rng.integers(2, 5))
+        n = int(rng.integers(1, 14))
+        px = rng.integers(-60, 150, 30)
+        py = rng.integers(-60, 150, 30)
+        x0, y0 = (int(v) for v in rng.integers(-40, 40, 2))
+        phases = _column_phases(grid, step)
+        np.testing.assert_array_equal(
+            _response_block_phased(phases, w, px, py, x0, y0, n, step),
+            _response_block(grid, px, py, x0, y0, n, step),
+        )
+
+
+def test_window_near_best_keeps_every_candidate_the_covariance_uses() -> None:
+    from eddiebot.slam.scan_matcher import (
+        _cells_for_angles,
+        _exhaustive,
+        _weighted_covariance,
+        _window_near_best,
+        _window_offsets,
+    )
+
+    rng = np.random.default_rng(31)
+    pruned = 0
+    for trial in range(24):
+        ref = rng.uniform(-4.0, 4.0, (int(rng.integers(20, 300)), 2))
+        grid = build_correlation_grid(ref, (-4.0, -4.0, 4.0, 4.0), 0.05, 0.03, 6)
+        scan = ref[rng.choice(ref.shape[0], 60)] + rng.normal(0.0, 0.02, (1, 2))
+        if trial % 4 == 0:
+            scan = rng.uniform(-7.0, 7.0, (50, 2))  # partly off the grid
+        window = int(rng.integers(20, 90))
+        penalize = bool(trial % 2)
+        pen = (penalize, 0.5, 1.0, 0.5, 0.9)
+        px, py = _cells_for_angles(scan, np.array([0.1, -0.2, 0.05]), np.array([0.05]), grid)
+        want = _exhaustive(grid.levels[0], px, py, np.array([0.05]), 0, 0, window, 0.05, *pen)[0]
+        sx, sy = (int(v) for v in rng.integers(-window - 1, window + 2, 2))
+        got = _window_near_best(
+            *grid.levels, 6, px[0], py[0], 0.05, window, sx, sy, 0.05, *pen
+        )
+        best = want.max()
+        keep = want >= best - 0.1
+        assert got.max() == best
+        np.testing.assert_array_equal(got[keep], want[keep])
+        assert np.all((got[~keep] == want[~keep]) | (got[~keep] == -1.0))
+        pruned += int(np.count_nonzero(got == -1.0))
+        coords = _window_offsets(window, 0.05)
+        np.testing.assert_array_equal(
+            _weighted_covariance(got.ravel(), coords, float(got.max()), np.full(2, 1e-5)),
+            _weighted_covariance(want.ravel(), coords, float(want.max()), np.full(2, 1e-5)),
+        )
+    assert pruned > 0

@@ -462,9 +462,11 @@ class SlamCore:
 
     # -- node points / reference maps
     def _world_points(self, idx: int) -> FloatArray:
+        # the caches below compare poses as float lists: np.array_equal's value semantics
+        # (0.0 == -0.0) at a tenth of its cost, which ~50 look-ups a scan add up to
         pose = self.graph.pose(idx)
         cached = self._ref_cache.get(idx)
-        if cached is not None and np.array_equal(cached[0], pose):
+        if cached is not None and cached[0].tolist() == pose.tolist():
             return cached[1]
         sensor = se2_compose(pose, self.sensor_offset)
         pts = self.nodes[idx].points
@@ -479,7 +481,7 @@ class SlamCore:
         """Normals of a node's end points in the map frame (computed once, in its own frame)."""
         pose = self.graph.pose(idx)
         cached = self._world_normal_cache.get(idx)
-        if cached is not None and np.array_equal(cached[0], pose):
+        if cached is not None and cached[0].tolist() == pose.tolist():
             return cached[1]
         local = self._normal_cache.get(idx)
         if local is None:
@@ -496,7 +498,7 @@ class SlamCore:
     def _reference_position(self, idx: int) -> FloatArray:
         pose = self.graph.pose(idx)
         cached = self._pos_cache.get(idx)
-        if cached is not None and np.array_equal(cached[0], pose):
+        if cached is not None and cached[0].tolist() == pose.tolist():
             return cached[1]
         if self.config.use_scan_barycenter and self.nodes[idx].points.shape[0]:
             pos = self._world_points(idx).mean(axis=0)
@@ -529,6 +531,9 @@ class SlamCore:
     def _match_against(
         self, nodes: list[int], points: FloatArray, prior_sensor: FloatArray, params: MatcherParams
     ) -> MatchResult:
+        # one pass over the optimiser's estimate (the same values as one look-up per node,
+        # which the reference points and normals below would otherwise make ~40 times)
+        self.graph.poses  # noqa: B018
         ref = np.concatenate([self._world_points(i) for i in nodes]) if nodes else np.zeros((0, 2))
         c, s = math.cos(prior_sensor[2]), math.sin(prior_sensor[2])
         wx = prior_sensor[0] + c * points[:, 0] - s * points[:, 1]

@@ -28,7 +28,6 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-import cv2
 import numpy as np
 import numpy.typing as npt
 from numba import njit
@@ -187,13 +186,30 @@ def build_correlation_grid(
         _splat(like, col, row, _smear_kernel(resolution, smear_deviation))
     pyramid = [like]
     for h in range(1, max(1, levels)):
-        k = 1 << h
-        kernel = np.ones((k, k), dtype=np.uint8)
-        pooled = cv2.dilate(
-            like, kernel, anchor=(0, 0), borderType=cv2.BORDER_CONSTANT, borderValue=0
-        )
-        pyramid.append(np.asarray(pooled, dtype=np.float32))
+        pyramid.append(_pool_level(pyramid[-1], 1 << (h - 1)))
     return CorrelationGrid(tuple(pyramid), (xmin, ymin), resolution)
+
+
+@njit(cache=True)
+def _pool_level(prev: npt.NDArray[np.float32], half: int) -> npt.NDArray[np.float32]:
+    """The next pyramid level: the max of ``prev`` at (r, c), (r, c + half), (r + half, c)
+    and (r + half, c + half) (0 past the edges), i.e. the max of the level below over the
+    2·half × 2·half cells from (r, c) — what a dilation anchored at (0, 0) with a zero border
+    gives, exactly (the grid holds no negative values), in three max passes per cell."""
+    h, w = prev.shape
+    out = np.empty((h, w), np.float32)
+    for r in range(h):
+        a = prev[r]
+        for c in range(w - half):
+            out[r, c] = max(a[c], a[c + half])
+        for c in range(max(0, w - half), w):
+            out[r, c] = max(a[c], np.float32(0.0))
+    for r in range(h - half):
+        b = out[r + half]
+        o = out[r]
+        for c in range(w):
+            o[c] = max(o[c], b[c])
+    return out
 
 
 @njit(cache=True)
@@ -404,6 +420,68 @@ def _response_block(
 
 
 @njit(cache=True)
+def _column_phases(grid: npt.NDArray[np.float32], step: int) -> npt.NDArray[np.float32]:
+    """The grid's columns split by phase: ``out[p, r, j] = grid[r, step·j + p]`` (zero past
+    the last column), so a run of every ``step``-th column is contiguous in one phase."""
+    h, w = grid.shape
+    wq = (w + step - 1) // step
+    out = np.empty((step, h, wq), np.float32)
+    for p in range(step):
+        n = (w - p + step - 1) // step
+        for r in range(h):
+            src = grid[r, p:]
+            dst = out[p, r]
+            for j in range(n):
+                dst[j] = src[step * j]
+            for j in range(n, wq):
+                dst[j] = 0.0
+    return out
+
+
+@njit(cache=True)
+def _response_block_phased(
+    phases: npt.NDArray[np.float32],
+    w: int,
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    x0: int,
+    y0: int,
+    n: int,
+    step: int,
+) -> npt.NDArray[np.float64]:
+    """`_response_block` for ``step`` > 1 on `_column_phases` of a grid ``w`` columns wide:
+    the same candidates, points and sums in the same order (the same values bit for bit),
+    read from contiguous runs."""
+    h = phases.shape[1]
+    acc = np.zeros((n, n))
+    for i in range(px.size):
+        c0 = px[i] + x0
+        lo = 0 if c0 >= 0 else (step - 1 - c0) // step
+        hi = min(n, (w - 1 - c0) // step + 1) if c0 <= w - 1 else 0
+        if lo >= hi:
+            continue
+        c = c0 + step * lo
+        plane = phases[c % step]
+        j0 = c // step
+        r0 = py[i] + y0
+        m = hi - lo
+        for iy in range(n):
+            r = r0 + step * iy
+            if r < 0 or r >= h:
+                continue
+            run = plane[r, j0:]
+            out_run = acc[iy, lo:hi]
+            for k in range(m):
+                out_run[k] += run[k]
+    inv = 1.0 / max(px.size, 1)
+    out = np.empty((n, n))
+    for ix in range(n):
+        for iy in range(n):
+            out[ix, iy] = acc[iy, ix] * inv
+    return out
+
+
+@njit(cache=True)
 def _coarse_grid_search(
     g0: npt.NDArray[np.float32],
     px: npt.NDArray[np.int64],
@@ -428,8 +506,9 @@ def _coarse_grid_search(
     best_a, best_x, best_y, best_s = -1, 0, 0, 0.0
     n = 2 * (window // step) + 1
     x0 = -(window // step) * step
+    phases = _column_phases(g0, step)
     for a in range(px.shape[0]):
-        block = _response_block(g0, px[a], py[a], x0, x0, n, step)
+        block = _response_block_phased(phases, g0.shape[1], px[a], py[a], x0, x0, n, step)
         best_h = 0.0
         for ix in range(n):
             for iy in range(n):
@@ -522,6 +601,117 @@ def _exhaustive(
                         map_,
                     )
                 out[a, ix, iy] = s
+    return out
+
+
+@njit(cache=True)
+def _bounded_score(
+    grid: npt.NDArray[np.float32],
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    x: int,
+    y: int,
+    size: int,
+    inv: float,
+) -> float:
+    """Mean of a pyramid level under the points moved by (x, y): on level 0 (``size`` 1) a
+    candidate's response exactly as `_response_block` sums it (point order, times 1/n); on a
+    coarser level an upper bound of every candidate in the size × size block from (x, y),
+    a point whose anchor falls off the grid while its block still overlaps it counting 1
+    (no cell exceeds 1). Rounding is monotone, so the bound holds in floating point too."""
+    h, w = grid.shape
+    total = 0.0
+    for i in range(px.size):
+        c = px[i] + x
+        r = py[i] + y
+        if 0 <= c < w and 0 <= r < h:
+            total += grid[r, c]
+        elif size > 1 and c + size > 0 and c < w and r + size > 0 and r < h:
+            total += 1.0
+    return total * inv
+
+
+@njit(cache=True)
+def _window_near_best(
+    g0: npt.NDArray[np.float32],
+    g1: npt.NDArray[np.float32],
+    g2: npt.NDArray[np.float32],
+    g3: npt.NDArray[np.float32],
+    g4: npt.NDArray[np.float32],
+    g5: npt.NDArray[np.float32],
+    n_levels: int,
+    px: npt.NDArray[np.int64],
+    py: npt.NDArray[np.int64],
+    dth: float,
+    window: int,
+    seed_x: int,
+    seed_y: int,
+    res: float,
+    penalize: bool,
+    dvp: float,
+    avp: float,
+    mdp: float,
+    map_: float,
+) -> npt.NDArray[np.float64]:
+    """One heading's (penalised) responses over the ±window, [ix, iy] as `_exhaustive` gives
+    them, where they can matter to the covariance: every candidate within 0.1 of the window's
+    best holds `_exhaustive`'s value bit for bit (and so does the best), the others hold
+    either their value or -1. Two passes over the pyramid: branch and bound for the best
+    (seeded with the candidate at ``seed_x``, ``seed_y``), then every block whose bound
+    reaches best - 0.1 down to its cells."""
+    grids = (g0, g1, g2, g3, g4, g5)
+    side = 2 * window + 1
+    out = np.full((side, side), -1.0)
+    inv = 1.0 / max(px.size, 1)
+    top = n_levels - 1
+    step = 1 << top
+    n_side = (side + step - 1) // step
+    cap = n_side * n_side + 4 * n_levels + 8
+    s_x = np.empty(cap, np.int64)
+    s_y = np.empty(cap, np.int64)
+    s_h = np.empty(cap, np.int64)
+    s_b = np.empty(cap, np.float64)
+    best = -1.0
+    if abs(seed_x) <= window and abs(seed_y) <= window:
+        best = _bounded_score(g0, px, py, seed_x, seed_y, 1, inv)
+        if penalize and best > 0.0:
+            best *= _penalty(seed_x * res, seed_y * res, dth, dvp, avp, mdp, map_)
+    for phase in range(2):
+        thresh = best - 0.1
+        n = 0
+        for ix in range(n_side):
+            for iy in range(n_side):
+                x = -window + ix * step
+                y = -window + iy * step
+                b = _bounded_score(grids[top], px, py, x, y, step, inv)
+                if (phase == 0 and b > best) or (phase == 1 and b >= thresh):
+                    s_x[n], s_y[n], s_h[n], s_b[n] = x, y, top, b
+                    n += 1
+        while n > 0:
+            n -= 1
+            x, y, h, b = s_x[n], s_y[n], s_h[n], s_b[n]
+            if phase == 0 and b <= best:
+                continue
+            if h == 0:
+                v = b
+                if penalize and v > 0.0:
+                    v *= _penalty(x * res, y * res, dth, dvp, avp, mdp, map_)
+                if phase == 0:
+                    best = max(best, v)
+                else:
+                    out[x + window, y + window] = v
+                continue
+            half = 1 << (h - 1)
+            for ox in (0, half):
+                for oy in (0, half):
+                    cx = x + ox
+                    cy = y + oy
+                    if cx > window or cy > window:
+                        continue
+                    cb = _bounded_score(grids[h - 1], px, py, cx, cy, half, inv)
+                    if (phase == 0 and cb > best) or (phase == 1 and cb >= thresh):
+                        s_x[n], s_y[n], s_h[n], s_b[n] = cx, cy, h - 1, cb
+                        n += 1
     return out
 
 
@@ -711,19 +901,136 @@ def score_pose(points: FloatArray, pose: FloatArray, grid: CorrelationGrid) -> f
     return float(_score(grid.likelihood, px[0], py[0], 0, 0))
 
 
+@njit(cache=True)
+def _block_sum(a: FloatArray, lo: int, n: int) -> float:
+    """numpy's pairwise-sum leaf (n <= 128): eight accumulators, then the tail."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[lo + i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    end = n - n % 8
+    while i < end:
+        r0 += a[lo + i]
+        r1 += a[lo + i + 1]
+        r2 += a[lo + i + 2]
+        r3 += a[lo + i + 3]
+        r4 += a[lo + i + 4]
+        r5 += a[lo + i + 5]
+        r6 += a[lo + i + 6]
+        r7 += a[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def _pairwise_sum(a: FloatArray, lo: int, n: int) -> float:
+    """``a[lo:lo + n].sum()`` as numpy sums a contiguous float64 run: halves (the first a
+    multiple of 8 long) split until at most 128 long, leaves by `_block_sum`, the halves'
+    sums added up the tree — the same value to the last bit (an explicit stack: numba's
+    cache does not take recursive functions)."""
+    if n <= 128:
+        return _block_sum(a, lo, n)
+    s_lo = np.empty(64, np.int64)
+    s_n = np.empty(64, np.int64)
+    s_stage = np.empty(64, np.int64)
+    vals = np.empty(64)
+    depth = 1
+    nv = 0
+    s_lo[0], s_n[0], s_stage[0] = lo, n, 0
+    while depth > 0:
+        t = depth - 1
+        m = s_n[t]
+        if m <= 128:
+            vals[nv] = _block_sum(a, s_lo[t], m)
+            nv += 1
+            depth -= 1
+            continue
+        half = m // 2
+        half -= half % 8
+        if s_stage[t] == 0:
+            s_stage[t] = 1
+            s_lo[depth], s_n[depth], s_stage[depth] = s_lo[t], half, 0
+            depth += 1
+        elif s_stage[t] == 1:
+            s_stage[t] = 2
+            s_lo[depth], s_n[depth], s_stage[depth] = s_lo[t] + half, m - half, 0
+            depth += 1
+        else:
+            right = vals[nv - 1]
+            left = vals[nv - 2]
+            nv -= 2
+            vals[nv] = left + right
+            nv += 1
+            depth -= 1
+    return vals[0]
+
+
+@njit(cache=True)
 def _weighted_covariance(
     values: FloatArray, coords: FloatArray, best: float, floor: FloatArray
 ) -> FloatArray:
-    keep = values >= best - 0.1
-    w = values[keep]
-    c = coords[keep]
-    norm = float(w.sum())
+    """Response-weighted covariance (D, D) of the candidates within 0.1 of ``best``, plus
+    ``diag(floor)``; ``coords`` (K, D). The sums run in numpy's order for the expressions
+    ``w.sum()``, ``(w[:, None] * c).sum(axis=0)`` and ``(w · d dᵀ).sum(axis=0)`` (pairwise
+    for the first, in candidate order for the others), so the values are numpy's bit for bit.
+    """
+    dim = coords.shape[1]
+    thresh = best - 0.1
+    keep = np.empty(values.size, np.int64)
+    w = np.empty(values.size)
+    k = 0
+    for i in range(values.size):
+        if values[i] >= thresh:
+            keep[k] = i
+            w[k] = values[i]
+            k += 1
+    out = np.zeros((dim, dim))
+    norm = _pairwise_sum(w, 0, k)
     if norm <= 1e-12:
-        return np.diag(floor)
-    mean = (w[:, None] * c).sum(axis=0) / norm
-    d = c - mean
-    cov = (w[:, None, None] * d[:, :, None] * d[:, None, :]).sum(axis=0) / norm
-    return cov + np.diag(floor)
+        for j in range(dim):
+            out[j, j] = floor[j]
+        return out
+    mean = np.zeros(dim)
+    if dim == 1:
+        # a (K, 1) reduction is a contiguous run to numpy: summed pairwise
+        prod = np.empty(k)
+        for q in range(k):
+            prod[q] = w[q] * coords[keep[q], 0]
+        mean[0] = _pairwise_sum(prod, 0, k) / norm
+        for q in range(k):
+            dq = coords[keep[q], 0] - mean[0]
+            prod[q] = w[q] * dq * dq
+        out[0, 0] = _pairwise_sum(prod, 0, k)
+    else:
+        # (K, D) and (K, D, D) reductions over K: one candidate after another
+        for j in range(dim):
+            acc = w[0] * coords[keep[0], j]
+            for q in range(1, k):
+                acc += w[q] * coords[keep[q], j]
+            mean[j] = acc / norm
+        d = np.empty(dim)
+        for q in range(k):
+            for j in range(dim):
+                d[j] = coords[keep[q], j] - mean[j]
+            for j in range(dim):
+                wd = w[q] * d[j]
+                for m in range(dim):
+                    if q == 0:
+                        out[j, m] = wd * d[m]
+                    else:
+                        out[j, m] += wd * d[m]
+    for j in range(dim):
+        for m in range(dim):
+            out[j, m] = out[j, m] / norm + (floor[j] if j == m else 0.0)
+    return out
 
 
 def match_scan(
@@ -838,21 +1145,38 @@ def match_scan(
     # covariance: translation spread over the whole window at the best heading (thinned
     # points: the spread, not the exact values, matters here)
     cpx, cpy = _cells_for_angles(coarse_pts, prior, prior[2] + fdth[fa : fa + 1], grid)
-    full = _exhaustive(
-        grid.likelihood,
-        cpx,
-        cpy,
-        fdth[fa : fa + 1],
-        0,
-        0,
-        window,
-        res,
-        params.penalize,
-        params.distance_variance_penalty,
-        params.angle_variance_penalty,
-        params.minimum_distance_penalty,
-        params.minimum_angle_penalty,
-    )[0]
+    if n_levels > 1:
+        # wide window: only the candidates that can come within 0.1 of the best (the ones
+        # the covariance keeps) are scored, found through the pyramid's bounds
+        full = _window_near_best(
+            levels[0],
+            levels[1],
+            levels[2],
+            levels[3],
+            levels[4],
+            levels[5],
+            n_levels,
+            cpx[0],
+            cpy[0],
+            float(fdth[fa]),
+            window,
+            dx,
+            dy,
+            res,
+            *penalties,
+        )
+    else:
+        full = _exhaustive(
+            grid.likelihood,
+            cpx,
+            cpy,
+            fdth[fa : fa + 1],
+            0,
+            0,
+            window,
+            res,
+            *penalties,
+        )[0]
     coords = _window_offsets(window, res)
     ref = float(full.max())
     xy_cov = _weighted_covariance(full.ravel(), coords, ref, np.full(2, 0.1 * res * res))
@@ -994,6 +1318,21 @@ def _icp_pairs(
             # anything in an outer ring is at least ring·cell away
             if best >= 0 and best_d2 < (ring * cell) ** 2:
                 break
+            # ... and at least as far as the searched square's nearest side that has cells
+            # beyond it (less a margin for the buckets' rounding): most points stop after
+            # the cell they fall in
+            gap = math.inf
+            if cx - ring - 1 >= 0:
+                gap = min(gap, wx - (x0 + (cx - ring) * cell))
+            if cx + ring + 1 <= nx - 1:
+                gap = min(gap, x0 + (cx + ring + 1) * cell - wx)
+            if cy - ring - 1 >= 0:
+                gap = min(gap, wy - (y0 + (cy - ring) * cell))
+            if cy + ring + 1 <= ny - 1:
+                gap = min(gap, y0 + (cy + ring + 1) * cell - wy)
+            gap -= 1e-9
+            if gap > 0.0 and (gap >= max_distance or (best >= 0 and best_d2 < gap * gap)):
+                break
         if best < 0 or not planar[best]:
             continue
         n0 = normals[best, 0]
@@ -1078,18 +1417,173 @@ def _nearest_sweep(
     return out
 
 
+#: LAPACK's machine constants (dlamch 'E', 'S', 'P') and the thresholds dsyevd / dsteqr
+#: derive from them
+_LA_EPS = 2.0**-53
+_LA_SAFMIN = 2.0**-1022
+_LA_EPS2 = _LA_EPS * _LA_EPS
+_LA_SSFMAX = math.sqrt(1.0 / _LA_SAFMIN) / 3.0
+_LA_SSFMIN = math.sqrt(_LA_SAFMIN) / _LA_EPS2
+_LA_RMIN = math.sqrt(_LA_SAFMIN / 2.0**-52)
+_LA_RMAX = math.sqrt(1.0 / (_LA_SAFMIN / 2.0**-52))
+
+
+@njit(cache=True)
+def _dlaev2(a: float, b: float, c: float) -> tuple[float, float, float, float]:
+    """LAPACK dlaev2: eigen-decomposition of [[a, b], [b, c]] as (rt1, rt2, cs1, sn1),
+    |rt1| >= |rt2|, (cs1, sn1) the unit eigenvector of rt1 (operation for operation)."""
+    sm = a + c
+    df = a - c
+    adf = abs(df)
+    tb = b + b
+    ab = abs(tb)
+    if abs(a) > abs(c):
+        acmx, acmn = a, c
+    else:
+        acmx, acmn = c, a
+    if adf > ab:
+        q = ab / adf
+        rt = adf * math.sqrt(1.0 + q * q)
+    elif adf < ab:
+        q = adf / ab
+        rt = ab * math.sqrt(1.0 + q * q)
+    else:
+        rt = ab * math.sqrt(2.0)
+    if sm < 0.0:
+        rt1 = 0.5 * (sm - rt)
+        sgn1 = -1
+        rt2 = (acmx / rt1) * acmn - (b / rt1) * b
+    elif sm > 0.0:
+        rt1 = 0.5 * (sm + rt)
+        sgn1 = 1
+        rt2 = (acmx / rt1) * acmn - (b / rt1) * b
+    else:
+        rt1 = 0.5 * rt
+        rt2 = -0.5 * rt
+        sgn1 = 1
+    if df >= 0.0:
+        cs = df + rt
+        sgn2 = 1
+    else:
+        cs = df - rt
+        sgn2 = -1
+    if abs(cs) > ab:
+        ct = -tb / cs
+        sn1 = 1.0 / math.sqrt(1.0 + ct * ct)
+        cs1 = ct * sn1
+    elif ab == 0.0:
+        cs1 = 1.0
+        sn1 = 0.0
+    else:
+        tn = -cs / tb
+        cs1 = 1.0 / math.sqrt(1.0 + tn * tn)
+        sn1 = tn * cs1
+    if sgn1 == sgn2:
+        tn = cs1
+        cs1 = -sn1
+        sn1 = tn
+    return rt1, rt2, cs1, sn1
+
+
+@njit(cache=True)
+def _eigh2(
+    a11: float, a21: float, a22: float
+) -> tuple[float, float, float, float, float, float, bool]:
+    """``np.linalg.eigh`` of the symmetric [[a11, a21], [a21, a22]], bit for bit: the path
+    LAPACK's dsyevd ('V', lower) takes for n = 2 (dsytrd leaves a 2×2 as it is, dstedc hands
+    it to dsteqr, which splits off a negligible a21 or applies dlaev2's rotation to the
+    identity, then sorts ascending). Returns (w0, w1, z00, z10, z01, z11, ok): eigenvalues
+    ascending, column k of Z the eigenvector of w_k; ok is False for matrices LAPACK would
+    rescale first (norms below ~1e-146 or above ~1e146), which this does not replicate."""
+    anrm = max(abs(a11), abs(a21), abs(a22))
+    if (anrm > 0.0 and anrm < _LA_RMIN) or anrm > _LA_RMAX:
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+    d1, d2, e = a11, a22, a21
+    z11, z21, z12, z22 = 1.0, 0.0, 0.0, 1.0
+    split = abs(e) == 0.0 or abs(e) <= (math.sqrt(abs(d1)) * math.sqrt(abs(d2))) * _LA_EPS
+    if not split:
+        anorm = max(abs(d1), abs(d2), abs(e))
+        if anorm > _LA_SSFMAX or anorm < _LA_SSFMIN:
+            return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, False
+        # dsteqr's QR (|d2| < |d1|) or QL sweep: its own negligibility test first
+        if abs(d2) < abs(d1):
+            split = e * e <= (_LA_EPS2 * abs(d2)) * abs(d1) + _LA_SAFMIN
+        else:
+            split = e * e <= (_LA_EPS2 * abs(d1)) * abs(d2) + _LA_SAFMIN
+    if not split:
+        rt1, rt2, c, s = _dlaev2(d1, e, d2)
+        # dlasr's plane rotation of the identity's two columns, as evaluated there
+        temp = z12
+        z12 = c * temp - s * z11
+        z11 = s * temp + c * z11
+        temp = z22
+        z22 = c * temp - s * z21
+        z21 = s * temp + c * z21
+        d1, d2 = rt1, rt2
+    if d2 < d1:
+        d1, d2 = d2, d1
+        z11, z12 = z12, z11
+        z21, z22 = z22, z21
+    return d1, d2, z11, z21, z12, z22, True
+
+
+@njit(cache=True)
+def _pca_normals(
+    points: FloatArray, nn: npt.NDArray[np.int64]
+) -> tuple[FloatArray, bool]:
+    """`point_normals`' PCA step compiled, with numpy's values bit for bit: each
+    neighbourhood's mean (summed in neighbour order, divided by k), its scatter matrix
+    (einsum's sums in neighbour order) and `_eigh2`. False when a matrix needs LAPACK's
+    rescaling (the caller then takes numpy's path)."""
+    m, k = nn.shape
+    out = np.empty((m, 2))
+    ce = np.empty((k, 2))
+    for p in range(m):
+        s0 = points[nn[p, 0], 0]
+        s1 = points[nn[p, 0], 1]
+        for q in range(1, k):
+            s0 += points[nn[p, q], 0]
+            s1 += points[nn[p, q], 1]
+        m0 = s0 / k
+        m1 = s1 / k
+        for q in range(k):
+            ce[q, 0] = points[nn[p, q], 0] - m0
+            ce[q, 1] = points[nn[p, q], 1] - m1
+        c00 = 0.0
+        c10 = 0.0
+        c11 = 0.0
+        for q in range(k):
+            c00 += ce[q, 0] * ce[q, 0]
+            c10 += ce[q, 1] * ce[q, 0]
+            c11 += ce[q, 1] * ce[q, 1]
+        w0, w1, z00, z10, _, _, ok = _eigh2(c00, c10, c11)
+        if not ok:
+            return out, False
+        if w0 < 0.1 * w1 + 1e-12:
+            out[p, 0] = z00
+            out[p, 1] = z10
+        else:
+            out[p, 0] = np.nan
+            out[p, 1] = np.nan
+    return out, True
+
+
 def point_normals(
     points: FloatArray, tree: Any = None, neighbours: int = 6
 ) -> FloatArray:
     """Unit normals (M, 2) from a PCA of each point's nearest neighbours; NaN where the
     neighbourhood is not line-like (corners, clutter). Without a ``tree`` the neighbours are
-    found by a compiled sweep along x (exact, nearest first, as a k-d tree query)."""
+    found by a compiled sweep along x (exact, nearest first, as a k-d tree query) and the PCA
+    is compiled too (`_pca_normals`: numpy's values bit for bit)."""
     points = np.ascontiguousarray(points, dtype=np.float64)
     if points.shape[0] < neighbours:
         return np.full(points.shape, np.nan)
     if tree is None:
         by_x = np.argsort(points[:, 0], kind="stable").astype(np.int64)
         nn = _nearest_sweep(points, by_x, neighbours)
+        normals, ok = _pca_normals(points, nn)
+        if ok:
+            return normals
     else:
         _, nn = tree.query(points, k=neighbours)
     nb = points[nn]
@@ -1182,13 +1676,15 @@ def refine_icp_with_covariance(
         w = w_buf[:count]
         wr = w * r
         h = jac.T @ jac_w_buf[:count] + damping
-        sw = float(w.sum())
-        fit = (h, float(np.sum(wr * r)) / max(sw - 3.0, 1.0))
-        if it == iterations:
-            break
-        delta = -np.linalg.solve(h, jac.T @ wr)
-        pose += delta
-        if abs(delta[0]) < 1e-5 and abs(delta[1]) < 1e-5 and abs(delta[2]) < 1e-6:
+        last = it == iterations
+        if not last:
+            delta = -np.linalg.solve(h, jac.T @ wr)
+            pose += delta
+            last = abs(delta[0]) < 1e-5 and abs(delta[1]) < 1e-5 and abs(delta[2]) < 1e-6
+        if last:
+            # the fit at the final pairs (before the step they gave): only this one is used
+            sw = float(w.sum())
+            fit = (h, float(np.sum(wr * r)) / max(sw - 3.0, 1.0))
             break
     covariance: FloatArray | None = None
     if fit is not None:
