@@ -6,15 +6,18 @@ Synthetic data: a textured corridor rendered by the pinhole ray-caster of the te
 
     .venv/bin/python benchmarks/bench_vslam.py [--nodes 1000] [--vo-frames 120] [--tum DIR]
         [--cpu-parts]  (per-part breakdown in CPU time; --vo-frames 0 skips odometry)
+        [--profile FILE]  (cProfile, CPU clock, of the updates from node --nodes − 100 on)
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import datetime as dt
 import importlib.util
 import json
 import platform
+import pstats
 import sys
 import time
 from pathlib import Path
@@ -102,7 +105,8 @@ def bench_vo(syn, world, n_frames: int) -> dict[str, dict[str, float]]:
 def bench_loop_closure(syn, world, n_nodes: int, extra: int,
                        memory_thr: int = 0, cpu_parts: bool = False,
                        frame_cache: Path | None = None,
-                       compare_relinearize: float | None = None) -> dict[str, object]:
+                       compare_relinearize: float | None = None,
+                       profile: Path | None = None) -> dict[str, object]:
     cam = syn.kinect_camera(640, 480)
     # ~Eddie at 1 Hz: 0.25 m or 0.25 rad between nodes; laps repeat, so revisits start at lap 2
     traj = corridor_loop(step=0.25, turn_step=0.25)
@@ -122,6 +126,8 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
         inner.relinearize_threshold = compare_relinearize
     other_cpu: list[float] = []
     other_loops = 0
+    # optional cProfile (CPU-time clock) of the core over the nodes from --nodes − 100 on
+    profiler = cProfile.Profile(time.process_time) if profile is not None else None
     rng = np.random.default_rng(0)
     odom = np.eye(4)
     prev_truth = syn.planar_pose(*laps[0])
@@ -156,6 +162,8 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
             other_loops += bool(other.process(rgb, depth, cam, odom, k * 1_000_000_000,
                                               features=feats).loop_closure_id)
             other_cpu.append((time.process_time() - c1) * 1e3)
+        if profiler is not None and k == max(0, n_nodes - 100):
+            profiler.enable()
         t0, c0 = time.perf_counter(), time.process_time()
         r = slam.process(rgb, depth, cam, odom, k * 1_000_000_000, features=feats)
         times.append((time.perf_counter() - t0) * 1e3)
@@ -168,6 +176,11 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
         wm.append(int(r.statistics["Memory/Working_memory_size/"]))
         parts.append({k: v for k, v in r.statistics.items() if k.startswith("Timing/")})
         loops += bool(r.loop_closure_id)
+    if profiler is not None and profile is not None:
+        profiler.disable()
+        profiler.dump_stats(str(profile))
+        stats = pstats.Stats(profiler)
+        stats.sort_stats("tottime").print_stats(20)
     target = min(n_nodes, len(times)) if memory_thr <= 0 else memory_thr
     near = [k for k, w in enumerate(wm) if w >= target - 110]
     if memory_thr > 0:
@@ -206,6 +219,9 @@ def main() -> int:
                     help="also run a core with this iSAM2 relinearisation threshold, interleaved")
     ap.add_argument("--frame-cache", type=Path,
                     help="folder keeping the rendered loop-closure frames between runs")
+    ap.add_argument("--profile", type=Path, metavar="FILE",
+                    help="cProfile (CPU time) of the updates from node --nodes - 100 on: "
+                         "top 20 printed, stats in FILE (profiling slows the timed nodes)")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     cv2.setNumThreads(1)  # one core, as the published figures
@@ -221,7 +237,7 @@ def main() -> int:
     if args.frame_cache:
         args.frame_cache.mkdir(parents=True, exist_ok=True)
     lc = bench_loop_closure(syn, world, args.nodes, args.extra, args.memory_thr, args.cpu_parts,
-                            args.frame_cache, args.compare_relinearize)
+                            args.frame_cache, args.compare_relinearize, args.profile)
     lc["memory_thr"] = args.memory_thr
     lc["breakdown_clock"] = "cpu" if args.cpu_parts else "wall"
     results["loop_closure"] = lc

@@ -10,6 +10,7 @@ import math
 from collections.abc import Callable, Iterable, Mapping
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 __all__ = ["VIRTUAL_PLACE_ID", "BayesFilter", "adjust_likelihood", "tfidf_scores"]
@@ -29,19 +30,20 @@ def tfidf_scores(
     `words`: word id → occurrences in the new node; `inverted_index`: word → {node: occurrences}
     over all nodes in memory (N = `n_nodes`); `node_word_totals`: n_j (word occurrences in j).
     """
-    cand = set(candidates)
-    scores = dict.fromkeys(cand, 0.0)
+    scores = dict.fromkeys(set(candidates), 0.0)
     if n_nodes <= 0:
         return scores
+    get = inverted_index.get
+    log10 = math.log10
     for w in words:
-        postings = inverted_index.get(w)
+        postings = get(w)
         if not postings:
             continue
-        idf = math.log10(n_nodes / len(postings))
+        idf = log10(n_nodes / len(postings))
         if idf <= 0.0:
             continue
         for j, n_wj in postings.items():
-            if j in cand:
+            if j in scores:
                 scores[j] += n_wj / node_word_totals[j] * idf
     return scores
 
@@ -53,7 +55,8 @@ def adjust_likelihood(scores: Mapping[int, float], virtual_ratio_mode: int = 0) 
     virtual place gets μ/σ + 1 (or 2 when σ ≤ 1e-4 or no score > 0). Mode 1 uses (s − μ)/σ and
     σ/(max − μ) + 1.
     """
-    values = np.array([v for v in scores.values() if v > 0.0])
+    all_values = np.fromiter(scores.values(), np.float64, len(scores))
+    values = all_values[all_values > 0.0]
     out = dict.fromkeys(scores, 1.0)
     if values.size == 0:
         out[VIRTUAL_PLACE_ID] = 2.0
@@ -61,9 +64,13 @@ def adjust_likelihood(scores: Mapping[int, float], virtual_ratio_mode: int = 0) 
     mu = float(values.mean())
     sigma = float(values.std())
     top = float(values.max())
-    for k, s in scores.items():
-        if s > mu + sigma:
-            out[k] = (s - mu) / sigma if virtual_ratio_mode == 1 else (s - sigma + 1e-4) / mu
+    high = np.flatnonzero(all_values > mu + sigma)
+    if high.size:
+        s = all_values[high]
+        adjusted = (s - mu) / sigma if virtual_ratio_mode == 1 else (s - sigma + 1e-4) / mu
+        keys = list(scores)
+        for i, v in zip(high.tolist(), adjusted.tolist()):
+            out[keys[i]] = v
     if sigma > 1e-4:
         if virtual_ratio_mode == 1:
             out[VIRTUAL_PLACE_ID] = sigma / (top - mu) + 1.0 if top > mu else 2.0
@@ -113,6 +120,7 @@ class BayesFilter:
         self._e_raw = np.zeros(1024)  # 0 = retired entry
         self._n = 0
         self._dead = 0
+        self._max_id = 0  # largest id in the table
 
     def invalidate(self, ids: Iterable[int]) -> None:
         """Recompute these ids' prediction columns at the next update."""
@@ -127,6 +135,8 @@ class BayesFilter:
         col = self._columns.get(column_id)
         if col is None or not 1 <= depth <= self.max_depth or neighbour_id in col:
             return
+        if not 0 <= neighbour_id <= self._max_id:
+            self._track_ids(neighbour_id, neighbour_id)
         col[neighbour_id] = self._append(column_id, [neighbour_id], [self._lc[depth + 1]])
 
     def remove_neighbour(self, column_id: int, neighbour_id: int) -> None:
@@ -198,8 +208,13 @@ class BayesFilter:
             if j != i and 1 <= depth <= self.max_depth:
                 rows.append(j)
                 vals.append(self._lc[depth + 1])
+        self._track_ids(min(rows), max(rows))  # rows include the column's own id
         first = self._append(i, rows, vals)
         self._columns[i] = {r: first + k for k, r in enumerate(rows)}
+
+    def _track_ids(self, low: int, high: int) -> None:
+        # negative ids cannot index the dense table: they keep the searchsorted lookup
+        self._max_id = max(self._max_id, high) if low >= 0 else 1 << 62
 
     def update(
         self,
@@ -241,17 +256,25 @@ class BayesFilter:
             predicted[0] += prior[active].sum() * self._lc[0]
             for s in sorted(set(states[active].tolist()) - self._columns.keys()):
                 self._ensure_column(s, neighbours)
-            # absent ids map to the extra state n (prior 0, dropped at the end); no boolean
-            # compressions, which cost more than the gathers on ~10⁵ entries
-            m = self._n
-            raw = self._e_raw[:m]
-            col = _lookup(states, self._e_col[:m])
-            col_prior = np.append(prior, 0.0)[col]
-            sums = np.bincount(col, raw, minlength=n + 1)
-            scale = np.divide(1.0 - self._lc[0], sums, out=np.zeros_like(sums), where=sums > 0)
-            weight = raw * col_prior * scale[col]
-            row = _lookup(states, self._e_row[:m])
-            predicted += np.bincount(row, weight, minlength=n + 1)[:n]
+            table = _dense_table(states, self._max_id)
+            if table is not None:
+                # one compiled pass: the gathers and bincounts below, entry by entry (same
+                # order of sums, same rounding)
+                predicted += _predict_entries(self._e_col, self._e_row, self._e_raw, self._n,
+                                              table, np.append(prior, 0.0), 1.0 - self._lc[0], n)
+            else:
+                # absent ids map to the extra state n (prior 0, dropped at the end); no boolean
+                # compressions, which cost more than the gathers on ~10⁵ entries
+                m = self._n
+                raw = self._e_raw[:m]
+                col = _lookup(states, self._e_col[:m])
+                col_prior = np.append(prior, 0.0)[col]
+                sums = np.bincount(col, raw, minlength=n + 1)
+                scale = np.divide(1.0 - self._lc[0], sums, out=np.zeros_like(sums),
+                                  where=sums > 0)
+                weight = raw * col_prior * scale[col]
+                row = _lookup(states, self._e_row[:m])
+                predicted += np.bincount(row, weight, minlength=n + 1)[:n]
         post = like * predicted
         total = post.sum()
         if total > 0:
@@ -264,9 +287,47 @@ class BayesFilter:
         self._post = post
         return self.posterior
 
+    def highest_hypothesis(self) -> tuple[int, float]:
+        """(location with the top posterior, 1 − P(virtual place)) of the last update; ties go to
+        the lowest id, (0, 0.0) before any update or without locations."""
+        if self._states.size < 2:
+            return 0, (1.0 - float(self._post[0])) if self._post.size else 0.0
+        k = int(np.argmax(self._post[1:])) + 1
+        return int(self._states[k]), 1.0 - float(self._post[0])
+
     def posterior_arrays(self) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
         """Last posterior as (state ids, probabilities), the virtual place (−1) first."""
         return self._states.copy(), self._post.copy()
+
+
+def _dense_table(states: NDArray[np.int64], max_id: int) -> NDArray[np.int64] | None:
+    """id → index among `states` (len(states) if absent) for ids 0..`max_id`, or None when ids
+    are too sparse for a table."""
+    n = states.size
+    locations = states[1:]
+    if locations.size == 0 or locations[0] < 0 or max_id > 16 * locations.size + 65536:
+        return None
+    table = np.full(max(max_id, int(locations[-1])) + 1, n, np.int64)
+    table[locations] = np.arange(1, n)
+    return table
+
+
+@njit(cache=True)
+def _predict_entries(e_col, e_row, e_raw, m, table, prior, keep, n):  # type: ignore[no-untyped-def]
+    """Σ over table entries of raw · prior[col] · keep / Σ_col raw, accumulated per row: the
+    bincount formulation of `BayesFilter.update` entry by entry (same order, same rounding)."""
+    sums = np.zeros(n + 1)
+    for k in range(m):
+        sums[table[e_col[k]]] += e_raw[k]
+    scale = np.zeros(n + 1)
+    for c in range(n + 1):
+        if sums[c] > 0:
+            scale[c] = keep / sums[c]
+    acc = np.zeros(n + 1)
+    for k in range(m):
+        c = table[e_col[k]]
+        acc[table[e_row[k]]] += e_raw[k] * prior[c] * scale[c]
+    return acc[:n]
 
 
 def _lookup(states: NDArray[np.int64], ids: NDArray[np.int64]) -> NDArray[np.int64]:

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from eddiebot.vslam.bayes import VIRTUAL_PLACE_ID, BayesFilter, adjust_likelihood, tfidf_scores
+from eddiebot.vslam.bayes import BayesFilter, adjust_likelihood, tfidf_scores
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.errors import VslamError
 from eddiebot.vslam.features import FeatureExtractor
@@ -89,10 +89,8 @@ class AppearanceLoopDetector:
         scores = tfidf_scores(node.word_counts, mem.inverted, mem.word_totals,
                               len(mem.wm) + len(mem.stm), wm)
         like = adjust_likelihood(scores, self.params.rtabmap_virtual_place_likelihood_ratio)
-        posterior = self.bayes.update(like, lambda i, d: mem.neighbours(i, d))
-        best = max((k for k in posterior if k != VIRTUAL_PLACE_ID), key=lambda k: posterior[k],
-                   default=0)
-        value = 1.0 - posterior.get(VIRTUAL_PLACE_ID, 1.0)
+        self.bayes.update(like, lambda i, d: mem.neighbours(i, d))
+        best, value = self.bayes.highest_hypothesis()
         loop = best if (best and value >= self.params.rtabmap_loop_thr and len(wm) > 1) else 0
         return LoopDetection(node.id, best, value, loop)
 

@@ -113,6 +113,11 @@ class Memory:
         self._wm_counter = 0
         self.inverted: dict[int, dict[int, int]] = {}
         self.word_totals: dict[int, int] = {}
+        # connected components of all nodes (union-find with member lists), kept by
+        # `add_link`; any removal drops it and the next `component` call rebuilds it
+        self._uf_parent: dict[int, int] = {}
+        self._uf_members: dict[int, list[int]] = {}
+        self._uf_valid = False
 
     # -- membership -------------------------------------------------------------------------
     @property
@@ -142,10 +147,20 @@ class Memory:
         if node.data is not None:
             self.vocabulary.remove_references(node.data.words)
 
-    def add_to_stm(self, node: Node) -> list[int]:
-        """Insert a new node; returns the ids that moved from STM to WM."""
+    def _register(self, node: Node) -> None:
+        known = node.id in self.nodes or bool(self.links.get(node.id))
         self.nodes[node.id] = node
         self.links.setdefault(node.id, {})
+        if self._uf_valid:
+            if known:
+                self._uf_valid = False
+            else:
+                self._uf_parent[node.id] = node.id
+                self._uf_members[node.id] = [node.id]
+
+    def add_to_stm(self, node: Node) -> list[int]:
+        """Insert a new node; returns the ids that moved from STM to WM."""
+        self._register(node)
         self.stm.append(node.id)
         self._index_words(node)
         moved = []
@@ -157,8 +172,7 @@ class Memory:
 
     def add_to_wm(self, node: Node) -> None:
         """Insert a node straight into WM (database load, retrieval)."""
-        self.nodes[node.id] = node
-        self.links.setdefault(node.id, {})
+        self._register(node)
         self.ltm.discard(node.id)
         self._index_words(node)
         self._add_to_wm(node.id)
@@ -171,8 +185,7 @@ class Memory:
         """Register a node that stays in LTM (poses and links only)."""
         node.data = None
         node.word_counts = {}
-        self.nodes[node.id] = node
-        self.links.setdefault(node.id, {})
+        self._register(node)
         self.ltm.add(node.id)
 
     def remove_node(self, node_id: int) -> None:
@@ -180,6 +193,7 @@ class Memory:
         node = self.nodes.pop(node_id, None)
         if node is None:
             return
+        self._uf_valid = False
         if node_id in self.stm:
             self.stm.remove(node_id)
         self.wm.pop(node_id, None)
@@ -199,12 +213,18 @@ class Memory:
         self.links.setdefault(b, {})[a] = inverse
         if a != b:
             self._pairs[(a, b) if a < b else (b, a)] = link if a < b else inverse
+            if self._uf_valid:
+                if a in self.nodes and b in self.nodes:
+                    self._uf_union(a, b)
+                else:
+                    self._uf_valid = False
 
     def remove_link(self, a: int, b: int) -> None:
         """Remove the link between two nodes."""
         self.links.get(a, {}).pop(b, None)
         self.links.get(b, {}).pop(a, None)
-        self._pairs.pop((a, b) if a < b else (b, a), None)
+        if self._pairs.pop((a, b) if a < b else (b, a), None) is not None:
+            self._uf_valid = False
 
     def unique_links(self, ids: Iterable[int] | None = None) -> list[Link]:
         """Each link once (from < to orientation as stored by `from_id`), among `ids` if given."""
@@ -237,7 +257,15 @@ class Memory:
         return out
 
     def component(self, node_id: int, within: set[int]) -> set[int]:
-        """Nodes connected to `node_id` through links among `within`."""
+        """Nodes connected to `node_id` through links among `within`.
+
+        When `within` holds every node (no node in LTM), the answer comes from components kept
+        up to date as links are added (a set copy instead of a graph search).
+        """
+        if node_id in within and len(within) >= len(self.nodes) and self.nodes.keys() <= within:
+            if not self._uf_valid:
+                self._uf_rebuild()
+            return set(self._uf_members[self._uf_find(node_id)])
         seen = {node_id}
         stack = [node_id]
         while stack:
@@ -247,6 +275,34 @@ class Memory:
                     seen.add(m)
                     stack.append(m)
         return seen
+
+    def _uf_find(self, i: int) -> int:
+        parent = self._uf_parent
+        root = i
+        while parent[root] != root:
+            root = parent[root]
+        while parent[i] != root:  # path compression
+            parent[i], i = root, parent[i]
+        return root
+
+    def _uf_union(self, a: int, b: int) -> None:
+        ra, rb = self._uf_find(a), self._uf_find(b)
+        if ra == rb:
+            return
+        members = self._uf_members
+        if len(members[ra]) < len(members[rb]):
+            ra, rb = rb, ra
+        self._uf_parent[rb] = ra
+        members[ra].extend(members.pop(rb))
+
+    def _uf_rebuild(self) -> None:
+        self._uf_parent = {i: i for i in self.nodes}
+        self._uf_members = {i: [i] for i in self.nodes}
+        self._uf_valid = True
+        nodes = self.nodes
+        for a, b in self._pairs:
+            if a in nodes and b in nodes:
+                self._uf_union(a, b)
 
     # -- transfer / retrieval ---------------------------------------------------------------
     def transfer_candidates(self, protected: set[int], recent_ratio: float) -> list[int]:
