@@ -56,11 +56,14 @@ class RtabmapParameters:
     gftt_block_size: int = _p("GFTT/BlockSize", 3, "px")
     mem_depth_as_mask: bool = _p("Mem/DepthAsMask", True, "detect only where depth > 0")
     # --- registration ---
-    vis_estimation_type: int = _p("Vis/EstimationType", 1, "1 = PnP (only value supported)")
+    vis_estimation_type: int = _p(
+        "Vis/EstimationType", 1,
+        "0 = 3D->3D (RANSAC on matches with depth in both frames, Vis/InlierDistance), 1 = PnP")
     vis_min_inliers: int = _p("Vis/MinInliers", 20, "")
     vis_inlier_distance: float = _p("Vis/InlierDistance", 0.1, "m, 3D inlier gate")
     vis_pnp_reproj_error: float = _p("Vis/PnPReprojError", 2.0, "px")
     vis_iterations: int = _p("Vis/Iterations", 300, "RANSAC iterations")
+    vis_refine_iterations: int = _p("Vis/RefineIterations", 5, "3D->3D: re-fits on the inliers")
     vis_pnp_refine_iterations: int = _p(
         "Vis/PnPRefineIterations", 0,
         "re-solve on the inliers, then re-select them among all matches (upstream: 0 when "
@@ -157,8 +160,8 @@ class RtabmapParameters:
                 raise ParameterError(
                     f"{strategy_name}={value} is not supported (supported: 2 ORB, 8 GFTT/ORB)"
                 )
-        if self.vis_estimation_type != 1:
-            raise ParameterError("Vis/EstimationType: only 1 (PnP) is supported")
+        if self.vis_estimation_type not in (0, 1):
+            raise ParameterError("Vis/EstimationType: 0 (3D->3D) or 1 (PnP) are supported")
         if self.odom_strategy not in (ODOM_STRATEGY_F2M, ODOM_STRATEGY_F2F):
             raise ParameterError(f"Odom/Strategy={self.odom_strategy}: use 0 (F2M) or 1 (F2F)")
         if self.mem_image_compression_format not in (".jpg", ".png"):

@@ -35,6 +35,7 @@ __all__ = [
     "refine_pnp",
     "register",
     "reprojection_errors",
+    "solve_3d3d",
     "solve_pnp",
 ]
 
@@ -173,6 +174,94 @@ def solve_pnp(
     p[:3, :3] = rot
     p[:3, 3] = np.asarray(tvec_out).ravel()
     return se3_inverse(lt @ p), inliers.ravel().astype(np.intp)
+
+
+def _fit_rigid(from_points: F64, to_points: F64, weights: F64, three_dof: bool) -> F64:
+    """Weighted least-squares rigid transform T with from ≈ T · to (Kabsch; in the plane with
+    `three_dof`, z carried over)."""
+    w = weights / weights.sum()
+    dims = 2 if three_dof else 3
+    a, b = to_points[:, :dims], from_points[:, :dims]
+    ca, cb = w @ a, w @ b
+    h = ((a - ca) * w[:, None]).T @ (b - cb)
+    u, _, vt = np.linalg.svd(h)
+    d = np.eye(dims)
+    d[-1, -1] = np.sign(np.linalg.det(vt.T @ u.T))
+    rot = vt.T @ d @ u.T
+    t = np.eye(4)
+    t[:dims, :dims] = rot
+    t[:dims, 3] = cb - rot @ ca
+    if three_dof:
+        t[2, 3] = float(w @ (from_points[:, 2] - to_points[:, 2]))
+    return t
+
+
+def solve_3d3d(
+    from_points: F64,
+    to_points: F64,
+    params: RtabmapParameters,
+    origin: F64 | None = None,
+) -> tuple[F64 | None, NDArray[np.intp]]:
+    """`Vis/EstimationType` 0: RANSAC over pairs of 3D points (old base frame ↔ new base frame,
+    both from depth), a pair an inlier when the transformed new point lies within
+    `Vis/InlierDistance` of the old one; then `Vis/RefineIterations` re-fits on the inliers and
+    re-selections. Returns the pose of the new base frame in the old one and the inlier positions.
+
+    With `Reg/Force3DoF` the samples are two pairs and the fit is planar (x, y, yaw). The re-fits
+    weight each pair by the inverse of the depth noise variance (σ ∝ range², as a Kinect's),
+    range from `origin` (the old camera, old base frame), so far points (whose depth error
+    exceeds their lateral error many times over) do not pull the heading (not upstream: the
+    upstream fit is unweighted). Deterministic: the samples come from a fixed-seed generator.
+    """
+    n = from_points.shape[0]
+    three_dof = params.reg_force_3dof
+    k = 2 if three_dof else 3
+    if n < max(k, 3):
+        return None, np.zeros(0, np.intp)
+    thr = float(params.vis_inlier_distance)
+    rng = np.random.default_rng(n)
+    iters = max(1, params.vis_iterations)
+    # all hypotheses at once: k distinct pairs per hypothesis
+    samples = np.argsort(rng.random((iters, n)), axis=1)[:, :k]
+    sp, sq = from_points[samples], to_points[samples]  # (iters, k, 3)
+    if three_dof:
+        dp, dq = sp[:, 1, :2] - sp[:, 0, :2], sq[:, 1, :2] - sq[:, 0, :2]
+        yaw = np.arctan2(dp[:, 1], dp[:, 0]) - np.arctan2(dq[:, 1], dq[:, 0])
+        c, s_ = np.cos(yaw), np.sin(yaw)
+        rot = np.zeros((iters, 3, 3))
+        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = c, -s_, s_, c, 1.0
+        valid = np.linalg.norm(dp, axis=1) > 0.05
+    else:
+        cp, cq = sp.mean(axis=1, keepdims=True), sq.mean(axis=1, keepdims=True)
+        h = np.einsum("nki,nkj->nij", sq - cq, sp - cp)
+        u, _, vt = np.linalg.svd(h)
+        d = np.sign(np.linalg.det(np.einsum("nji,nkj->nik", vt, u)))
+        vt[:, -1, :] *= d[:, None]
+        rot = np.einsum("nji,nkj->nik", vt, u)
+        valid = np.linalg.norm(sp[:, 1] - sp[:, 0], axis=1) > 0.05
+    trans = sp.mean(axis=1) - np.einsum("nij,nj->ni", rot, sq.mean(axis=1))
+    moved = np.einsum("nij,mj->nmi", rot, to_points) + trans[:, None, :]
+    err = np.linalg.norm(from_points[None] - moved, axis=2)  # (iters, n)
+    count = np.where(valid, (err <= thr).sum(axis=1), -1)
+    score = count - np.minimum(err, thr).sum(axis=1) / (thr * (n + 1))  # ties: smaller error
+    h_best = int(np.argmax(score))
+    best: NDArray[np.intp] = np.flatnonzero(err[h_best] <= thr).astype(np.intp)
+    if best.size < max(k, 3):
+        return None, best
+    ranges = np.linalg.norm(from_points - (np.zeros(3) if origin is None else origin), axis=1)
+    weights = 1.0 / np.maximum(ranges, 0.5) ** 4
+    t = _fit_rigid(from_points[best], to_points[best], weights[best], three_dof)
+    for _ in range(max(0, params.vis_refine_iterations)):
+        err = np.linalg.norm(from_points - (to_points @ t[:3, :3].T + t[:3, 3]), axis=1)
+        inl = np.flatnonzero(err <= thr).astype(np.intp)
+        if inl.size < max(k, 3):
+            break
+        t_new = _fit_rigid(from_points[inl], to_points[inl], weights[inl], three_dof)
+        done = np.array_equal(inl, best)
+        t, best = t_new, inl
+        if done:
+            break
+    return t, best
 
 
 def reprojection_errors(
@@ -405,6 +494,8 @@ def register(
             )
         if fi.size < params.vis_min_inliers:
             return RegistrationResult(None, matches=int(fi.size), reason="too few matches")
+        if params.vis_estimation_type == 0:
+            return _estimate_3d3d(fi, ti)
         transform, inl = solve_pnp(old.points[fi], new.uv[ti], camera, params, g)
         if transform is None or inl.size < params.vis_min_inliers:
             return RegistrationResult(
@@ -423,6 +514,22 @@ def register(
             jac = pnp_jacobian_covariance(se3_inverse(transform), old.points[fi_in],
                                           new.uv[ti_in], camera, force)
             cov = np.maximum(cov, jac)
+        return RegistrationResult(transform, cov, int(inl.size), int(fi.size), fi_in, ti_in,
+                                  match_from_index=fi, match_to_index=ti)
+
+    def _estimate_3d3d(fi: NDArray[np.intp], ti: NDArray[np.intp]) -> RegistrationResult:
+        both = np.flatnonzero(np.isfinite(new.points[ti, 0]) & np.isfinite(old.points[fi, 0]))
+        if both.size < params.vis_min_inliers:
+            return RegistrationResult(None, matches=int(fi.size), inliers=0,
+                                      reason="too few matches with depth")
+        transform, inl = solve_3d3d(old.points[fi[both]], new.points[ti[both]], params,
+                                    camera.local_transform[:3, 3])
+        if transform is None or inl.size < params.vis_min_inliers:
+            return RegistrationResult(
+                None, matches=int(fi.size), inliers=int(inl.size), reason="too few inliers")
+        fi_in, ti_in = fi[both[inl]], ti[both[inl]]
+        cov = estimate_covariance(transform, old.points[fi_in], new.points[ti_in], new.uv[ti_in],
+                                  camera, params.vis_pnp_variance_median_ratio)
         return RegistrationResult(transform, cov, int(inl.size), int(fi.size), fi_in, ti_in,
                                   match_from_index=fi, match_to_index=ti)
 

@@ -18,7 +18,7 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from eddiebot.vslam.bayes import VIRTUAL_PLACE_ID, BayesFilter, adjust_likelihood, tfidf_scores
+from eddiebot.vslam.bayes import BayesFilter, adjust_likelihood, tfidf_scores
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
 from eddiebot.vslam.graph import (
@@ -237,13 +237,8 @@ class Rtabmap:
         if not skip_update and wm:
             scores = self._likelihood_scores(node, wm)
             like = adjust_likelihood(scores, p.rtabmap_virtual_place_likelihood_ratio)
-            posterior = self.bayes.update(
-                like, lambda i, d: self.memory.neighbours(i, d)
-            )
-            best = max((k for k in posterior if k != VIRTUAL_PLACE_ID),
-                       key=lambda k: posterior[k], default=0)
-            hyp_id = best
-            hyp_value = 1.0 - posterior.get(VIRTUAL_PLACE_ID, 1.0)
+            self.bayes.update(like, lambda i, d: self.memory.neighbours(i, d))
+            hyp_id, hyp_value = self.bayes.highest_hypothesis()
             stats["Loop/Likelihood_max/"] = max(scores.values(), default=0.0)
         elif skip_update:
             hyp_id, hyp_value = self._last_hypothesis

@@ -30,6 +30,7 @@ __all__ = ["Vocabulary"]
 
 _FLANN_LSH = 6
 _UNRELATED_DISTANCE = 80
+LSH_SEED = 0x5EED  # base of the LSH index seeds; benchmarks vary it for seed studies
 
 
 @dataclass
@@ -162,6 +163,10 @@ class Vocabulary:
 
     def _build(self, ids: NDArray[np.int64]) -> _Level:
         index = cv2.flann.Index()
+        # FLANN draws its LSH bit selections from OpenCV's process-wide RNG, so without a seed
+        # the index (and every loop closure after it) depended on what ran before in the
+        # process. Seeding from the level's size makes each build a function of its words.
+        cv2.setRNGSeed(LSH_SEED + int(ids.shape[0]))
         index.build(np.ascontiguousarray(self._desc[ids]), self._lsh_params, 9)  # 9 = Hamming
         return _Level(ids, index)
 
