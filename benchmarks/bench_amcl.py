@@ -44,7 +44,7 @@ from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_fil
 from eddiebot.core.node import Node
 from eddiebot.core.tf import Buffer, TransformException, TransformListener
 from eddiebot.core.time import stamp_to_ns
-from eddiebot.demo.route import OFFICE_ROUTE, RouteDriver, Waypoint
+from eddiebot.demo.route import OFFICE_ROUTE, WAREHOUSE_ROUTE, RouteDriver, Waypoint
 from eddiebot.demo.vslam_stage import CORRIDOR_ROUTE
 from eddiebot.geometry import quaternion_to_yaw
 from eddiebot.maps import OccupancyMap, save_map
@@ -57,7 +57,8 @@ from eddiebot.sim import cached_ground_truth
 
 ROOT = Path(__file__).resolve().parents[1]
 NAV2_YAML = ROOT / "src" / "eddiebot" / "config" / "nav2.yaml"
-ROUTES: dict[str, tuple[Waypoint, ...]] = {"office": OFFICE_ROUTE, "corridor": CORRIDOR_ROUTE}
+ROUTES: dict[str, tuple[Waypoint, ...]] = {"office": OFFICE_ROUTE, "corridor": CORRIDOR_ROUTE,
+                                           "warehouse": WAREHOUSE_ROUTE}
 DIVERGED_M = 0.5
 #: the motion-noise alphas of the sweep
 _A = {f"alpha{i}": 0.005 for i in (1, 2, 3, 4)}
@@ -65,7 +66,8 @@ _PROB = {"laser_model_type": "likelihood_field_prob"}
 #: the parameter study of docs/benchmarks/nav.md#amcl (``--sweep`` on recorded runs);
 #: each entry overrides config/nav2.yaml's amcl block
 BEFORE = {"laser_model_type": "likelihood_field", "do_beamskip": False,
-          "resample_method": "multinomial", **{f"alpha{i}": 0.02 for i in (1, 2, 3, 4)}}
+          "resample_method": "multinomial", "laser_likelihood_surfaces_only": False,
+          **{f"alpha{i}": 0.02 for i in (1, 2, 3, 4)}}
 SWEEP: dict[str, dict[str, Any]] = {
     "before (alphas 0.02, likelihood_field, multinomial)": BEFORE,
     "alphas 0.005": {**BEFORE, **_A},
@@ -76,6 +78,15 @@ SWEEP: dict[str, dict[str, Any]] = {
     "nav2.yaml, sigma_hit 0.1": {"sigma_hit": 0.1},
     "nav2.yaml, update_min_d/a 0.2": {"update_min_d": 0.2, "update_min_a": 0.2},
 }
+#: the warehouse study of docs/benchmarks/nav.md#amcl-warehouse (``--sweep surfaces`` on
+#: runs recorded in the office, corridor and warehouse, replayed on the footprint map)
+SURFACES_SWEEP: dict[str, dict[str, Any]] = {
+    "Nav2's field (all occupied cells)": {"laser_likelihood_surfaces_only": False},
+    "nav2.yaml (surfaces only)": {},
+    "nav2.yaml, laser_max_range 5": {"laser_max_range": 5.0},
+    "nav2.yaml, laser_max_range 6": {"laser_max_range": 6.0},
+}
+SWEEPS = {"study": SWEEP, "surfaces": SURFACES_SWEEP}
 SAMPLE_S = 0.2
 
 
@@ -108,6 +119,17 @@ def surface_map(occ: OccupancyMap, start: tuple[float, ...]) -> OccupancyMap:
     data[reach] = 0
     data[border] = 100
     return OccupancyMap(data, occ.resolution, occ.origin)
+
+
+def bench_map(world: Any, map_kind: str, start: tuple[float, ...]) -> OccupancyMap:
+    """The map AMCL is given: ``surface`` (the scan-plane slice as a 2-D SLAM map holds it),
+    ``full`` (the whole slice) or ``footprint`` (every prism between the ground clearance and
+    the robot's height, the map ``bench_nav_worlds.py`` serves: it also holds what the scan
+    plane misses, low pallets and table legs)."""
+    maps = cached_ground_truth(world)
+    if map_kind == "footprint":
+        return maps.footprint
+    return surface_map(maps.scan, start) if map_kind == "surface" else maps.scan
 
 
 def _interp(stamps: np.ndarray, poses: np.ndarray, query: np.ndarray) -> np.ndarray:
@@ -186,9 +208,7 @@ def run(world: str, seed: int, overrides: dict[str, Any], camera: tuple[int, int
     nodes: list[Node] = build_nodes(parse_launch_file(find_launch_file("sim"), args), context, NODES)
     sim = context.resources["simulator"]
     start = tuple(float(v) for v in sim.world.start)
-    gt = cached_ground_truth(sim.world).scan
-    if map_kind == "surface":
-        gt = surface_map(gt, start)
+    gt = bench_map(sim.world, map_kind, start)
     update_cpu: list[float] = []
     update_wall: list[float] = []
     row: dict[str, Any] = {"world": world, "seed": seed, "map": map_kind}
@@ -312,9 +332,7 @@ def replay(path: Path, overrides: dict[str, Any], seed: int = 0,
     rec = np.load(path)
     world = str(rec["world"])
     start = tuple(float(v) for v in rec["start"])
-    gt = cached_ground_truth(load_world(world)).scan
-    if map_kind == "surface":
-        gt = surface_map(gt, start)
+    gt = bench_map(load_world(world), map_kind, start)
     params = _amcl_params(overrides)
     params = {k: v for k, v in params.items() if not k.startswith("initial_pose")}
     cfg = from_params(AmclConfig, _flatten_amcl(params), server="amcl")
@@ -380,16 +398,18 @@ def main() -> int:
     ap.add_argument("--camera", default="320x240@10", help="WxH@HZ")
     ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                     help="amcl parameter override (repeatable)")
-    ap.add_argument("--map", choices=("surface", "full"), default="surface",
+    ap.add_argument("--map", choices=("surface", "full", "footprint"), default="surface",
                     help="surface: the slice's visible surfaces only, as a 2-D SLAM map; "
-                         "full: the whole slice (walls with their thickness)")
+                         "full: the whole slice (walls with their thickness); footprint: "
+                         "the navigation benchmark's map")
     ap.add_argument("--name", default="amcl", help="results file benchmarks/results/<name>.json")
     ap.add_argument("--record", type=Path, default=None,
                     help="also save each run's scans, odometry and ground truth here (npz)")
     ap.add_argument("--replay", type=Path, nargs="+", default=None,
                     help="run the AMCL core on recorded runs instead of simulating")
-    ap.add_argument("--sweep", action="store_true",
-                    help="with --replay: every parameter set of SWEEP, mean over --seeds")
+    ap.add_argument("--sweep", nargs="?", const="study", default=None, choices=sorted(SWEEPS),
+                    help="with --replay: every parameter set of SWEEP (study, the default) or "
+                         "SURFACES_SWEEP (surfaces), mean over --seeds")
     ap.add_argument("--only", default="",
                     help="with --sweep: only the parameter sets whose label contains this")
     ap.add_argument("--before", action="store_true",
@@ -404,7 +424,7 @@ def main() -> int:
     if args.before:
         overrides = {**BEFORE, **overrides}
     if args.replay and args.sweep:
-        for label, sweep_set in SWEEP.items():
+        for label, sweep_set in SWEEPS[args.sweep].items():
             if args.only not in label:
                 continue
             for path in args.replay:

@@ -76,6 +76,11 @@ class AmclConfig:
     initial_pose_yaw: float = 0.0
     #: eddiebot's addition: "multinomial" (Nav2's pf) or "systematic" (lower resampling noise)
     resample_method: str = "multinomial"
+    #: eddiebot's addition: build the likelihood field from the obstacles' surfaces (occupied
+    #: cells with a non-occupied 4-neighbour) instead of every occupied cell (Nav2), so a beam
+    #: endpoint inside a thick obstacle (a floor plan's wall, a solid shelf rack in a footprint
+    #: map) scores by its depth below the surface instead of as a perfect hit
+    laser_likelihood_surfaces_only: bool = False
 
     def validate(self, server: str = "amcl") -> None:
         require(self.min_particles > 0, server, "min_particles", self.min_particles, "must be > 0")
@@ -124,9 +129,17 @@ def _angle_diff(a: npt.NDArray[np.float64] | float, b: npt.NDArray[np.float64] |
     return np.asarray(d)
 
 
-def likelihood_field(occ_map: OccupancyMap, max_dist: float) -> npt.NDArray[np.float64]:
-    """Distance (m) from every cell to the nearest occupied (== 100) cell, capped at max_dist."""
+def likelihood_field(occ_map: OccupancyMap, max_dist: float,
+                     surfaces_only: bool = False) -> npt.NDArray[np.float64]:
+    """Distance (m) from every cell to the nearest occupied (== 100) cell, capped at max_dist.
+    ``surfaces_only``: to the nearest occupied cell that has a non-occupied 4-neighbour (cells
+    on the map's edge count the outside as occupied), so the inside of a thick obstacle is
+    as far from a surface as it is deep."""
     occupied = occ_map.data == 100
+    if surfaces_only:
+        interior = ndimage.binary_erosion(occupied, structure=ndimage.generate_binary_structure(2, 1),
+                                          border_value=1)
+        occupied &= ~interior
     if not occupied.any():
         return np.full(occupied.shape, max_dist)
     d = ndimage.distance_transform_edt(~occupied) * occ_map.resolution
@@ -260,7 +273,8 @@ class Amcl:
     def set_map(self, occupancy_map: OccupancyMap) -> None:
         self._map = occupancy_map
         self._dist = np.ascontiguousarray(
-            likelihood_field(occupancy_map, self.config.laser_likelihood_max_dist))
+            likelihood_field(occupancy_map, self.config.laser_likelihood_max_dist,
+                             self.config.laser_likelihood_surfaces_only))
         jj, ii = np.nonzero(occupancy_map.data == 0)
         res = occupancy_map.resolution
         self._free = np.stack([occupancy_map.origin[0] + (ii + 0.5) * res,
