@@ -27,8 +27,9 @@ three other frames' scans from the same pose (true answer: zero) →
 ``--live-summary`` instead merges the live SLAM runs of ``bench_slam_sim.py
 --noise-correlation-px N --name sim_depth_noise_live_<tag>`` (any number of seeds and
 worlds; ``benchmarks/results/sim_depth_noise_live_*.json``) into
-``benchmarks/results/sim_depth_noise_live.json``: every run, and per world and window the
-mean / median over seeds of RMSE, end ratio and map agreement, and the seeds on which the
+``benchmarks/results/sim_depth_noise_live.json`` (adding to the runs it already holds; a
+newer run of the same world, seed and window replaces the older): every run, and per world and window the
+mean / median over seeds of RMSE, end error, end ratio and map agreement, and the seeds on which the
 correlated noise did better (paired by seed).
 """
 
@@ -180,12 +181,13 @@ def live_summary() -> int:
 
     from _common import RESULTS
 
-    runs: list[dict[str, Any]] = []
-    for path in sorted(RESULTS.glob("sim_depth_noise_live_*.json")):
+    merged = RESULTS / "sim_depth_noise_live.json"
+    runs: list[dict[str, Any]] = json.loads(merged.read_text())["results"] if merged.exists() else []
+    for path in sorted(RESULTS.glob("sim_depth_noise_live_*.json")):  # newer runs replace
         runs.extend(json.loads(path.read_text())["results"])
     key = {(r["run"], r["seed"], float(r["noise_correlation_px"] or 0.0)): r for r in runs}
     runs = sorted(key.values(), key=lambda r: (r["run"], r["noise_correlation_px"] or 0.0, r["seed"]))
-    metrics = ("ate_rmse_m", "end_ratio", "agreement")
+    metrics = ("ate_rmse_m", "slam_end_m", "end_ratio", "agreement")
     summary: list[dict[str, Any]] = []
     for name in sorted({r["run"] for r in runs}):
         windows = sorted({float(r["noise_correlation_px"] or 0.0) for r in runs if r["run"] == name})
@@ -209,14 +211,13 @@ def live_summary() -> int:
                        "wall_s", "cpu_s"])
     print()
     print_table(summary, ["run", "window_native_px", "seeds", "ate_rmse_m_mean",
-                          "ate_rmse_m_median", "end_ratio_mean", "end_ratio_median",
+                          "ate_rmse_m_median", "slam_end_m_mean", "end_ratio_mean", "end_ratio_median",
                           "agreement_mean", "agreement_median", "paired_seeds", "rmse_better",
                           "end_ratio_better", "agreement_better"])
-    path = RESULTS / "sim_depth_noise_live.json"
     out = json.loads(write_results("sim_depth_noise_live", runs).read_text())
     out["summary"] = summary
-    path.write_text(json.dumps(out, indent=2) + "\n")
-    print(f"\nwrote {path}")
+    merged.write_text(json.dumps(out, indent=2) + "\n")
+    print(f"\nwrote {merged} (the sim_depth_noise_live_*.json it merged can go)")
     return 0
 
 
