@@ -85,13 +85,15 @@ def find_loop_candidates(
         near &= active[:current]
     chains: list[tuple[int, ...]] = []
     chain: list[int] = []
-    for idx in range(current):
-        if near[idx] and idx not in linked:
-            chain.append(idx)
+    # only the near ids are visited (a run breaks at any gap in them)
+    for idx in np.flatnonzero(near).tolist():
+        if idx in linked:
             continue
-        if len(chain) >= min_chain_size:
-            chains.append(tuple(chain))
-        chain = []
+        if chain and idx != chain[-1] + 1:
+            if len(chain) >= min_chain_size:
+                chains.append(tuple(chain))
+            chain = []
+        chain.append(idx)
     if len(chain) >= min_chain_size:
         chains.append(tuple(chain))
     return chains

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import numpy.typing as npt
 
-from eddiebot.geometry import se2_between, se2_compose, se2_inverse, wrap_angle
+from eddiebot.geometry import se2_compose, se2_inverse, wrap_angle
 from eddiebot.maps import OccupancyMap
 from eddiebot.slam.config import SlamConfig
 from eddiebot.slam.loop_closure import (
@@ -162,6 +162,37 @@ def matcher_params(
     )
 
 
+_PI = np.pi
+_TWO_PI = 2.0 * np.pi
+
+
+def _wrap1(a: float) -> float:
+    """`wrap_angle` of one angle: the same ufuncs on a scalar (bit-identical, no array setup)."""
+    w: float = np.mod(a + _PI, _TWO_PI) - _PI
+    return _PI if w == -_PI else w
+
+
+def _compose1(a: FloatArray, b: FloatArray) -> FloatArray:
+    """`se2_compose` of two single poses (3,), element by element with the same ufuncs and
+    operation order, so bit-identical; about a fifth of its cost on the per-scan path."""
+    a0, a1, a2 = a[0], a[1], a[2]
+    b0, b1 = b[0], b[1]
+    c, s = np.cos(a2), np.sin(a2)
+    return np.array([a0 + c * b0 - s * b1, a1 + s * b0 + c * b1, _wrap1(a2 + b[2])])
+
+
+def _inverse1(a: FloatArray) -> FloatArray:
+    """`se2_inverse` of one pose (3,), bit-identical (see `_compose1`)."""
+    a0, a1, a2 = a[0], a[1], a[2]
+    c, s = np.cos(a2), np.sin(a2)
+    return np.array([-c * a0 - s * a1, s * a0 - c * a1, _wrap1(-a2)])
+
+
+def _between1(a: FloatArray, b: FloatArray) -> FloatArray:
+    """`se2_between` of two single poses, bit-identical (see `_compose1`)."""
+    return _compose1(_inverse1(a), b)
+
+
 def _odometry_covariance(delta: FloatArray, config: SlamConfig | None = None) -> FloatArray:
     """Covariance (x, y, theta) of an odometry increment under the config's noise model."""
     cfg = config or SlamConfig()
@@ -276,11 +307,11 @@ def fuse_increments(
     """
     info_odom = np.linalg.inv(cov_odom)
     dz = np.asarray(z_match, dtype=np.float64) - z_odom
-    dz[2] = float(wrap_angle(dz[2]))
+    dz[2] = float(_wrap1(dz[2]))
     info = info_odom + info_match
     cov = np.linalg.inv(info)
     fused = np.asarray(z_odom, dtype=np.float64) + cov @ (info_match @ dz)
-    fused[2] = float(wrap_angle(fused[2]))
+    fused[2] = float(_wrap1(fused[2]))
     return fused, 0.5 * (cov + cov.T)
 
 
@@ -447,9 +478,9 @@ class SlamCore:
         last = self._state.last_processed_odom
         if last is None:
             return True
-        a = se2_compose(last, self.sensor_offset)
-        b = se2_compose(odom, self.sensor_offset)
-        if abs(float(wrap_angle(b[2] - a[2]))) >= self.config.minimum_travel_heading:
+        a = _compose1(last, self.sensor_offset)
+        b = _compose1(odom, self.sensor_offset)
+        if abs(float(_wrap1(b[2] - a[2]))) >= self.config.minimum_travel_heading:
             return True
         d2 = float((b[0] - a[0]) ** 2 + (b[1] - a[1]) ** 2)
         return d2 >= self.config.minimum_travel_distance**2 - 1e-9
@@ -457,18 +488,20 @@ class SlamCore:
     def _prior(self, odom: FloatArray) -> FloatArray:
         st = self._state
         if st.last_pose is None or st.last_processed_odom is None:
-            return se2_compose(st.map_to_odom, odom)
-        return se2_compose(st.last_pose, se2_between(st.last_processed_odom, odom))
+            return _compose1(st.map_to_odom, odom)
+        return _compose1(st.last_pose, _between1(st.last_processed_odom, odom))
 
     # -- node points / reference maps
-    def _world_points(self, idx: int) -> FloatArray:
+    def _world_points(self, idx: int, pose: FloatArray | None = None) -> FloatArray:
         # the caches below compare poses as float lists: np.array_equal's value semantics
-        # (0.0 == -0.0) at a tenth of its cost, which ~50 look-ups a scan add up to
-        pose = self.graph.pose(idx)
+        # (0.0 == -0.0) at a tenth of its cost, which ~50 look-ups a scan add up to;
+        # ``pose``: the node's current estimate when the caller has it (a row of graph.poses)
+        if pose is None:
+            pose = self.graph.pose(idx)
         cached = self._ref_cache.get(idx)
         if cached is not None and cached[0].tolist() == pose.tolist():
             return cached[1]
-        sensor = se2_compose(pose, self.sensor_offset)
+        sensor = _compose1(pose, self.sensor_offset)
         pts = self.nodes[idx].points
         c, s = math.cos(sensor[2]), math.sin(sensor[2])
         world = np.empty_like(pts)
@@ -477,9 +510,10 @@ class SlamCore:
         self._ref_cache[idx] = (pose, world)
         return world
 
-    def _world_normals(self, idx: int) -> FloatArray:
+    def _world_normals(self, idx: int, pose: FloatArray | None = None) -> FloatArray:
         """Normals of a node's end points in the map frame (computed once, in its own frame)."""
-        pose = self.graph.pose(idx)
+        if pose is None:
+            pose = self.graph.pose(idx)
         cached = self._world_normal_cache.get(idx)
         if cached is not None and cached[0].tolist() == pose.tolist():
             return cached[1]
@@ -487,7 +521,7 @@ class SlamCore:
         if local is None:
             local = point_normals(self.nodes[idx].points)
             self._normal_cache[idx] = local
-        th = float(se2_compose(pose, self.sensor_offset)[2])
+        th = float(_compose1(pose, self.sensor_offset)[2])
         c, s = math.cos(th), math.sin(th)
         world = np.stack(
             [c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]], axis=-1
@@ -503,7 +537,7 @@ class SlamCore:
         if self.config.use_scan_barycenter and self.nodes[idx].points.shape[0]:
             pos = self._world_points(idx).mean(axis=0)
         else:
-            pos = se2_compose(pose, self.sensor_offset)[:2]
+            pos = _compose1(pose, self.sensor_offset)[:2]
         self._pos_cache[idx] = (pose, pos)
         return pos
 
@@ -533,8 +567,12 @@ class SlamCore:
     ) -> MatchResult:
         # one pass over the optimiser's estimate (the same values as one look-up per node,
         # which the reference points and normals below would otherwise make ~40 times)
-        self.graph.poses  # noqa: B018
-        ref = np.concatenate([self._world_points(i) for i in nodes]) if nodes else np.zeros((0, 2))
+        poses = self.graph.poses
+        ref = (
+            np.concatenate([self._world_points(i, poses[i]) for i in nodes])
+            if nodes
+            else np.zeros((0, 2))
+        )
         c, s = math.cos(prior_sensor[2]), math.sin(prior_sensor[2])
         wx = prior_sensor[0] + c * points[:, 0] - s * points[:, 1]
         wy = prior_sensor[1] + s * points[:, 0] + c * points[:, 1]
@@ -554,7 +592,7 @@ class SlamCore:
             and match.response > 0.0
             and params is not self._slip_params
         ):
-            normals = np.concatenate([self._world_normals(i) for i in nodes])
+            normals = np.concatenate([self._world_normals(i, poses[i]) for i in nodes])
             match = self._polish(match, points, ref, normals, params)
         return match
 
@@ -652,7 +690,7 @@ class SlamCore:
         stamp = int(scan.stamp_ns)
         points = scan_points(scan, cfg.max_laser_range)
         prior = self._prior(odom)
-        prior_sensor = se2_compose(prior, self.sensor_offset)
+        prior_sensor = _compose1(prior, self.sensor_offset)
         response = 0.0
         covariance: FloatArray | None = None
         pose = prior
@@ -661,7 +699,7 @@ class SlamCore:
         chain_from_odometry = st.last_processed_odom is not None
         odo_delta: FloatArray | None = None
         if chain_from_odometry and st.last_processed_odom is not None:
-            odo_delta = se2_between(st.last_processed_odom, odom)
+            odo_delta = _between1(st.last_processed_odom, odom)
         if cfg.use_scan_matching and running:
             match = self._match_against(running, points, prior_sensor, self._seq_params)
             match = self._recover_slip(
@@ -671,7 +709,7 @@ class SlamCore:
                 match = self._with_scan_geometry(match, points, len(self.nodes))
             response, covariance = match.response, match.covariance
             if match.response >= cfg.link_match_minimum_response_fine:
-                pose = se2_compose(match.pose, se2_inverse(self.sensor_offset))
+                pose = _compose1(match.pose, _inverse1(self.sensor_offset))
                 matched = True
                 self._check_covariance(match, warnings, stamp)
             else:
@@ -688,9 +726,9 @@ class SlamCore:
             if not chain_from_odometry and not matched:
                 # first scan after loading a session: the odom frames of the two runs are
                 # unrelated, so only a weak link to where the session ended
-                edge = (se2_between(prev_pose, pose), np.diag([1.0, 1.0, 0.5]), EdgeKind.ODOMETRY)
+                edge = (_between1(prev_pose, pose), np.diag([1.0, 1.0, 0.5]), EdgeKind.ODOMETRY)
             elif matched and covariance is not None:
-                delta = se2_between(prev_pose, pose)
+                delta = _between1(prev_pose, pose)
                 cov = _rotate_covariance(covariance, float(prev_pose[2]))
                 if cfg.fuse_odometry and odo_delta is not None:
                     # one edge carrying both measurements: equivalent to an odometry edge plus
@@ -700,7 +738,7 @@ class SlamCore:
                     delta, cov = fuse_increments(
                         odo_delta, _odometry_covariance(odo_delta, cfg), delta, info
                     )
-                    pose = se2_compose(prev_pose, delta)
+                    pose = _compose1(prev_pose, delta)
                 edge = (delta, cov, EdgeKind.SCAN_MATCH)
             elif odo_delta is not None:
                 edge = (odo_delta, _odometry_covariance(odo_delta, cfg), EdgeKind.ODOMETRY)
@@ -727,7 +765,7 @@ class SlamCore:
             self._retire_superseded(idx)
         st.last_pose = final
         st.last_processed_odom = odom.copy()
-        st.map_to_odom = se2_compose(final, se2_inverse(odom))
+        st.map_to_odom = _compose1(final, _inverse1(odom))
         return ProcessResult(
             ProcessStatus.ADDED,
             self.map_to_odom,
@@ -825,10 +863,11 @@ class SlamCore:
                 active=self.active_mask(),
             )
             found: LoopClosure | None = None
-            sensor = se2_compose(self.graph.pose(idx), self.sensor_offset)
+            poses = self.graph.poses  # in sync since _positions: no second pass
+            sensor = _compose1(poses[idx], self.sensor_offset)
             icp_cov = cfg.use_icp_refinement and cfg.match_covariance == "icp"
             for chain in chains:
-                ref = np.concatenate([self._world_points(i) for i in chain])
+                ref = np.concatenate([self._world_points(i, poses[i]) for i in chain])
                 found = verify_loop(
                     points,
                     sensor,
@@ -843,7 +882,7 @@ class SlamCore:
                     max_variance_fine=0.0 if icp_cov else cfg.loop_match_maximum_variance_fine,
                 )
                 if found is not None and icp_cov:
-                    normals = np.concatenate([self._world_normals(i) for i in chain])
+                    normals = np.concatenate([self._world_normals(i, poses[i]) for i in chain])
                     polished = self._polish(found.match, points, ref, normals, self._loop_fine)
                     found = dataclasses.replace(found, match=polished)
                     if cfg.loop_match_maximum_variance_fine > 0.0 and (
@@ -855,9 +894,9 @@ class SlamCore:
                     break
             if found is None:
                 return closed
-            base = se2_compose(found.match.pose, se2_inverse(self.sensor_offset))
+            base = _compose1(found.match.pose, _inverse1(self.sensor_offset))
             cand_pose = self.graph.pose(found.candidate)
-            delta = se2_between(cand_pose, base)
+            delta = _between1(cand_pose, base)
             match = found.match
             if cfg.match_degeneracy_analysis:
                 match = self._with_scan_geometry(match, points, idx)
