@@ -134,13 +134,12 @@ def _stage_vslam(out: Path, report: Report, seed: int) -> bool:
     if importlib.util.find_spec("eddiebot.demo.vslam_stage") is None:
         print("== stage vslam: not available in this build ==")
         return True
-    from eddiebot.demo.vslam_stage import run_vslam  # type: ignore[import-not-found]
+    from eddiebot.demo.vslam_stage import SLAM_PARAMETERS, run_vslam  # type: ignore[import-not-found]
 
     print("== stage vslam: RGB-D SLAM on the same route ==", flush=True)
-    # Eddie's wheel odometry as measured in the simulator (sigma 1 cm and 0.18 deg per node)
-    # instead of rtabmap_ros's 0.001 default
-    r = run_vslam(out, seed=seed, parameters={"odom_tf_linear_variance": 1e-4,
-                                              "odom_tf_angular_variance": 1e-5})
+    # Eddie's wheel odometry variance per node link as measured in the simulator (instead of
+    # rtabmap_ros's 0.001 default) and loop closures registered 3D->3D from both frames' depth
+    r = run_vslam(out, seed=seed, parameters=dict(SLAM_PARAMETERS))
     rows = [(k, getattr(r, k)) for k in ("ate_rmse_m", "ate_max_m", "odom_end_error_m",
                                          "loop_closures", "sim_seconds", "wall_seconds")
             if hasattr(r, k)]

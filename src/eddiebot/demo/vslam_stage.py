@@ -33,8 +33,8 @@ from eddiebot.geometry import quaternion_to_yaw, se2_compose
 from eddiebot.msgs.nav_msgs import Odometry
 from eddiebot.registry import NODES
 
-__all__ = ["CORRIDOR_LONG_ROUTE", "CORRIDOR_ROUTE", "VO_PARAMETERS", "VslamResult", "replay_vo_frames",
-           "run_vslam"]
+__all__ = ["CORRIDOR_LONG_ROUTE", "CORRIDOR_ROUTE", "SLAM_PARAMETERS", "VO_PARAMETERS", "VslamResult",
+           "replay_vo_frames", "run_vslam"]
 
 #: Down the ``corridor`` world (40 × 2.2 m) and back, looking around at both ends and again at
 #: the start: about 34 m, the return leg revisits every place of the outward one.
@@ -54,6 +54,18 @@ CORRIDOR_LONG_ROUTE: tuple[Waypoint, ...] = (
     Waypoint(18.0, 1.1, spin=2 * math.pi),
     Waypoint(2.5, 1.1, spin=2 * math.pi),
 )
+
+
+#: The SLAM node's settings for the simulated Eddie on top of launch/vslam.yaml (pass as
+#: ``run_vslam(parameters=...)``): the wheel odometry's variance per node link as measured
+#: against ground truth in the simulator (σ ≈ 3 mm and 0.7°: the body's heading wobbles against
+#: the odometry's by that much from node to node, and the camera sees it), and loop closures
+#: registered 3D→3D from both frames' depth (`Vis/EstimationType` 0), which PnP on floor-tile
+#: inliers in a narrow depth band got up to 2.5° wrong in yaw
+#: (docs/benchmarks/vslam_sim.md#vslam-sim-ate).
+SLAM_PARAMETERS: dict[str, Any] = {"odom_tf_linear_variance": 1e-5,
+                                   "odom_tf_angular_variance": 1.5e-4,
+                                   "Vis/EstimationType": "0"}
 
 
 #: Parameters of the visual odometry run beside the SLAM (VO-only drift): the report's

@@ -1,4 +1,5 @@
-"""Visual registration of two feature sets: descriptor or projection matching, then PnP RANSAC.
+"""Visual registration of two feature sets: descriptor or projection matching, then PnP RANSAC
+(`Vis/EstimationType` 1) or RANSAC on 3D point pairs from both frames' depth (0).
 
 Conventions: registration goes *from* an older frame (whose 3D points are used) *to* a newer one
 (whose keypoints are used); the result is the pose of the new base frame expressed in the old
@@ -472,6 +473,8 @@ def register(
     Without a guess, descriptors are matched globally (NNDR `Vis/CorNNDR`); with a guess, by
     projection within `Vis/CorGuessWinSize` px. `Reg/RepeatOnce` re-matches by projection using
     the first result. `Reg/Force3DoF` projects the guess and the result to x, y, yaw.
+    `Vis/EstimationType` 0 estimates from the matches with depth in both frames (`solve_3d3d`)
+    instead of PnP; the covariance is the 3D-error rule either way.
     """
     ratio = params.vis_cor_nndr if nndr is None else nndr
     force = params.reg_force_3dof
