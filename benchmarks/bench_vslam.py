@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import datetime as dt
+import hashlib
 import importlib.util
 import json
 import platform
@@ -21,6 +22,7 @@ import pstats
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -71,14 +73,15 @@ def _stats(ms: list[float]) -> dict[str, float]:
             "max_ms": float(a.max()), "n": int(a.size)}
 
 
-def bench_vo(syn, world, n_frames: int) -> dict[str, dict[str, float]]:
+def bench_vo(syn, world, n_frames: int) -> dict[str, dict[str, Any]]:
     cam = syn.kinect_camera(640, 480)
     traj = corridor_loop(step=0.03, turn_step=0.05)[:n_frames]
     frames = [syn.render(world, syn.planar_pose(*p), cam) for p in traj]
     out = {}
     for name, strategy in (("F2M", "0"), ("F2F", "1")):
         vo = VisualOdometry(RtabmapParameters.from_dict({"Odom/Strategy": strategy}))
-        vo.process(*frames[0], cam, 0)  # warm-up (numba, first map)
+        rgb0, depth0 = frames[0]
+        vo.process(rgb0, depth0, cam, 0)  # warm-up (numba, first map)
         vo.reset()
         times = []
         cpu = []
@@ -106,7 +109,7 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
                        memory_thr: int = 0, cpu_parts: bool = False,
                        frame_cache: Path | None = None,
                        compare_relinearize: float | None = None,
-                       profile: Path | None = None) -> dict[str, object]:
+                       profile: Path | None = None) -> dict[str, Any]:
     cam = syn.kinect_camera(640, 480)
     # ~Eddie at 1 Hz: 0.25 m or 0.25 rad between nodes; laps repeat, so revisits start at lap 2
     traj = corridor_loop(step=0.25, turn_step=0.25)
@@ -136,6 +139,9 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
     wm: list[int] = []
     parts: list[dict[str, float]] = []
     loops = 0
+    # every node's decision (hypothesis id and value, loop, rejected loop), hashed: two code
+    # versions that give the same digest took the same decisions
+    decisions = hashlib.md5()
     render_s = 0.0
     for k, pose in enumerate(laps):
         truth = syn.planar_pose(*pose)
@@ -176,6 +182,8 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
         wm.append(int(r.statistics["Memory/Working_memory_size/"]))
         parts.append({k: v for k, v in r.statistics.items() if k.startswith("Timing/")})
         loops += bool(r.loop_closure_id)
+        decisions.update(repr((r.hypothesis_id, round(r.hypothesis_value, 9), r.loop_closure_id,
+                               r.rejected_loop_id)).encode())
     if profiler is not None and profile is not None:
         profiler.disable()
         profiler.dump_stats(str(profile))
@@ -200,6 +208,7 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
         "at_1000_wm_breakdown_median_ms": breakdown,
         "at_1000_wm_cpu": _stats(at_1000_cpu or cpu[-50:]),
         "nodes": len(times), "wm_final": wm[-1], "loop_closures": loops,
+        "decisions_md5": decisions.hexdigest(),
         "dictionary_words": slam.vocabulary.active_words,
         "all": _stats(times), "at_1000_wm": _stats(at_1000 or times[-50:]),
         "render_and_extract_s": render_s,
@@ -262,7 +271,7 @@ def main() -> int:
     print(f"loop closure + update per node, WM~{lc['wm_final']}, CPU (ms)  {c['median_ms']:9.1f} "
           f"{c['p95_ms']:9.1f}")
     print(f"  nodes {lc['nodes']}, loop closures {lc['loop_closures']}, "
-          f"active words {lc['dictionary_words']}")
+          f"active words {lc['dictionary_words']}, decisions md5 {lc['decisions_md5']}")
     for k, v in lc["at_1000_wm_breakdown_median_ms"].items():
         print(f"  {k:42s} {v:9.1f}")
     comp = lc["compare"]
