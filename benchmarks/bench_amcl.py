@@ -439,6 +439,7 @@ def main() -> int:
                 row["diverged"] = any(r["diverged"] for r in runs)
                 rows.append(row)
                 print(row, flush=True)
+                write_results(args.name, rows)  # a sweep cut short keeps what it measured
         print()
         print_table(rows, ["parameters", "replay", "tf_rmse_m", "tf_rmse_worst_seed_m", "tf_p95_m",
                            "tf_max_m", "tf_yaw_rms_deg", "diverged", "update_cpu_median_ms"])
