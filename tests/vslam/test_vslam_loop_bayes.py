@@ -1,6 +1,7 @@
 """The Bayes filter's compiled prediction pass gives bit for bit the numpy formulation."""
 
 import numpy as np
+from vslam_synthetic import graph_neighbours
 
 from eddiebot.vslam import bayes as bayes_module
 from eddiebot.vslam.bayes import VIRTUAL_PLACE_ID, BayesFilter
@@ -18,17 +19,7 @@ def _run(monkeypatch, compiled: bool, offset: int = 0):
     wm: set[int] = set()
 
     def neighbours(i, depth_max):
-        out, frontier, seen = {}, [i], {i}
-        for depth in range(1, depth_max + 1):
-            nxt = []
-            for n in frontier:
-                for m in links.get(n, ()):
-                    if m not in seen and m in wm:
-                        seen.add(m)
-                        out[m] = depth
-                        nxt.append(m)
-            frontier = nxt
-        return out
+        return graph_neighbours(links, wm, i, depth_max)
 
     bf = BayesFilter(lc, 0.9)
     posts = []

@@ -1,6 +1,7 @@
 """The fast paths of the loop-closure update: they must give the reference numbers."""
 
 import numpy as np
+from vslam_synthetic import graph_neighbours
 
 from eddiebot.vslam.bayes import VIRTUAL_PLACE_ID, BayesFilter
 from eddiebot.vslam.graph import (
@@ -103,17 +104,7 @@ def test_bayes_filter_matches_the_dense_prediction_matrix():
     wm: set[int] = set()
 
     def neighbours(i, depth_max):
-        out, frontier, seen = {}, [i], {i}
-        for depth in range(1, depth_max + 1):
-            nxt = []
-            for n in frontier:
-                for m in links.get(n, ()):
-                    if m not in seen and m in wm:
-                        seen.add(m)
-                        out[m] = depth
-                        nxt.append(m)
-            frontier = nxt
-        return out
+        return graph_neighbours(links, wm, i, depth_max)
 
     bayes = BayesFilter(lc, 0.9)
     prior_post: dict[int, float] = {}

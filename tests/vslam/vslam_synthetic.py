@@ -121,3 +121,19 @@ def frame(seed: int, x: float, y: float, yaw: float, width: int = 320
         _FRAME_CACHE[key] = render(room(seed), planar_pose(x, y, yaw),
                                    kinect_camera(width, width * 3 // 4))
     return _FRAME_CACHE[key]
+
+
+def graph_neighbours(links: dict[int, set[int]], wm: set[int], i: int, depth_max: int) -> dict[int, int]:
+    """Nodes of ``wm`` within ``depth_max`` links of ``i`` (breadth first), with their depth."""
+    out: dict[int, int] = {}
+    frontier, seen = [i], {i}
+    for depth in range(1, depth_max + 1):
+        nxt = []
+        for n in frontier:
+            for m in links.get(n, ()):
+                if m not in seen and m in wm:
+                    seen.add(m)
+                    out[m] = depth
+                    nxt.append(m)
+        frontier = nxt
+    return out
