@@ -145,6 +145,18 @@ class SlamConfig:
     a match constrains the pose only along the directions it observes well (variance below
     ``corridor_covariance_threshold``); odometry fills in the rest (e.g. along a corridor).
     Off: the match alone sets the pose (slam_toolbox's behaviour)."""
+    odometry_span_nodes: int = 0
+    """Also link each scan-matched node to the node this many steps back in the same odometry
+    chain by odometry alone (eddiebot's; 0 = off, slam_toolbox's behaviour). Per-step edges
+    treat every odometry heading error as accumulating, but coarse encoders (Eddie's 36
+    positions per wheel turn) quantise the heading in ≈ 2° steps: an error that is large from
+    one step to the next and does not accumulate, while the narrow scan's sequential matches
+    carry small heading errors that do. The span edge's heading σ is
+    √2 · ``odometry_heading_quantization`` plus the noise model's accumulating part over the
+    span, so a straight run keeps the wheels' heading."""
+    odometry_heading_quantization: float = 0.01
+    """σ (rad) of the odometry heading's non-accumulating error (encoder quantisation), used by
+    ``odometry_span_nodes``."""
     loop_match_maximum_variance_fine: float = 0.0
     """Reject a loop closure whose fine match has a position variance (m², along its weakest
     direction) above this: an aliased corridor match constrains only one direction; 0 = off."""
@@ -224,10 +236,15 @@ class SlamConfig:
             "minimum_travel_heading",
             "max_laser_range",
             "map_max_laser_range",
+            "odometry_heading_quantization",
         ):
             value = getattr(out, name)
             if not math.isfinite(value) or value < 0:
                 raise ConfigError(f"parameter '{name}' must be a finite value >= 0, got {value}")
+        if out.odometry_span_nodes < 0:
+            raise ConfigError(
+                f"parameter 'odometry_span_nodes' must be >= 0, got {out.odometry_span_nodes}"
+            )
         return out
 
     @classmethod

@@ -322,6 +322,8 @@ class _State:
     last_pose: FloatArray | None = None
     map_to_odom: FloatArray = field(default_factory=lambda: np.zeros(3))
     running: deque[int] = field(default_factory=deque)
+    chain_start: int = 0
+    """First node of the current odometry chain (odometry poses before it are in another frame)."""
 
 
 class SlamCore:
@@ -746,6 +748,11 @@ class SlamCore:
         self.nodes.append(NodeRecord(scan, points, odom.copy()))
         if edge is not None:
             self.graph.add_edge(idx - 1, idx, edge[0], edge[1], kind=edge[2])
+        if not chain_from_odometry:
+            st.chain_start = idx
+        span = cfg.odometry_span_nodes
+        if span > 0 and matched and idx - span >= st.chain_start:
+            self._add_odometry_span(idx - span, idx)
         # running buffer
         st.running.append(idx)
         while len(st.running) > cfg.scan_buffer_size:
@@ -776,6 +783,19 @@ class SlamCore:
             loop_closed=loop_closed,
             warnings=tuple(warnings),
         )
+
+    def _add_odometry_span(self, j: int, idx: int) -> None:
+        """Odometry alone from node ``j`` to node ``idx`` of one chain (`odometry_span_nodes`)."""
+        cfg = self.config
+        odo = [self.nodes[m].odom_pose for m in range(j, idx + 1)]
+        dist = sum(math.hypot(float(b[0] - a[0]), float(b[1] - a[1])) for a, b in zip(odo, odo[1:]))
+        turn = sum(abs(_wrap1(float(b[2] - a[2]))) for a, b in zip(odo, odo[1:]))
+        sth = math.hypot(math.sqrt(2.0) * cfg.odometry_heading_quantization,
+                         cfg.odometry_rotation_noise * turn
+                         + cfg.odometry_rotation_noise_per_meter * dist)
+        sx = cfg.odometry_translation_sigma + cfg.odometry_translation_noise * dist
+        self.graph.add_edge(j, idx, _between1(odo[0], odo[-1]), np.diag([sx * sx, sx * sx, sth * sth]),
+                            kind=EdgeKind.ODOMETRY)
 
     def _recover_slip(
         self,
