@@ -24,7 +24,7 @@ from eddiebot.vslam.matching import (
     nndr_one_to_one,
 )
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, to_3dof, yaw_of
+from eddiebot.vslam.transforms import fit_rigid, from_xyz_yaw, se3_inverse, to_3dof, yaw_of
 
 __all__ = [
     "LOST_VARIANCE",
@@ -177,26 +177,6 @@ def solve_pnp(
     return se3_inverse(lt @ p), inliers.ravel().astype(np.intp)
 
 
-def _fit_rigid(from_points: F64, to_points: F64, weights: F64, three_dof: bool) -> F64:
-    """Weighted least-squares rigid transform T with from ≈ T · to (Kabsch; in the plane with
-    `three_dof`, z carried over)."""
-    w = weights / weights.sum()
-    dims = 2 if three_dof else 3
-    a, b = to_points[:, :dims], from_points[:, :dims]
-    ca, cb = w @ a, w @ b
-    h = ((a - ca) * w[:, None]).T @ (b - cb)
-    u, _, vt = np.linalg.svd(h)
-    d = np.eye(dims)
-    d[-1, -1] = np.sign(np.linalg.det(vt.T @ u.T))
-    rot = vt.T @ d @ u.T
-    t = np.eye(4)
-    t[:dims, :dims] = rot
-    t[:dims, 3] = cb - rot @ ca
-    if three_dof:
-        t[2, 3] = float(w @ (from_points[:, 2] - to_points[:, 2]))
-    return t
-
-
 def solve_3d3d(
     from_points: F64,
     to_points: F64,
@@ -251,13 +231,13 @@ def solve_3d3d(
         return None, best
     ranges = np.linalg.norm(from_points - (np.zeros(3) if origin is None else origin), axis=1)
     weights = 1.0 / np.maximum(ranges, 0.5) ** 4
-    t = _fit_rigid(from_points[best], to_points[best], weights[best], three_dof)
+    t = fit_rigid(from_points[best], to_points[best], weights[best], three_dof)
     for _ in range(max(0, params.vis_refine_iterations)):
         err = np.linalg.norm(from_points - (to_points @ t[:3, :3].T + t[:3, 3]), axis=1)
         inl = np.flatnonzero(err <= thr).astype(np.intp)
         if inl.size < max(k, 3):
             break
-        t_new = _fit_rigid(from_points[inl], to_points[inl], weights[inl], three_dof)
+        t_new = fit_rigid(from_points[inl], to_points[inl], weights[inl], three_dof)
         done = np.array_equal(inl, best)
         t, best = t_new, inl
         if done:

@@ -7,6 +7,7 @@ from numpy.typing import NDArray
 
 __all__ = [
     "OPTICAL_ROTATION",
+    "fit_rigid",
     "from_xyz_rpy",
     "from_xyz_yaw",
     "is_3dof",
@@ -92,3 +93,23 @@ def rotation_angle(t: F64) -> float:
     """Angle of the rotation part, rad in [0, π]."""
     c = (np.trace(t[:3, :3]) - 1.0) / 2.0
     return float(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def fit_rigid(from_points: F64, to_points: F64, weights: F64, three_dof: bool) -> F64:
+    """Weighted least-squares rigid transform T with from ≈ T · to (Kabsch; in the plane with
+    `three_dof`, z carried over)."""
+    w = weights / weights.sum()
+    dims = 2 if three_dof else 3
+    a, b = to_points[:, :dims], from_points[:, :dims]
+    ca, cb = w @ a, w @ b
+    h = ((a - ca) * w[:, None]).T @ (b - cb)
+    u, _, vt = np.linalg.svd(h)
+    d = np.eye(dims)
+    d[-1, -1] = np.sign(np.linalg.det(vt.T @ u.T))
+    rot = vt.T @ d @ u.T
+    t = np.eye(4)
+    t[:dims, :dims] = rot
+    t[:dims, 3] = cb - rot @ ca
+    if three_dof:
+        t[2, 3] = float(w @ (from_points[:, 2] - to_points[:, 2]))
+    return t

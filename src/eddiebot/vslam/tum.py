@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.errors import TumFormatError
-from eddiebot.vslam.transforms import OPTICAL_ROTATION
+from eddiebot.vslam.transforms import OPTICAL_ROTATION, fit_rigid
 
 __all__ = [
     "TUM_DEPTH_SCALE",
@@ -241,11 +241,8 @@ def absolute_trajectory_error(
     g_index = {s: k for k, s in enumerate(gt_stamps)}
     a = np.array([est_poses[e_index[s]][:3, 3] for s, _ in pairs])
     b = np.array([gt_poses[g_index[g]][:3, 3] for _, g in pairs])
-    ca, cb = a.mean(axis=0), b.mean(axis=0)
-    u, _, vt = np.linalg.svd((a - ca).T @ (b - cb))
-    d = np.sign(np.linalg.det(vt.T @ u.T))
-    r = vt.T @ np.diag([1.0, 1.0, d]) @ u.T
-    aligned = (a - ca) @ r.T + cb
+    t = fit_rigid(b, a, np.ones(len(a)), three_dof=False)
+    aligned = a @ t[:3, :3].T + t[:3, 3]
     err = np.linalg.norm(aligned - b, axis=1)
     return float(np.sqrt(np.mean(err**2))), len(pairs)
 
