@@ -150,18 +150,30 @@ def _interp(t: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out
 
 
-def replay_one(name: str, bag: Path, overrides: dict[str, Any]) -> dict[str, Any]:
-    """Replay a recorded run's bag and score it against its ground truth."""
-    from eddiebot.cli.slam import _default_params, replay_bag
+def replay_one(name: str, bag: Path, overrides: dict[str, Any],
+               node_time_gate: bool = False) -> dict[str, Any]:
+    """Replay a recorded run's bag and score it against its ground truth (``node_time_gate``:
+    the node's ``minimum_time_interval`` gate too, as in the live run)."""
+    from eddiebot.cli.slam import _default_params
     from eddiebot.geometry import se2_compose
     from eddiebot.sim.worlds import load_world
     from eddiebot.slam import load_slam_config
+    from eddiebot.slam.replay import check_bag_topics, replay_scans, scans_from_messages
+    from eddiebot.viz.bag import BagReader
 
     start = np.array(load_world(RUNS[name][0]).start, dtype=np.float64)
     config = load_slam_config(_default_params(), overrides=overrides)
     tg, pg = _series(bag, "/ground_truth/odom")
     to, po = _series(bag, "/odom")
-    res = replay_bag(bag, config)
+    with BagReader(bag) as reader:
+        types = {c.topic: c.type_name for c in reader.connections}
+        topics = check_bag_topics(types, scan_topic="/scan", odom_topic=None, source=str(bag))
+        log = scans_from_messages(((m.topic, m.timestamp, m.decode())
+                                   for m in reader.messages(topics.all)),
+                                  topics, odom_frame=config.odom_frame,
+                                  base_frame=config.base_frame)
+    res = replay_scans(log.scans, log.odometry, config, sensor_offset=log.sensor_offset,
+                       source=str(bag), node_time_gate=node_time_gate)
     stamps, poses = res.trajectory()
     q = np.round(stamps * 1e9).astype(np.int64)
     est = se2_compose(np.broadcast_to(start, poses.shape), poses)
@@ -202,7 +214,8 @@ def main_replay(args: argparse.Namespace) -> int:
             if not bag.exists():
                 print(f"{name}: no {bag}, skipped")
                 continue
-            rows.append({"drive": folder.name, **replay_one(name, bag, overrides)})
+            rows.append({"drive": folder.name, "node_time_gate": args.node_time_gate,
+                         **replay_one(name, bag, overrides, args.node_time_gate)})
             print(rows[-1], flush=True)
     print_table(rows, ["drive", "run", "nodes", "loop_closures", "ate_rmse_m", "ate_max_m",
                        "slam_end_m", "odom_ate_rmse_m", "odom_end_m", "end_ratio",
@@ -229,6 +242,9 @@ def main() -> int:
                     "(several DIRs: several drives)")
     ap.add_argument("--set", action="append", default=[], metavar="NAME:=VALUE",
                     help="with --replay: override one SLAM parameter (repeatable)")
+    ap.add_argument("--node-time-gate", action="store_true",
+                    help="with --replay: also skip scans within minimum_time_interval of the "
+                    "last processed one, as the node does (closer to the live run)")
     ap.add_argument("--noise-correlation-px", type=float, default=None,
                     help="the simulator's noise_correlation_px (Kinect depth-noise correlation "
                     "window, native pixels; default: the node's default)")

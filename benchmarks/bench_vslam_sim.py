@@ -19,7 +19,10 @@ error of every accepted closure against the true relative pose, next to its clai
 
 ``--replay-vo DIR [DIR ...]`` re-runs the visual odometry alone on the frames a
 ``--record-vo --keep`` run stored (``vo_frames.npz``: every frame's features, camera and ground
-truth), with `VO_PARAMETERS` and the ``--set`` overrides: drift in a minute of CPU.
+truth), with `VO_PARAMETERS` and the ``--set`` overrides: drift in a minute of CPU. With
+``--vo-images`` the odometry also gets every frame's registered depth from the run's
+``vo_images.npz`` (``--record-images``; needed by ICP: ``Reg/Strategy`` 1/2,
+``Odom/IcpFallbackInliers``), and with ``--vo-extract`` re-extracts the features from its RGB.
 
 ``--vo-ideal ROUTE [ROUTE ...]`` runs the visual odometry alone on frames the simulator's
 renderer makes along a route driven with ideal kinematics (no base stack, no people).
@@ -54,11 +57,12 @@ ROUTES = {"office": ("office", OFFICE_ROUTE), "corridor": ("corridor", CORRIDOR_
           "office_long": ("office", OFFICE_LONG_ROUTE),
           "corridor_long": ("corridor", CORRIDOR_LONG_ROUTE)}
 #: ``--profile``: ``report`` = the report's parameters (launch/vslam.yaml) unchanged;
-#: ``gated`` adds the odometry variance measured on the simulated wheel odometry between
-#: consecutive nodes against ground truth (σ 3 mm and 0.7° per node link, instead of
-#: rtabmap_ros's 0.001 default, i.e. σ 3.2 cm and 1.8°), the loop-closure plausibility gate
-#: `RGBD/LoopClosureMaxMahalanobis` 4 (not upstream) and 3D→3D loop-closure registration
-#: (`Vis/EstimationType` 0: both frames' depth, see docs/benchmarks/vslam_sim.md#vslam-sim-ate).
+#: ``gated`` adds `SLAM_PARAMETERS` (the simulated wheel odometry's noise as measured against
+#: ground truth: σ 3 mm and 0.18° per node link plus a non-accumulating heading error per node
+#: held by `RGBD/OdomHeadingSigma`, instead of rtabmap_ros's 0.001 default, i.e. σ 3.2 cm and
+#: 1.8° per link; 3D→3D loop-closure registration, `Vis/EstimationType` 0) and the loop-closure
+#: plausibility gate `RGBD/LoopClosureMaxMahalanobis` 4 (not upstream; see
+#: docs/benchmarks/vslam_sim.md#vslam-sim-ate).
 PROFILES: dict[str, dict[str, object]] = {
     "report": {},
     "gated": {**SLAM_PARAMETERS, "RGBD/LoopClosureMaxMahalanobis": "4"},
@@ -364,6 +368,10 @@ def main() -> int:
     ap.add_argument("--replay-vo", nargs="+", type=Path, default=None, metavar="DIR",
                     help="re-run the visual odometry offline on vo_frames.npz kept with "
                          "--record-vo --keep (VO_PARAMETERS plus --set)")
+    ap.add_argument("--vo-images", action="store_true",
+                    help="with --replay-vo: give the odometry the depth of vo_images.npz")
+    ap.add_argument("--vo-extract", action="store_true",
+                    help="with --replay-vo --vo-images: re-extract features from its RGB")
     ap.add_argument("--vo-ideal", nargs="+", default=None, choices=sorted(ROUTES),
                     metavar="ROUTE", help="visual odometry alone on rendered frames along the "
                     "route(s) driven with ideal kinematics (no base stack, no people; --set)")
@@ -390,15 +398,20 @@ def main() -> int:
         overrides = dict(item.split("=", 1) for item in args.set)
         rows_vo = []
         for d in args.replay_vo:
-            r = replay_vo_frames(d / "vo_frames.npz", overrides)
+            r = replay_vo_frames(d / "vo_frames.npz", overrides,
+                                 images=d / "vo_images.npz" if args.vo_images else None,
+                                 extract=args.vo_extract)
             rows_vo.append({"session": str(d), **r})
             print(f"{str(d)[-30:]:30s} frames {r['frames']:6.0f} lost {r['lost']:5.0f} "
-                  f"end error {r['end_error_m']:6.3f} m drift {r['drift_percent']:6.2f} % "
-                  f"CPU {r['cpu_s']:5.1f} s", flush=True)
+                  f"ICP {r['icp_frames']:5.0f} end error {r['end_error_m']:6.3f} m drift "
+                  f"{r['drift_percent']:6.2f} % yaw {r['yaw_error_deg']:+6.2f} deg CPU "
+                  f"{r['cpu_s']:5.1f} s ({r['cpu_ms_median']:.1f} / {r['cpu_ms_p95']:.1f} "
+                  f"ms median / p95)", flush=True)
         out = RESULTS.with_name("vslam_vo_replay.json") if args.out == RESULTS else args.out
         out.write_text(json.dumps({
             "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-            "parameters": {**VO_PARAMETERS, **overrides}, "sessions": rows_vo}, indent=2))
+            "parameters": {**VO_PARAMETERS, **overrides}, "depth": args.vo_images,
+            "extract": args.vo_extract, "sessions": rows_vo}, indent=2))
         print(f"wrote {out}")
         return 0
     if args.replay:

@@ -57,15 +57,17 @@ CORRIDOR_LONG_ROUTE: tuple[Waypoint, ...] = (
 
 
 #: The SLAM node's settings for the simulated Eddie on top of launch/vslam.yaml (pass as
-#: ``run_vslam(parameters=...)``): the wheel odometry's variance per node link as measured
-#: against ground truth in the simulator (σ ≈ 3 mm and 0.7°: the body's heading wobbles against
-#: the odometry's by that much from node to node, and the camera sees it), and loop closures
-#: registered 3D→3D from both frames' depth (`Vis/EstimationType` 0), which PnP on floor-tile
-#: inliers in a narrow depth band got up to 2.5° wrong in yaw
-#: (docs/benchmarks/vslam_sim.md#vslam-sim-ate).
+#: ``run_vslam(parameters=...)``): the wheel odometry's heading error is modelled as it behaves
+#: against ground truth in the simulator: mostly a non-accumulating error per node (the
+#: encoders quantise the heading in ≈ 2° steps; σ ≈ 0.8° per node, up to 2.4°), held by
+#: per-node odometry frames (`RGBD/OdomHeadingSigma` 1.8°), plus a small accumulating part per
+#: node link (0.18°; σ 3 mm in position); loop closures registered 3D→3D from both frames'
+#: depth (`Vis/EstimationType` 0), which PnP on floor-tile inliers in a narrow depth band got
+#: up to 2.5° wrong in yaw (docs/benchmarks/vslam_sim.md#vslam-sim-ate).
 SLAM_PARAMETERS: dict[str, Any] = {"odom_tf_linear_variance": 1e-5,
-                                   "odom_tf_angular_variance": 1.5e-4,
-                                   "Vis/EstimationType": "0"}
+                                   "odom_tf_angular_variance": 1e-5,
+                                   "Vis/EstimationType": "0",
+                                   "RGBD/OdomHeadingSigma": "0.0314"}
 
 
 #: Parameters of the visual odometry run beside the SLAM (VO-only drift): the report's
@@ -302,9 +304,13 @@ def _save_vo_frames(path: Path, recorded: list[tuple[int, Any, Any]],
         distance=np.array(distance_m), **arrays)
 
 
-def replay_vo_frames(path: Path, parameters: dict[str, str] | None = None) -> dict[str, float]:
+def replay_vo_frames(path: Path, parameters: dict[str, str] | None = None, *,
+                     images: Path | None = None, extract: bool = False) -> dict[str, float]:
     """Run `VisualOdometry` offline on frames written by ``record_vo``: end-point drift (% of
-    the distance driven), frames lost, CPU seconds."""
+    the distance driven), frames lost, CPU seconds. ``images`` (``vo_images.npz`` of the same
+    run, ``record_images``) gives every frame's registered depth to the odometry (needed by
+    ICP: `Reg/Strategy` 1/2, `Odom/IcpFallbackInliers`); with ``extract`` the features are
+    extracted again from its RGB instead of the recorded ones."""
     from eddiebot.vslam.camera import CameraIntrinsics
     from eddiebot.vslam.features import FrameFeatures
     from eddiebot.vslam.odometry import VisualOdometry
@@ -316,27 +322,49 @@ def replay_vo_frames(path: Path, parameters: dict[str, str] | None = None) -> di
     vo = VisualOdometry(RtabmapParameters.from_dict({**VO_PARAMETERS, **(parameters or {})}))
     offsets = np.concatenate([[0], np.cumsum(data["counts"])])
     fields = {name: data[name] for name in _FEATURE_FIELDS}
+    depth: np.ndarray | None = None
+    rgb: np.ndarray | None = None
+    if images is not None:
+        with np.load(images) as img:
+            depth = img["depth"]
+            if extract:
+                rgb = img["rgb"]
     poses: list[tuple[int, np.ndarray]] = []
     lost = 0
-    c0 = time.process_time()
+    by_icp = 0
+    cpu_ms: list[float] = []
     for i, t in enumerate(data["stamps"]):
-        a, b = offsets[i], offsets[i + 1]
-        feats = FrameFeatures(*(fields[name][a:b] for name in _FEATURE_FIELDS))
-        r = vo.process_features(feats, cam, int(t))
+        c0 = time.process_time()
+        if rgb is not None and depth is not None:
+            r = vo.process(rgb[i], depth[i], cam, int(t))
+        else:
+            a, b = offsets[i], offsets[i + 1]
+            feats = FrameFeatures(*(fields[name][a:b] for name in _FEATURE_FIELDS))
+            r = vo.process_features(feats, cam, int(t), depth=None if depth is None else depth[i])
+        cpu_ms.append((time.process_time() - c0) * 1e3)
+        by_icp += int(r.icp)
         if r.pose is None:
             lost += 1
         else:
             poses.append((i, r.pose))
-    cpu = time.process_time() - c0
     truth = data["truth"]
+    dist = float(data["distance"])
+    out = {"frames": float(len(data["stamps"])), "lost": float(lost), "icp_frames": float(by_icp),
+           "cpu_s": float(np.sum(cpu_ms) / 1e3), "cpu_ms_median": float(np.median(cpu_ms)),
+           "cpu_ms_p95": float(np.percentile(cpu_ms, 95)), "end_error_m": math.nan,
+           "drift_percent": math.nan, "yaw_error_deg": math.nan}
+    if not poses:
+        return out
     i0, first = poses[0]
     i1, last = poses[-1]
     rel = np.linalg.inv(first) @ last
     end = se2_compose(truth[i0], np.array([rel[0, 3], rel[1, 3], math.atan2(rel[1, 0], rel[0, 0])]))
     err = float(np.hypot(*(end[:2] - truth[i1][:2])))
-    dist = float(data["distance"])
-    return {"frames": float(len(data["stamps"])), "lost": float(lost), "end_error_m": err,
-            "drift_percent": 100.0 * err / dist if dist > 0 else math.nan, "cpu_s": cpu}
+    out["end_error_m"] = err
+    out["drift_percent"] = 100.0 * err / dist if dist > 0 else math.nan
+    out["yaw_error_deg"] = math.degrees(math.atan2(math.sin(end[2] - truth[i1][2]),
+                                                   math.cos(end[2] - truth[i1][2])))
+    return out
 
 
 def _nearest(stamps: np.ndarray, values: np.ndarray, query: np.ndarray) -> np.ndarray:

@@ -670,6 +670,23 @@ class SlamCore:
         cov[:2, :2] += (d * w[weak]) @ d.T
         return MatchResult(match.pose, match.response, cov)
 
+    def _with_range_error(self, match: MatchResult, points: FloatArray, idx: int) -> MatchResult:
+        """A match whose position covariance also holds the error its scan's range errors
+        leave it (`scan_position_covariance`, turned into the map frame by the match's
+        heading): ``loop_match_range_covariance``."""
+        cfg = self.config
+        geo = scan_position_covariance(
+            points,
+            self._scan_normals(idx, points),
+            cfg.scan_range_sigma,
+            cfg.scan_range_sigma_quadratic,
+        )
+        c, s = math.cos(float(match.pose[2])), math.sin(float(match.pose[2]))
+        rot = np.array([[c, -s], [s, c]])
+        cov = np.array(match.covariance, dtype=np.float64)
+        cov[:2, :2] += rot @ geo @ rot.T
+        return MatchResult(match.pose, match.response, cov)
+
     def _check_covariance(
         self, match: MatchResult, warnings: list[SlamWarning], stamp: int
     ) -> None:
@@ -869,6 +886,13 @@ class SlamCore:
     ) -> bool:
         cfg = self.config
         closed = False
+        scan_points_all = points
+        if cfg.loop_match_max_laser_range > 0.0:
+            # only the near points (`loop_match_max_laser_range`): far ones carry the range bias
+            near = np.einsum("ij,ij->i", points, points) <= cfg.loop_match_max_laser_range**2
+            points = points[near]
+            if points.shape[0] < min(cfg.loop_match_minimum_points, scan_points_all.shape[0]):
+                return False
         for _ in range(2):
             positions = self._positions()
             linked = near_linked_nodes(
@@ -919,7 +943,9 @@ class SlamCore:
             delta = _between1(cand_pose, base)
             match = found.match
             if cfg.match_degeneracy_analysis:
-                match = self._with_scan_geometry(match, points, idx)
+                match = self._with_scan_geometry(match, scan_points_all, idx)
+            if cfg.loop_match_range_covariance:
+                match = self._with_range_error(match, scan_points_all, idx)
             cov = _rotate_covariance(match.covariance, float(cand_pose[2]))
             if cfg.loop_match_constrained_variance > 0.0:
                 cov = constrained_covariance(cov, cfg.loop_match_constrained_variance)

@@ -101,8 +101,13 @@ def replay_scans(
     sensor_offset: npt.ArrayLike = (0.0, 0.0, 0.0),
     source: str = "<scans>",
     progress: Callable[[int], None] | None = None,
+    node_time_gate: bool = False,
 ) -> ReplayResult:
-    """Run the core over scans (each with the robot's odometry pose at its stamp)."""
+    """Run the core over scans (each with the robot's odometry pose at its stamp).
+
+    ``node_time_gate``: skip a scan stamped less than ``minimum_time_interval`` after the
+    last processed one, as the node does (off: every scan goes to the core).
+    """
     if mode not in ("sync", "async"):
         raise ValueError(f"mode must be 'sync' or 'async', got {mode!r}")
     if len(odometry) != len(scans):
@@ -112,6 +117,8 @@ def replay_scans(
     if scans:
         result.duration_s = (scans[-1].stamp_ns - scans[0].stamp_ns) * 1e-9
     busy_until = -math.inf
+    gate_ns = config.minimum_time_interval * 1e9 * 0.999 if node_time_gate else 0.0
+    last_ns: int | None = None
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for k, scan in enumerate(scans):
         if progress is not None:
@@ -121,11 +128,15 @@ def replay_scans(
         if mode == "async" and stamp_s < busy_until:
             result.dropped_busy += 1
             continue
+        if last_ns is not None and scan.stamp_ns - last_ns < gate_ns:
+            continue
         t0 = time.process_time()
         out = core.process(scan, odometry[k], expected_beams=scan.ranges.size)
         spent = time.process_time() - t0
         busy_until = stamp_s + spent
         result.statuses[out.status.value] += 1
+        if out.processed:
+            last_ns = scan.stamp_ns
         if out.status is ProcessStatus.ADDED:
             result.scan_cpu_s.append(spent)
             result.node_stamps_s.append(stamp_s)

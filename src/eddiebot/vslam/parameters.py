@@ -77,6 +77,37 @@ class RtabmapParameters:
         "σ²(JᵀJ)⁻¹ marginal (inlier reprojection residual, ≥ 0.5 px)")
     reg_force_3dof: bool = _p("Reg/Force3DoF", False, "x, y, yaw only")
     reg_repeat_once: bool = _p("Reg/RepeatOnce", True, "second pass with the first result as guess")
+    reg_strategy: int = _p(
+        "Reg/Strategy", 0,
+        "0 = Vis, 1 = Icp (depth cloud), 2 = VisIcp (visual, then ICP from its result); "
+        "odometry only here (vslam/depth_icp.py)")
+    # --- ICP on the registered depth (vslam/depth_icp.py; upstream defaults of a PCL build) ---
+    icp_max_translation: float = _p("Icp/MaxTranslation", 0.2, "m, largest correction of the guess")
+    icp_max_rotation: float = _p("Icp/MaxRotation", 0.78, "rad, largest correction of the guess")
+    icp_voxel_size: float = _p("Icp/VoxelSize", 0.05, "m, uniform sampling, 0 = off")
+    icp_downsampling_step: int = _p(
+        "Icp/DownsamplingStep", 1,
+        "1 = every depth pixel; the cloud is made from every n-th row and column of the depth")
+    icp_range_min: float = _p("Icp/RangeMin", 0.0, "m, 0 = off")
+    icp_range_max: float = _p("Icp/RangeMax", 0.0, "m, 0 = off")
+    icp_max_correspondence_distance: float = _p("Icp/MaxCorrespondenceDistance", 0.05, "m")
+    icp_iterations: int = _p("Icp/Iterations", 30, "")
+    icp_epsilon: float = _p("Icp/Epsilon", 0.0, "convergence on the step (m / rad), 0 = 1e-6")
+    icp_correspondence_ratio: float = _p(
+        "Icp/CorrespondenceRatio", 0.1,
+        "accept when this share of the new cloud's points has a correspondence (upstream "
+        "divides by the larger cloud)")
+    icp_point_to_plane: bool = _p("Icp/PointToPlane", False, "else point to point")
+    icp_point_to_plane_k: int = _p("Icp/PointToPlaneK", 5, "neighbours per normal")
+    icp_point_to_plane_radius: float = _p("Icp/PointToPlaneRadius", 0.0, "m, 0 = use K")
+    icp_point_to_plane_min_complexity: float = _p(
+        "Icp/PointToPlaneMinComplexity", 0.02,
+        "smallest eigenvalue of the normals' covariance (in the plane under Reg/Force3DoF) "
+        "below which the geometry leaves a translation free (one wall, a corridor)")
+    icp_point_to_plane_low_complexity_strategy: int = _p(
+        "Icp/PointToPlaneLowComplexityStrategy", 1,
+        "below the complexity: 0 = reject, 1 = correct only the constrained axes (the free "
+        "translation stays at the guess, with the guess's variance), 2 = accept as is")
     # --- odometry ---
     odom_strategy: int = _p("Odom/Strategy", 0, "0 = frame-to-map, 1 = frame-to-frame")
     odom_key_frame_thr: float = _p("Odom/KeyFrameThr", 0.3, "inlier ratio")
@@ -91,6 +122,17 @@ class RtabmapParameters:
         "through the view) took the RANSAC vote: keep the one that continues the tracked motion")
     odom_f2m_max_size: int = _p("OdomF2M/MaxSize", 2000, "local map words")
     odom_f2m_max_new_features: int = _p("OdomF2M/MaxNewFeatures", 0, "0 = all")
+    odom_scan_key_frame_thr: float = _p(
+        "Odom/ScanKeyFrameThr", 0.7, "add the cloud to the scan map when the ICP ratio is below")
+    odom_f2m_scan_max_size: int = _p("OdomF2M/ScanMaxSize", 2000, "local scan map points")
+    odom_f2m_scan_subtract_radius: float = _p(
+        "OdomF2M/ScanSubtractRadius", 0.05, "m: new points this close to the map are not added")
+    odom_icp_fallback_inliers: int = _p(
+        "Odom/IcpFallbackInliers", 0,
+        "not upstream; 0 = off: with Reg/Strategy 0, a frame whose visual registration fails "
+        "or keeps fewer inliers than this is registered by ICP on the depth cloud (from the "
+        "visual result, else the motion prediction) and becomes a key frame, so the visual "
+        "map re-forms once texture is back")
     # --- loop closure ---
     rtabmap_loop_thr: float = _p("Rtabmap/LoopThr", 0.11, "")
     rtabmap_loop_ratio: float = _p("Rtabmap/LoopRatio", 0.0, "")
@@ -126,6 +168,13 @@ class RtabmapParameters:
         "not upstream; sigmas, 0 = off: reject a loop/proximity closure whose (x, y, yaw) is "
         "farther than this Mahalanobis distance from the graph's prediction, with the "
         "covariance of the closure plus the link covariances composed along the graph path")
+    rgbd_odom_heading_sigma: float = _p(
+        "RGBD/OdomHeadingSigma", 0.0,
+        "not upstream; rad, 0 = off: σ of a non-accumulating error of the odometry heading at "
+        "each node (wheel encoders that quantise the heading): in the optimised graph the "
+        "neighbour links join per-node odometry frames, each tied to its node by this yaw σ "
+        "(the root's frame is the root), so the neighbour links' angular variance is the "
+        "accumulating part only")
     rgbd_proximity_by_space: bool = _p("RGBD/ProximityBySpace", True, "")
     rgbd_local_radius: float = _p("RGBD/LocalRadius", 10.0, "m")
     rgbd_proximity_max_graph_depth: int = _p("RGBD/ProximityMaxGraphDepth", 50, "")
@@ -162,6 +211,12 @@ class RtabmapParameters:
                 )
         if self.vis_estimation_type not in (0, 1):
             raise ParameterError("Vis/EstimationType: 0 (3D->3D) or 1 (PnP) are supported")
+        if self.reg_strategy not in (0, 1, 2):
+            raise ParameterError(f"Reg/Strategy={self.reg_strategy}: use 0, 1 or 2")
+        if self.icp_point_to_plane_low_complexity_strategy not in (0, 1, 2):
+            raise ParameterError("Icp/PointToPlaneLowComplexityStrategy must be 0, 1 or 2")
+        if self.icp_downsampling_step < 1:
+            raise ParameterError("Icp/DownsamplingStep must be >= 1")
         if self.odom_strategy not in (ODOM_STRATEGY_F2M, ODOM_STRATEGY_F2F):
             raise ParameterError(f"Odom/Strategy={self.odom_strategy}: use 0 (F2M) or 1 (F2F)")
         if self.mem_image_compression_format not in (".jpg", ".png"):
@@ -170,6 +225,8 @@ class RtabmapParameters:
             raise ParameterError("Mem/DepthCompressionFormat: only .png is supported")
         if self.grid_sensor not in (0, 1, 2):
             raise ParameterError("Grid/Sensor must be 0, 1 or 2")
+        if self.rgbd_odom_heading_sigma < 0:
+            raise ParameterError("RGBD/OdomHeadingSigma must be >= 0")
         if self.mem_stm_size < 0:
             raise ParameterError("Mem/STMSize must be >= 0")
         if self.vis_min_inliers < 4:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import heapq
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -22,6 +22,7 @@ from eddiebot.vslam.bayes import BayesFilter, adjust_likelihood, tfidf_scores
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
 from eddiebot.vslam.graph import (
+    GraphLink,
     GtsamPoseGraph,
     PoseGraphOptimizer,
     optimized_link_errors,
@@ -45,11 +46,16 @@ from eddiebot.vslam.registration import register
 from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, to_3dof, xyz_rpy, yaw_of
 from eddiebot.vslam.vocabulary import Vocabulary
 
-__all__ = ["FrameRecord", "ProcessResult", "Rtabmap", "closure_mahalanobis", "path_covariance"]
+__all__ = ["ODOM_FRAME_ID_OFFSET", "FrameRecord", "ProcessResult", "Rtabmap", "closure_mahalanobis",
+           "odometry_frame_graph", "path_covariance"]
 
 F64 = NDArray[np.float64]
 _DEFAULT_ODOM_VARIANCE = 0.001
 _CLOUD_VOXEL = 0.02
+#: ids of the per-node odometry frames in the optimised graph (`RGBD/OdomHeadingSigma`): node id + this
+ODOM_FRAME_ID_OFFSET = 1 << 40
+_FRAME_TIE_VARIANCE = 1e-8  # m², rad²: a node's odometry frame shares its position (and the root's yaw)
+_ODOMETRY_LINKS = (LinkType.NEIGHBOR, LinkType.NEIGHBOR_MERGED)
 
 
 @dataclass(frozen=True)
@@ -145,6 +151,7 @@ class Rtabmap:
         self._prev_hyp_value = 0.0
         self._localized = False
         self._odom_max_info: F64 | None = None  # per-axis largest odometry information
+        self._frame_poses: dict[int, F64] = {}  # optimised odometry frames (RGBD/OdomHeadingSigma)
         if database is not None:
             database.load_into(self)
 
@@ -430,7 +437,8 @@ class Rtabmap:
             old_pose = self.optimized_poses.get(old.id)
             if old_pose is not None:
                 d = closure_mahalanobis(link, self.map_to_odom @ new.odom_pose, old_pose,
-                                        self.memory.links)
+                                        self.memory.links,
+                                        heading_sigma=self.params.rgbd_odom_heading_sigma)
                 if d is not None and d > gate:
                     return None, (f"RGBD/LoopClosureMaxMahalanobis exceeded ({d:.1f} > "
                                   f"{gate:g})")
@@ -489,12 +497,15 @@ class Rtabmap:
         known = self.optimized_poses
         poses = {i: known[i] if i in known else self.map_to_odom @ mem.nodes[i].odom_pose
                  for i in comp}
-        links = mem.unique_links(comp)
+        links: list[Link] | list[GraphLink] = mem.unique_links(comp)
         if self.params.rgbd_optimize_from_graph_end:
             root = current
             poses[root] = mem.nodes[root].odom_pose
         else:
             root = min(comp)
+        sigma = self.params.rgbd_odom_heading_sigma
+        if sigma > 0:
+            poses, links = odometry_frame_graph(poses, links, root, sigma, self._frame_poses)
         optimized = self.optimizer.optimize(poses, links, root, self.params.optimizer_iterations)
         thr = self.params.rgbd_optimize_max_error
         if thr > 0 and new_links:
@@ -502,6 +513,9 @@ class Rtabmap:
             worst = max(float(lin.max(initial=0.0)), float(ang.max(initial=0.0)))
             if worst > thr:
                 return False
+        if sigma > 0:
+            self._frame_poses = {i: p for i, p in optimized.items() if i >= ODOM_FRAME_ID_OFFSET}
+            optimized = {i: p for i, p in optimized.items() if i < ODOM_FRAME_ID_OFFSET}
         self.optimized_poses.update(optimized)
         return True
 
@@ -562,6 +576,47 @@ class Rtabmap:
         return len(cands)
 
 
+# -- odometry frames (RGBD/OdomHeadingSigma) ---------------------------------------------------
+def odometry_frame_graph(poses: Mapping[int, F64], links: Sequence[Link | GraphLink], root: int,
+                         heading_sigma: float, frame_poses: Mapping[int, F64] | None = None,
+                         ) -> tuple[dict[int, F64], list[GraphLink]]:
+    """The graph to optimise when the odometry heading carries a non-accumulating error.
+
+    Wheel encoders that quantise the heading (Eddie's: 36 positions per wheel turn, ≈ 2° of
+    heading per position) report at every node a heading that is off by an error of its own
+    which does not add up along the path, while the positions, integrated from every encoder
+    step, follow the true direction of travel; a neighbour link, expressed in its first node's
+    reported heading, then carries a sideways error of its length times that node's heading
+    error. Modelled per link (independent x, y, yaw noise), the heading looks like a random
+    walk and the graph turns whole stretches of the path to fit the loop closures.
+
+    Here every node `i` gets an odometry frame (id `ODOM_FRAME_ID_OFFSET + i`, initial pose
+    from `frame_poses` or the node's): the neighbour links (`NEIGHBOR`, `NEIGHBOR_MERGED`) join
+    the frames, and a link node → frame (identity) ties each frame to its node in position and
+    lets its heading differ by `heading_sigma` (rad). The root's frame is tied in heading as
+    well: the map frame is the odometry's at the root. Loop-closure and other links stay
+    between the nodes. Returns the poses (nodes and frames) and the links to optimise.
+    """
+    tie = 1.0 / _FRAME_TIE_VARIANCE
+    heading = np.diag([tie, tie, tie, tie, tie, 1.0 / heading_sigma**2])
+    rigid = np.diag(np.full(6, tie))
+    known = frame_poses or {}
+    out_poses: dict[int, F64] = dict(poses)
+    out: list[GraphLink] = []
+    eye = np.eye(4)
+    for i in poses:
+        f = ODOM_FRAME_ID_OFFSET + i
+        out_poses[f] = known.get(f, poses[i])
+        out.append(GraphLink(i, f, eye, rigid if i == root else heading))
+    for lk in links:
+        if getattr(lk, "type", None) in _ODOMETRY_LINKS:
+            out.append(GraphLink(ODOM_FRAME_ID_OFFSET + lk.from_id,
+                                 ODOM_FRAME_ID_OFFSET + lk.to_id, lk.transform, lk.information))
+        else:
+            out.append(GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information))
+    return out_poses, out
+
+
 # -- loop-closure plausibility ----------------------------------------------------------------
 def _xyt(t: F64) -> F64:
     return np.array([t[0, 3], t[1, 3], yaw_of(t)])
@@ -574,7 +629,8 @@ def _link_covariance_xyt(info: F64) -> F64:
 
 
 def path_covariance(links: Mapping[int, Mapping[int, Link]], start: int, goal: int,
-                    max_nodes: int = 100_000) -> tuple[F64, F64] | None:
+                    max_nodes: int = 100_000, *,
+                    heading_sigma: float = 0.0) -> tuple[F64, F64] | None:
     """Pose of `goal` in `start`'s frame (x, y, yaw) and its 3×3 covariance, composed along the
     graph path from `start` to `goal` of least summed link variance (None if not connected).
 
@@ -582,6 +638,8 @@ def path_covariance(links: Mapping[int, Mapping[int, Link]], start: int, goal: i
     SE(2) composition with first-order Jacobians, so a heading uncertainty early on the path
     grows into a lateral one further along it. A path is one of several in a graph with loops,
     so this overestimates the marginal covariance: a conservative prediction for gating.
+    `heading_sigma` (`RGBD/OdomHeadingSigma`) adds the odometry frame's heading offset where
+    the path enters and where it leaves a run of odometry links.
     """
     if start == goal:
         return np.zeros(3), np.zeros((3, 3))
@@ -613,8 +671,13 @@ def path_covariance(links: Mapping[int, Mapping[int, Link]], start: int, goal: i
     chain.reverse()
     pose = np.zeros(3)
     cov = np.zeros((3, 3))
+    in_odometry = False
     for a, b in zip(chain[:-1], chain[1:]):
         lk = links[a][b]
+        odometry = heading_sigma > 0 and lk.type in _ODOMETRY_LINKS
+        if odometry != in_odometry:  # a node's heading ↔ its odometry frame's
+            cov[2, 2] += heading_sigma**2
+            in_odometry = odometry
         step = _xyt(lk.transform)
         c, s = np.cos(pose[2]), np.sin(pose[2])
         j1 = np.array([[1.0, 0.0, -s * step[0] - c * step[1]],
@@ -625,18 +688,22 @@ def path_covariance(links: Mapping[int, Mapping[int, Link]], start: int, goal: i
         pose = np.array([pose[0] + c * step[0] - s * step[1],
                          pose[1] + s * step[0] + c * step[1],
                          float(np.arctan2(np.sin(pose[2] + step[2]), np.cos(pose[2] + step[2])))])
+    if in_odometry:
+        cov[2, 2] += heading_sigma**2
     return pose, cov
 
 
 def closure_mahalanobis(link: Link, from_pose: F64, to_pose: F64,
-                        links: Mapping[int, Mapping[int, Link]]) -> float | None:
+                        links: Mapping[int, Mapping[int, Link]], *,
+                        heading_sigma: float = 0.0) -> float | None:
     """Mahalanobis distance (σ) between a candidate closure and the graph's prediction.
 
     `from_pose`/`to_pose`: current estimates of the closure's two nodes (map frame, 4×4). The
     prediction is their relative pose; its covariance is that of the least-variance graph path
-    between them (`path_covariance`) plus the closure's own. None when they are not connected.
+    between them (`path_covariance`, with `heading_sigma`) plus the closure's own. None when
+    they are not connected.
     """
-    path = path_covariance(links, link.from_id, link.to_id)
+    path = path_covariance(links, link.from_id, link.to_id, heading_sigma=heading_sigma)
     if path is None:
         return None
     _, cov = path

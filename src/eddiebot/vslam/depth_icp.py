@@ -1,0 +1,461 @@
+"""ICP on the registered depth image: the geometric registration of RTAB-Map's odometry
+(`Reg/Strategy` 1 = ICP, 2 = visual then ICP) with the ``Icp/*`` parameters.
+
+The new frame's depth is turned into a cloud (every `Icp/DownsamplingStep`-th pixel, range
+limits, `Icp/VoxelSize` uniform sampling, normals from `Icp/PointToPlaneK` neighbours), and
+registered to a local scan map (`ScanMap`, in the odometry frame) by point-to-plane
+(`Icp/PointToPlane`) or point-to-point Gauss-Newton, in x, y, yaw under `Reg/Force3DoF`.
+Under `Reg/Force3DoF` the floor and ceiling points are dropped: a horizontal plane does not
+constrain x, y or yaw.
+
+Geometry that leaves a translation free (one wall, the two parallel walls of a corridor) is
+detected as upstream does: the smallest eigenvalue of the normals' covariance (in the plane
+under `Reg/Force3DoF`) below `Icp/PointToPlaneMinComplexity`. With
+`Icp/PointToPlaneLowComplexityStrategy` 1 the fit then corrects only the constrained axes; the
+free translation stays at the guess (the visual result or the motion prediction) and the
+covariance says so: along that axis it is the guess's variance, not the fit's.
+
+Covariance (x, y, z in the odometry frame's axes at the pose, rotation about the pose):
+σ² (JᵀJ)⁻¹ of the final correspondences, σ² the residual variance (floored at (1 mm)²: the
+Kinect's depth quantisation at 1 m is coarser), on the axes the fit constrains.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import cKDTree
+
+from eddiebot.vslam.camera import CameraIntrinsics, depth_to_meters
+from eddiebot.vslam.parameters import RtabmapParameters
+from eddiebot.vslam.transforms import rotation_angle, se3_inverse
+
+__all__ = [
+    "IcpResult",
+    "IcpSettings",
+    "ScanCloud",
+    "ScanMap",
+    "depth_cloud",
+    "estimate_normals",
+    "icp_register",
+    "make_scan",
+    "normals_complexity",
+    "voxel_filter",
+]
+
+F64 = NDArray[np.float64]
+LOST_VARIANCE = 9999.0
+_RESIDUAL_VARIANCE_FLOOR = 1e-6  # m², (1 mm)²
+_ANGULAR_VARIANCE_FLOOR = 3e-8
+_MIN_CORRESPONDENCES = 10
+_VERTICAL_NORMAL = 0.9  # |n_z| above this: floor / ceiling (dropped under Reg/Force3DoF)
+_DEFAULT_EPSILON = 1e-6
+_THREE_DOF_AXES = np.array([0, 1, 5])
+_NORMAL_HALF_WINDOW = 2
+_JUMP_RATIO = 0.05
+
+
+@dataclass(frozen=True)
+class IcpSettings:
+    """The ``Icp/*`` parameters (upstream names in `RtabmapParameters`) and `Reg/Force3DoF`."""
+
+    max_translation: float = 0.2
+    max_rotation: float = 0.78
+    voxel_size: float = 0.05
+    downsampling_step: int = 1
+    range_min: float = 0.0
+    range_max: float = 0.0
+    max_correspondence_distance: float = 0.05
+    iterations: int = 30
+    epsilon: float = 0.0
+    correspondence_ratio: float = 0.1
+    point_to_plane: bool = False
+    point_to_plane_k: int = 5
+    point_to_plane_radius: float = 0.0
+    min_complexity: float = 0.02
+    low_complexity_strategy: int = 1
+    force_3dof: bool = False
+
+    @classmethod
+    def from_parameters(cls, p: RtabmapParameters) -> IcpSettings:
+        """Settings of a parameter table."""
+        return cls(
+            p.icp_max_translation, p.icp_max_rotation, p.icp_voxel_size,
+            p.icp_downsampling_step, p.icp_range_min, p.icp_range_max,
+            p.icp_max_correspondence_distance, p.icp_iterations, p.icp_epsilon,
+            p.icp_correspondence_ratio, p.icp_point_to_plane, p.icp_point_to_plane_k,
+            p.icp_point_to_plane_radius, p.icp_point_to_plane_min_complexity,
+            p.icp_point_to_plane_low_complexity_strategy, p.reg_force_3dof,
+        )
+
+
+@dataclass(frozen=True)
+class ScanCloud:
+    """Points (N, 3) m and unit normals (N, 3) in one frame."""
+
+    points: F64
+    normals: F64
+
+    def __len__(self) -> int:
+        return int(self.points.shape[0])
+
+    def transformed(self, t: F64) -> ScanCloud:
+        """The cloud expressed in the frame where `t` is this cloud's frame's pose."""
+        r = t[:3, :3]
+        return ScanCloud(self.points @ r.T + t[:3, 3], self.normals @ r.T)
+
+    @staticmethod
+    def empty() -> ScanCloud:
+        """No points."""
+        return ScanCloud(np.zeros((0, 3)), np.zeros((0, 3)))
+
+
+def _organised_points(depth: NDArray[np.generic], camera: CameraIntrinsics,
+                      step: int) -> F64:
+    """(h, w, 3) camera-frame points of every `step`-th pixel; NaN where there is no depth."""
+    d = depth_to_meters(np.asarray(depth)[::step, ::step]).astype(np.float64)
+    d[d <= 0] = np.nan
+    h, w = d.shape
+    u = np.arange(w, dtype=np.float64) * step
+    v = np.arange(h, dtype=np.float64) * step
+    x = (u[None, :] - camera.cx) * d / camera.fx
+    y = (v[:, None] - camera.cy) * d / camera.fy
+    return np.stack([x, y, d], axis=2)
+
+
+def _in_range(cam: F64, range_min: float, range_max: float) -> NDArray[np.bool_]:
+    keep = np.isfinite(cam[..., 2])
+    if range_min > 0 or range_max > 0:
+        rng = np.linalg.norm(np.nan_to_num(cam), axis=-1)
+        if range_min > 0:
+            keep &= rng >= range_min
+        if range_max > 0:
+            keep &= rng <= range_max
+    return keep
+
+
+def depth_cloud(depth: NDArray[np.generic], camera: CameraIntrinsics, step: int = 1,
+                range_min: float = 0.0, range_max: float = 0.0) -> F64:
+    """3D points (robot base frame) of every `step`-th row and column of a registered depth
+    image (uint16 mm or float m; 0 / NaN = no depth), within the range limits (0 = off)."""
+    cam = _organised_points(depth, camera, step)
+    pts = cam[_in_range(cam, range_min, range_max)]
+    lt = camera.local_transform
+    out: F64 = pts @ lt[:3, :3].T + lt[:3, 3]
+    return out
+
+
+def _grid_normals(cam: F64, half: int) -> F64:
+    """Normals of an organised cloud from the neighbours `half` cells away along the rows and
+    columns (central differences), towards the camera; NaN at depth jumps and borders."""
+    h, w, _ = cam.shape
+    out = np.full((h, w, 3), np.nan)
+    if h <= 2 * half or w <= 2 * half:
+        return out
+    c = cam[half:h - half, half:w - half]
+    du = cam[half:h - half, 2 * half:] - cam[half:h - half, : w - 2 * half]
+    dv = cam[2 * half:, half:w - half] - cam[: h - 2 * half, half:w - half]
+    n = np.cross(du, dv)
+    norm = np.linalg.norm(n, axis=2, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = n / norm
+        # Inverse depth is affine in the pixel coordinates on a plane: its second difference
+        # beyond a share of the centre's marks a depth jump (not one surface).
+        inv = 1.0 / cam[..., 2]
+        ic = inv[half:h - half, half:w - half]
+        d2u = inv[half:h - half, 2 * half:] + inv[half:h - half, : w - 2 * half] - 2 * ic
+        d2v = inv[2 * half:, half:w - half] + inv[: h - 2 * half, half:w - half] - 2 * ic
+        jump = (np.abs(d2u) > _JUMP_RATIO * ic) | (np.abs(d2v) > _JUMP_RATIO * ic)
+    n[jump] = np.nan
+    flip = np.sum(n * c, axis=2) > 0  # the camera is at the origin
+    n[flip] *= -1.0
+    out[half:h - half, half:w - half] = n
+    return out
+
+
+def voxel_filter(points: F64, voxel: float, normals: F64 | None = None) -> tuple[F64, F64 | None]:
+    """Uniform sampling: the centroid of the points in each `voxel`-sized cube (0 = off), and
+    the renormalised mean of their `normals` when given."""
+    if voxel <= 0 or points.shape[0] == 0:
+        return points, normals
+    keys = np.floor(points / voxel).astype(np.int64)
+    keys -= keys.min(axis=0)
+    span = keys.max(axis=0) + 1
+    flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+    _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+    sums = np.zeros((counts.size, 3))
+    np.add.at(sums, inverse, points)
+    out: F64 = sums / counts[:, None]
+    if normals is None:
+        return out, None
+    nsum = np.zeros((counts.size, 3))
+    np.add.at(nsum, inverse, normals)
+    nrm: F64 = nsum / np.maximum(np.linalg.norm(nsum, axis=1, keepdims=True), 1e-12)
+    return out, nrm
+
+
+def estimate_normals(points: F64, k: int = 5, radius: float = 0.0,
+                     viewpoint: F64 | None = None) -> F64:
+    """Unit normals by PCA of each point's `k` nearest neighbours (or those within `radius`
+    when > 0), turned towards `viewpoint`. Points with fewer than 3 neighbours get NaN."""
+    n = points.shape[0]
+    if n < 3:
+        return np.full((n, 3), np.nan)
+    tree = cKDTree(points)
+    kk = min(max(k, 3), n)
+    dist, idx = tree.query(points, k=kk)
+    valid = np.ones((n, kk), bool)
+    if radius > 0:
+        valid = dist <= radius
+    nb = points[idx]  # (n, k, 3)
+    w = valid[..., None].astype(np.float64)
+    cnt = w.sum(axis=1)
+    mean = (nb * w).sum(axis=1) / np.maximum(cnt, 1.0)
+    dev = (nb - mean[:, None, :]) * w
+    cov = np.einsum("nki,nkj->nij", dev, dev)
+    _, vecs = np.linalg.eigh(cov)
+    normals: F64 = vecs[:, :, 0].copy()
+    normals[cnt[:, 0] < 3] = np.nan
+    if viewpoint is not None:
+        flip = np.sum(normals * (viewpoint - points), axis=1) < 0
+        normals[flip] *= -1.0
+    return normals
+
+
+def make_scan(depth: NDArray[np.generic], camera: CameraIntrinsics,
+              settings: IcpSettings) -> ScanCloud:
+    """The ICP cloud of one registered depth image, in the robot base frame. Normals come from
+    the image grid (neighbours `_NORMAL_HALF_WINDOW` sampled pixels away: a depth image is an
+    organised cloud), averaged per voxel."""
+    cam = _organised_points(depth, camera, settings.downsampling_step)
+    normals = _grid_normals(cam, _NORMAL_HALF_WINDOW)
+    keep = _in_range(cam, settings.range_min, settings.range_max) & np.isfinite(normals[..., 0])
+    lt = camera.local_transform
+    pts = cam[keep] @ lt[:3, :3].T + lt[:3, 3]
+    nrm = normals[keep] @ lt[:3, :3].T
+    if settings.force_3dof:
+        wall = np.abs(nrm[:, 2]) < _VERTICAL_NORMAL
+        pts, nrm = pts[wall], nrm[wall]
+    pts, nrm_v = voxel_filter(pts, settings.voxel_size, nrm)
+    assert nrm_v is not None
+    return ScanCloud(pts, nrm_v)
+
+
+def normals_complexity(normals: F64, three_dof: bool) -> tuple[float, F64]:
+    """Upstream's structural complexity: the smallest eigenvalue of the normals' covariance
+    (of their horizontal part, renormalised, under 3 DoF), and its eigenvector: the translation
+    the geometry constrains least (along one wall, along a corridor)."""
+    if normals.shape[0] == 0:
+        return 0.0, np.array([1.0, 0.0, 0.0])
+    if three_dof:
+        h = normals[:, :2]
+        h = h / np.maximum(np.linalg.norm(h, axis=1, keepdims=True), 1e-12)
+        vals, vecs = np.linalg.eigh(h.T @ h / h.shape[0])
+        return float(vals[0]), np.array([vecs[0, 0], vecs[1, 0], 0.0])
+    vals, vecs = np.linalg.eigh(normals.T @ normals / normals.shape[0])
+    return float(vals[0]), vecs[:, 0].copy()
+
+
+def _huge_covariance() -> F64:
+    return np.eye(6) * LOST_VARIANCE
+
+
+@dataclass(frozen=True)
+class IcpResult:
+    """Outcome of `icp_register`: the new frame's pose in the map frame, None on failure."""
+
+    transform: F64 | None
+    covariance: F64 = field(default_factory=_huge_covariance)
+    correspondences: int = 0
+    ratio: float = 0.0
+    complexity: float = 0.0
+    #: unit translation (map axes) left at the guess because the geometry does not fix it
+    free_axis: F64 | None = None
+    reason: str = ""
+    iterations: int = 0
+
+    @property
+    def ok(self) -> bool:
+        """True when a transform was found."""
+        return self.transform is not None
+
+
+def _rotation(w: F64) -> F64:
+    th = float(np.linalg.norm(w))
+    if th < 1e-12:
+        return np.eye(3)
+    k = w / th
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    out: F64 = np.eye(3) + np.sin(th) * kx + (1.0 - np.cos(th)) * (kx @ kx)
+    return out
+
+
+def _linearise(src: F64, tgt: F64, tgt_normals: F64, centre: F64, point_to_plane: bool,
+               axes: NDArray[np.intp]) -> tuple[F64, F64]:
+    """Residuals and Jacobian (columns: `axes` of tx ty tz rx ry rz about `centre`)."""
+    arm = src - centre
+    if point_to_plane:
+        r = np.sum(tgt_normals * (src - tgt), axis=1)
+        jac = np.concatenate([tgt_normals, np.cross(arm, tgt_normals)], axis=1)
+        return r, jac[:, axes]
+    r3 = src - tgt
+    m = src.shape[0]
+    jac3 = np.zeros((m, 3, 6))
+    jac3[:, 0, 0] = jac3[:, 1, 1] = jac3[:, 2, 2] = 1.0
+    # d(ω × arm)/dω = -[arm]×
+    jac3[:, 0, 4], jac3[:, 0, 5] = arm[:, 2], -arm[:, 1]
+    jac3[:, 1, 3], jac3[:, 1, 5] = -arm[:, 2], arm[:, 0]
+    jac3[:, 2, 3], jac3[:, 2, 4] = arm[:, 1], -arm[:, 0]
+    rows = 2 if axes.size == 3 else 3  # under 3 DoF the z row carries nothing
+    return r3[:, :rows].ravel(), jac3[:, :rows, :][:, :, axes].reshape(-1, axes.size)
+
+
+def _complement(free: F64) -> F64:
+    """Orthonormal basis (columns) of the space orthogonal to the unit vector `free`."""
+    q, _ = np.linalg.qr(np.column_stack([free, np.eye(free.size)]))
+    return q[:, 1:]
+
+
+def icp_register(target: ScanCloud, source: ScanCloud, guess: F64, settings: IcpSettings,
+                 guess_covariance: F64 | None = None,
+                 tree: cKDTree | None = None) -> IcpResult:
+    """Pose of `source`'s frame in `target`'s frame by ICP from `guess` (4×4).
+
+    Rejected (``transform=None``) with fewer than 10 correspondences, a correspondence ratio
+    below `Icp/CorrespondenceRatio`, a correction of the guess beyond `Icp/MaxTranslation` /
+    `Icp/MaxRotation`, or low complexity with `Icp/PointToPlaneLowComplexityStrategy` 0.
+    `guess_covariance` (6×6, default huge) is the variance given to a free translation.
+    """
+    if len(source) < _MIN_CORRESPONDENCES or len(target) < _MIN_CORRESPONDENCES:
+        return IcpResult(None, reason="too few points")
+    axes = _THREE_DOF_AXES if settings.force_3dof else np.arange(6)
+    k = axes.size
+    complexity, free_src = normals_complexity(source.normals, settings.force_3dof)
+    free = np.asarray(guess, dtype=np.float64)[:3, :3] @ free_src  # into the map's axes
+    basis = np.eye(k)
+    free_axis: F64 | None = None
+    if settings.point_to_plane and complexity < settings.min_complexity:
+        if settings.low_complexity_strategy == 0:
+            return IcpResult(None, complexity=complexity, reason="low structural complexity")
+        if settings.low_complexity_strategy == 1:
+            free_axis = free
+            basis = _complement(np.concatenate([free[:2], [0.0]]) if k == 3
+                                else np.concatenate([free, np.zeros(3)]))
+    if tree is None:
+        tree = cKDTree(target.points)
+    t = np.array(guess, dtype=np.float64, copy=True)
+    eps = settings.epsilon if settings.epsilon > 0 else _DEFAULT_EPSILON
+    gate = settings.max_correspondence_distance
+    it = 0
+    for it in range(1, max(1, settings.iterations) + 1):
+        src = source.points @ t[:3, :3].T + t[:3, 3]
+        dist, idx = tree.query(src, distance_upper_bound=gate)
+        ok = np.isfinite(dist)
+        if int(ok.sum()) < _MIN_CORRESPONDENCES:
+            return IcpResult(None, complexity=complexity, reason="too few correspondences",
+                             iterations=it)
+        r, jac = _linearise(src[ok], target.points[idx[ok]], target.normals[idx[ok]],
+                            t[:3, 3], settings.point_to_plane, axes)
+        jb = jac @ basis
+        step_b, *_ = np.linalg.lstsq(jb.T @ jb, -(jb.T @ r), rcond=1e-10)
+        step = np.zeros(6)
+        step[axes] = basis @ step_b
+        t[:3, :3] = _rotation(step[3:]) @ t[:3, :3]
+        t[:3, 3] = t[:3, 3] + step[:3]
+        if float(np.linalg.norm(step)) < eps:
+            break
+    src = source.points @ t[:3, :3].T + t[:3, 3]
+    dist, idx = tree.query(src, distance_upper_bound=gate)
+    ok = np.isfinite(dist)
+    n_ok = int(ok.sum())
+    ratio = n_ok / len(source)
+    if n_ok < _MIN_CORRESPONDENCES or ratio < settings.correspondence_ratio:
+        return IcpResult(None, correspondences=n_ok, ratio=ratio, complexity=complexity,
+                         reason="correspondence ratio", iterations=it)
+    correction = se3_inverse(guess) @ t
+    if (settings.max_translation > 0
+            and float(np.linalg.norm(correction[:3, 3])) > settings.max_translation):
+        return IcpResult(None, correspondences=n_ok, ratio=ratio, complexity=complexity,
+                         reason="translation correction too large", iterations=it)
+    if settings.max_rotation > 0 and rotation_angle(correction) > settings.max_rotation:
+        return IcpResult(None, correspondences=n_ok, ratio=ratio, complexity=complexity,
+                         reason="rotation correction too large", iterations=it)
+    r, jac = _linearise(src[ok], target.points[idx[ok]], target.normals[idx[ok]], t[:3, 3],
+                        settings.point_to_plane, axes)
+    dof = basis.shape[1]
+    sigma2 = max(float(r @ r) / max(r.size - dof, 1), _RESIDUAL_VARIANCE_FLOOR)
+    jb = jac @ basis
+    info = jb.T @ jb
+    vals, vecs = np.linalg.eigh(info)
+    inv_vals = np.where(vals > 1e-12 * max(float(vals[-1]), 1e-300),
+                        1.0 / np.maximum(vals, 1e-300), LOST_VARIANCE / sigma2)
+    cov_b = sigma2 * (vecs * inv_vals) @ vecs.T
+    cov_k = basis @ cov_b @ basis.T
+    if free_axis is not None:
+        g = _huge_covariance() if guess_covariance is None else np.asarray(guess_covariance)
+        f3 = free_axis
+        var_free = float(f3 @ g[:3, :3] @ f3)
+        fk = np.array([f3[0], f3[1], 0.0]) if k == 3 else np.concatenate([f3, np.zeros(3)])
+        cov_k = cov_k + var_free * np.outer(fk, fk)
+    cov = np.diag([sigma2, sigma2, sigma2, _ANGULAR_VARIANCE_FLOOR, _ANGULAR_VARIANCE_FLOOR,
+                   _ANGULAR_VARIANCE_FLOOR]).astype(np.float64)
+    cov[np.ix_(axes, axes)] = np.minimum(cov_k, LOST_VARIANCE)
+    for i in range(3, 6):
+        cov[i, i] = max(cov[i, i], _ANGULAR_VARIANCE_FLOOR)
+    return IcpResult(t, cov, n_ok, ratio, complexity, free_axis, "", it)
+
+
+class ScanMap:
+    """Local scan map of the odometry (`OdomF2M/ScanMaxSize`, `OdomF2M/ScanSubtractRadius`):
+    points of key-frame clouds in the odometry frame, the oldest dropped first."""
+
+    def __init__(self, max_size: int = 2000, subtract_radius: float = 0.05) -> None:
+        self.max_size = max_size
+        self.subtract_radius = subtract_radius
+        self.cloud = ScanCloud.empty()
+        self._born = np.zeros(0, np.int64)
+        self._tree: cKDTree | None = None
+
+    def __len__(self) -> int:
+        return len(self.cloud)
+
+    @property
+    def tree(self) -> cKDTree:
+        """k-d tree of the map points (rebuilt after a change)."""
+        if self._tree is None:
+            self._tree = cKDTree(self.cloud.points)
+        return self._tree
+
+    def add(self, cloud: ScanCloud, stamp: int) -> int:
+        """Add the points of `cloud` (odometry frame) farther than the subtract radius from the
+        map; returns how many were added."""
+        if len(cloud) == 0:
+            return 0
+        keep = np.ones(len(cloud), bool)
+        if len(self.cloud) and self.subtract_radius > 0:
+            d, _ = self.tree.query(cloud.points, distance_upper_bound=self.subtract_radius)
+            keep = ~np.isfinite(d)
+        n = int(keep.sum())
+        if n == 0:
+            return 0
+        pts = np.concatenate([self.cloud.points, cloud.points[keep]])
+        nrm = np.concatenate([self.cloud.normals, cloud.normals[keep]])
+        born = np.concatenate([self._born, np.full(n, stamp, np.int64)])
+        if self.max_size > 0 and pts.shape[0] > self.max_size:
+            order = np.argsort(born, kind="stable")[pts.shape[0] - self.max_size:]
+            order.sort()
+            pts, nrm, born = pts[order], nrm[order], born[order]
+        self.cloud = ScanCloud(pts, nrm)
+        self._born = born
+        self._tree = None
+        return n
+
+    def reset(self, cloud: ScanCloud | None = None, stamp: int = 0) -> None:
+        """Forget the map (and start it with `cloud`)."""
+        self.cloud = ScanCloud.empty()
+        self._born = np.zeros(0, np.int64)
+        self._tree = None
+        if cloud is not None:
+            self.add(cloud, stamp)
