@@ -190,3 +190,40 @@ def test_core_optimises_with_frames_and_reports_only_nodes():
     assert np.hypot(r.pose[0, 3], r.pose[1, 3]) < 0.01
     assert abs(np.degrees(np.arctan2(r.pose[1, 0], r.pose[0, 0]))) < 0.2
     assert set(slam._frame_poses) == {ODOM_FRAME_ID_OFFSET + i for i in range(1, 7)}
+
+
+class _ShiftNode:
+    """Optimiser that moves one node sideways after solving."""
+
+    def __init__(self, node: int, shift: float) -> None:
+        self.inner = GtsamPoseGraph(True, incremental=False)
+        self.node = node
+        self.shift = shift
+
+    def optimize(self, poses, links, root_id, iterations):  # type: ignore[no-untyped-def]
+        out = self.inner.optimize(poses, links, root_id, iterations)
+        out[self.node] = out[self.node].copy()
+        out[self.node][1, 3] += self.shift
+        return out
+
+
+@pytest.mark.parametrize(("sigma", "accepted"), [(SIGMA, True), (0.0, False)])
+def test_optimize_max_error_judges_only_the_heading_of_frame_links(sigma, accepted):
+    # With frames the odometry links join the frames and a node is tied to its frame: the
+    # tie's position is a constraint of the model, not a measurement, so 2 cm of slack there
+    # does not reject the closure; without frames the same 2 cm break the node's odometry links.
+    slam = Rtabmap({"RGBD/LinearUpdate": "0.05", "RGBD/ProximityBySpace": "false",
+                    "Reg/Force3DoF": "true", "Vis/MinInliers": "12", "Mem/STMSize": "2",
+                    "Rtabmap/LoopThr": "0.05", "RGBD/OdomHeadingSigma": str(sigma),
+                    "RGBD/OptimizeMaxError": "3"},
+                   optimizer=_ShiftNode(3, 0.02))
+    cov = np.diag([1e-5, 1e-5, 1e-5, 1e-5, 1e-5, 1e-5])
+    for k in range(5):
+        slam.process(*frame(3, 2.0 + 0.3 * k, 3.0, 0.0), CAM, planar_pose(0.3 * k, 0, 0),
+                     k * 1_000_000_000, odom_covariance=cov)
+    r = slam.process(*frame(3, 2.0, 3.0, 0.0), CAM, planar_pose(0.02, 0.0, 0.0),
+                     5_000_000_000, odom_covariance=cov)
+    assert (r.loop_closure_id == 1) is accepted
+    if not accepted:
+        assert r.rejected_loop_id == 1
+        assert r.rejection_reason == "RGBD/OptimizeMaxError exceeded"

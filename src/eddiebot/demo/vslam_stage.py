@@ -74,9 +74,17 @@ SLAM_PARAMETERS: dict[str, Any] = {"odom_tf_linear_variance": 1e-5,
 #: 3-DoF mode, with the inliers' x, y, yaw re-solve (`Vis/PnPRefineIterations`; upstream
 #: refines its F2M odometry by local bundle adjustment instead, which is not implemented here)
 #: and the check that keeps the tracked motion when a walking person carries the RANSAC vote
-#: (`Odom/MotionConsistencyReprojError`, not upstream).
+#: (`Odom/MotionConsistencyReprojError`, not upstream). Where the visual registration fails
+#: or keeps fewer than 40 inliers (a blank wall at a spin), the frame is registered by
+#: point-to-plane ICP of the depth cloud (every 4th pixel, ≤ 3 m: the Kinect's depth steps
+#: beyond lock ICP onto the last frame) against a 10,000-point scan map
+#: (`Odom/IcpFallbackInliers`, not upstream; docs/benchmarks/vslam_sim.md#vslam-sim-vo).
 VO_PARAMETERS: dict[str, str] = {"Reg/Force3DoF": "true", "Vis/PnPRefineIterations": "1",
-                                 "Odom/MotionConsistencyReprojError": "1.0"}
+                                 "Odom/MotionConsistencyReprojError": "1.0",
+                                 "Odom/IcpFallbackInliers": "40", "Icp/PointToPlane": "true",
+                                 "Icp/DownsamplingStep": "4", "Icp/RangeMax": "3",
+                                 "Icp/MaxCorrespondenceDistance": "0.1",
+                                 "OdomF2M/ScanMaxSize": "10000"}
 
 
 @dataclass

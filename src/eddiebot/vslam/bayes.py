@@ -148,9 +148,29 @@ class BayesFilter:
         self._dead += 1
 
     def node_entered(self, node_id: int, neighbourhood: Mapping[int, int]) -> None:
-        """A node joined the states; `neighbourhood` = {id: depth} of its WM neighbours."""
+        """A node joined the states; `neighbourhood` = {id: depth} of its WM neighbours.
+
+        `add_neighbour` for each neighbour, appended to the table in one go (same entries, same
+        order)."""
+        columns = self._columns
+        lc = self._lc
+        top = self.max_depth
+        cols: list[int] = []
+        vals: list[float] = []
+        targets: list[dict[int, int]] = []
         for j, depth in neighbourhood.items():
-            self.add_neighbour(j, node_id, depth)
+            col = columns.get(j)
+            if col is None or not 1 <= depth <= top or node_id in col:
+                continue
+            cols.append(j)
+            vals.append(lc[depth + 1])
+            targets.append(col)
+        if cols:
+            if not 0 <= node_id <= self._max_id:
+                self._track_ids(node_id, node_id)
+            first = self._append(cols, [node_id] * len(cols), vals)
+            for k, col in enumerate(targets):
+                col[node_id] = first + k
         self.invalidate([node_id])
 
     def node_left(self, node_id: int, neighbourhood: Iterable[int]) -> None:
@@ -169,8 +189,9 @@ class BayesFilter:
             self._states = self._states[keep]
             self._post = self._post[keep]
 
-    def _append(self, column_id: int, rows: list[int], raw: list[float]) -> int:
-        """Append entries of one column; returns the index of the first."""
+    def _append(self, column_id: int | list[int], rows: list[int], raw: list[float]) -> int:
+        """Append entries (of one column, or one column per entry); returns the index of the
+        first."""
         n, m = self._n, len(rows)
         if n + m > self._e_col.size:
             if self._dead > n // 2:
@@ -202,12 +223,14 @@ class BayesFilter:
     def _ensure_column(self, i: int, neighbours: Callable[[int, int], Mapping[int, int]]) -> None:
         if i in self._columns:
             return
+        lc = self._lc
+        top = self.max_depth
         rows = [i]
-        vals = [self._lc[1]]
-        for j, depth in neighbours(i, self.max_depth).items():
-            if j != i and 1 <= depth <= self.max_depth:
+        vals = [lc[1]]
+        for j, depth in neighbours(i, top).items():
+            if j != i and 1 <= depth <= top:
                 rows.append(j)
-                vals.append(self._lc[depth + 1])
+                vals.append(lc[depth + 1])
         self._track_ids(min(rows), max(rows))  # rows include the column's own id
         first = self._append(i, rows, vals)
         self._columns[i] = {r: first + k for k, r in enumerate(rows)}

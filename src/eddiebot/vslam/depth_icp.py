@@ -2,15 +2,20 @@
 (`Reg/Strategy` 1 = ICP, 2 = visual then ICP) with the ``Icp/*`` parameters.
 
 The new frame's depth is turned into a cloud (every `Icp/DownsamplingStep`-th pixel, range
-limits, `Icp/VoxelSize` uniform sampling, normals from `Icp/PointToPlaneK` neighbours), and
-registered to a local scan map (`ScanMap`, in the odometry frame) by point-to-plane
-(`Icp/PointToPlane`) or point-to-point Gauss-Newton, in x, y, yaw under `Reg/Force3DoF`.
-Under `Reg/Force3DoF` the floor and ceiling points are dropped: a horizontal plane does not
-constrain x, y or yaw.
+limits, `Icp/VoxelSize` uniform sampling) with normals from the image grid (a depth image is
+an organised cloud: central differences two samples away; none at depth jumps and creases,
+whose normal would blend two surfaces; `estimate_normals` is the k-nearest-neighbour version,
+`Icp/PointToPlaneK`, for clouds without a grid), and registered to a local scan map
+(`ScanMap`, in the odometry frame) by point-to-plane (`Icp/PointToPlane`) or point-to-point
+Gauss-Newton, in x, y, yaw under `Reg/Force3DoF`. Under `Reg/Force3DoF` the floor and ceiling
+points are dropped: a horizontal plane does not constrain x, y or yaw. Not upstream: the
+correspondence gate starts at 4× `Icp/MaxCorrespondenceDistance` and halves each iteration
+down to it, so a guess a few degrees off (the start of a turn) still converges.
 
 Geometry that leaves a translation free (one wall, the two parallel walls of a corridor) is
 detected as upstream does: the smallest eigenvalue of the normals' covariance (in the plane
-under `Reg/Force3DoF`) below `Icp/PointToPlaneMinComplexity`. With
+under `Reg/Force3DoF`) below `Icp/PointToPlaneMinComplexity`, here of the matched points'
+normals at each iteration (a second wall outside the overlap constrains nothing). With
 `Icp/PointToPlaneLowComplexityStrategy` 1 the fit then corrects only the constrained axes; the
 free translation stays at the guess (the visual result or the motion prediction) and the
 covariance says so: along that axis it is the guess's variance, not the fit's.
@@ -55,6 +60,8 @@ _DEFAULT_EPSILON = 1e-6
 _THREE_DOF_AXES = np.array([0, 1, 5])
 _NORMAL_HALF_WINDOW = 2
 _JUMP_RATIO = 0.05
+_COARSE_GATE = 4.0
+_CREASE_COS = float(np.cos(np.radians(20.0)))
 
 
 @dataclass(frozen=True)
@@ -168,6 +175,13 @@ def _grid_normals(cam: F64, half: int) -> F64:
         d2u = inv[half:h - half, 2 * half:] + inv[half:h - half, : w - 2 * half] - 2 * ic
         d2v = inv[2 * half:, half:w - half] + inv[: h - 2 * half, half:w - half] - 2 * ic
         jump = (np.abs(d2u) > _JUMP_RATIO * ic) | (np.abs(d2v) > _JUMP_RATIO * ic)
+        # A crease (two walls meeting): the normals of the forward and the backward
+        # differences disagree; the central one would be a blend of both walls.
+        fwd = np.cross(cam[half:h - half, 2 * half:] - c, cam[2 * half:, half:w - half] - c)
+        bwd = np.cross(c - cam[half:h - half, : w - 2 * half], c - cam[: h - 2 * half, half:w - half])
+        cos_fb = np.sum(fwd * bwd, axis=2) / (
+            np.linalg.norm(fwd, axis=2) * np.linalg.norm(bwd, axis=2))
+        jump |= ~(cos_fb > _CREASE_COS)
     n[jump] = np.nan
     flip = np.sum(n * c, axis=2) > 0  # the camera is at the origin
     n[flip] *= -1.0
@@ -332,17 +346,18 @@ def icp_register(target: ScanCloud, source: ScanCloud, guess: F64, settings: Icp
         return IcpResult(None, reason="too few points")
     axes = _THREE_DOF_AXES if settings.force_3dof else np.arange(6)
     k = axes.size
-    complexity, free_src = normals_complexity(source.normals, settings.force_3dof)
-    free = np.asarray(guess, dtype=np.float64)[:3, :3] @ free_src  # into the map's axes
-    basis = np.eye(k)
-    free_axis: F64 | None = None
-    if settings.point_to_plane and complexity < settings.min_complexity:
-        if settings.low_complexity_strategy == 0:
-            return IcpResult(None, complexity=complexity, reason="low structural complexity")
-        if settings.low_complexity_strategy == 1:
-            free_axis = free
-            basis = _complement(np.concatenate([free[:2], [0.0]]) if k == 3
-                                else np.concatenate([free, np.zeros(3)]))
+    strategy = settings.low_complexity_strategy if settings.point_to_plane else 2
+
+    def constrained(normals: F64) -> tuple[float, F64 | None, F64]:
+        """Complexity of the matched normals (map axes), the free translation when it is
+        below `Icp/PointToPlaneMinComplexity` and strategy 1 applies, and the basis of the
+        parameters the fit corrects."""
+        cplx, free = normals_complexity(normals, settings.force_3dof)
+        if cplx >= settings.min_complexity or strategy != 1:
+            return cplx, None, np.eye(k)
+        fk = np.array([free[0], free[1], 0.0]) if k == 3 else np.concatenate([free, np.zeros(3)])
+        return cplx, free, _complement(fk)
+
     if tree is None:
         tree = cKDTree(target.points)
     t = np.array(guess, dtype=np.float64, copy=True)
@@ -351,20 +366,23 @@ def icp_register(target: ScanCloud, source: ScanCloud, guess: F64, settings: Icp
     it = 0
     for it in range(1, max(1, settings.iterations) + 1):
         src = source.points @ t[:3, :3].T + t[:3, 3]
-        dist, idx = tree.query(src, distance_upper_bound=gate)
+        # coarse to fine (not upstream): 4×, 2×, then the gate, so that a guess a few
+        # degrees off (the start of a turn) still finds the far points' correspondences
+        coarse = gate * max(1.0, _COARSE_GATE / 2 ** (it - 1))
+        dist, idx = tree.query(src, distance_upper_bound=coarse)
         ok = np.isfinite(dist)
         if int(ok.sum()) < _MIN_CORRESPONDENCES:
-            return IcpResult(None, complexity=complexity, reason="too few correspondences",
-                             iterations=it)
+            return IcpResult(None, reason="too few correspondences", iterations=it)
         r, jac = _linearise(src[ok], target.points[idx[ok]], target.normals[idx[ok]],
                             t[:3, 3], settings.point_to_plane, axes)
+        complexity, free_axis, basis = constrained(target.normals[idx[ok]])
         jb = jac @ basis
         step_b, *_ = np.linalg.lstsq(jb.T @ jb, -(jb.T @ r), rcond=1e-10)
         step = np.zeros(6)
         step[axes] = basis @ step_b
         t[:3, :3] = _rotation(step[3:]) @ t[:3, :3]
         t[:3, 3] = t[:3, 3] + step[:3]
-        if float(np.linalg.norm(step)) < eps:
+        if float(np.linalg.norm(step)) < eps and coarse <= gate:
             break
     src = source.points @ t[:3, :3].T + t[:3, 3]
     dist, idx = tree.query(src, distance_upper_bound=gate)
@@ -372,8 +390,12 @@ def icp_register(target: ScanCloud, source: ScanCloud, guess: F64, settings: Icp
     n_ok = int(ok.sum())
     ratio = n_ok / len(source)
     if n_ok < _MIN_CORRESPONDENCES or ratio < settings.correspondence_ratio:
-        return IcpResult(None, correspondences=n_ok, ratio=ratio, complexity=complexity,
+        return IcpResult(None, correspondences=n_ok, ratio=ratio,
                          reason="correspondence ratio", iterations=it)
+    complexity, free_axis, basis = constrained(target.normals[idx[ok]])
+    if strategy == 0 and complexity < settings.min_complexity:
+        return IcpResult(None, correspondences=n_ok, ratio=ratio, complexity=complexity,
+                         reason="low structural complexity", iterations=it)
     correction = se3_inverse(guess) @ t
     if (settings.max_translation > 0
             and float(np.linalg.norm(correction[:3, 3])) > settings.max_translation):
@@ -395,9 +417,9 @@ def icp_register(target: ScanCloud, source: ScanCloud, guess: F64, settings: Icp
     cov_k = basis @ cov_b @ basis.T
     if free_axis is not None:
         g = _huge_covariance() if guess_covariance is None else np.asarray(guess_covariance)
-        f3 = free_axis
-        var_free = float(f3 @ g[:3, :3] @ f3)
-        fk = np.array([f3[0], f3[1], 0.0]) if k == 3 else np.concatenate([f3, np.zeros(3)])
+        var_free = float(free_axis @ g[:3, :3] @ free_axis)
+        fk = (np.array([free_axis[0], free_axis[1], 0.0]) if k == 3
+              else np.concatenate([free_axis, np.zeros(3)]))
         cov_k = cov_k + var_free * np.outer(fk, fk)
     cov = np.diag([sigma2, sigma2, sigma2, _ANGULAR_VARIANCE_FLOOR, _ANGULAR_VARIANCE_FLOOR,
                    _ANGULAR_VARIANCE_FLOOR]).astype(np.float64)

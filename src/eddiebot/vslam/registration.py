@@ -13,14 +13,13 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.features import FrameFeatures
 from eddiebot.vslam.matching import (
     as_words64,
     knn2_hamming,
-    knn2_hamming_candidates,
+    knn2_hamming_window,
     nndr_one_to_one,
 )
 from eddiebot.vslam.parameters import RtabmapParameters
@@ -114,17 +113,9 @@ def match_by_projection(
     proj_index = np.flatnonzero(valid)
     if proj_index.size < 2 or to_uv.shape[0] == 0:
         return np.zeros(0, np.intp), np.zeros(0, np.intp)
-    tree = cKDTree(np.stack([u[proj_index], v[proj_index]], axis=1))
-    lists = tree.query_ball_point(to_uv.astype(np.float64), r=window_px)
-    lengths = np.fromiter((len(c) for c in lists), dtype=np.int64, count=len(lists))
-    offsets = np.zeros(len(lists) + 1, np.int64)
-    np.cumsum(lengths, out=offsets[1:])
-    flat = (
-        np.concatenate([np.asarray(c, dtype=np.int64) for c in lists if c])
-        if offsets[-1] > 0 else np.zeros(0, np.int64)
-    )
-    cand = proj_index[flat].astype(np.int64)
-    idx, dist = knn2_hamming_candidates(as_words64(to_desc), as_words64(from_desc), offsets, cand)
+    idx, dist = knn2_hamming_window(
+        as_words64(to_desc), as_words64(from_desc), to_uv,
+        np.stack([u[proj_index], v[proj_index]], axis=1), proj_index, window_px)
     # A window with a single candidate has no second neighbour; such a match passes when it is
     # clearly close (a quarter of the descriptor bits), as the projection already disambiguates.
     single = (idx[:, 0] >= 0) & (idx[:, 1] < 0) & (dist[:, 0] <= 64)

@@ -509,7 +509,12 @@ class Rtabmap:
         optimized = self.optimizer.optimize(poses, links, root, self.params.optimizer_iterations)
         thr = self.params.rgbd_optimize_max_error
         if thr > 0 and new_links:
-            _, lin, ang = optimized_link_errors(self.optimizer, optimized, links)
+            ids, lin, ang = optimized_link_errors(self.optimizer, optimized, links)
+            if sigma > 0:
+                # a frame shares its node's position by construction (a constraint, not a
+                # measurement): only the frame links' heading is judged
+                tie = (ids[:, 0] < ODOM_FRAME_ID_OFFSET) & (ids[:, 1] >= ODOM_FRAME_ID_OFFSET)
+                lin = np.where(tie, 0.0, lin)
             worst = max(float(lin.max(initial=0.0)), float(ang.max(initial=0.0)))
             if worst > thr:
                 return False

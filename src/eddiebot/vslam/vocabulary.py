@@ -109,6 +109,7 @@ class Vocabulary:
         self._n = 0
         self._tail: list[int] = []
         self._levels: list[_Level] = []
+        self._refs_dropped = False  # references removed since the levels were last checked
 
     # -- sizes ------------------------------------------------------------------------------
     def __len__(self) -> int:
@@ -164,6 +165,7 @@ class Vocabulary:
         ids = np.asarray(word_ids, np.int64)
         ids = np.unique(ids[ids > 0]) - 1
         self._refs[ids] = np.maximum(self._refs[ids] - 1, 0)
+        self._refs_dropped = True
 
     def quantize(self, descriptors: NDArray[np.uint8], *, add_new: bool = True) -> NDArray[np.int64]:
         """Word id per descriptor; rejected descriptors become new words (or -1 if not `add_new`).
@@ -225,20 +227,25 @@ class Vocabulary:
             alive = self._refs[tail] > 0
             self._indexed[tail[~alive]] = False
             self._tail = tail[alive].tolist()
+        check = self._refs_dropped  # a level's share of referenced words fell, or levels changed
         if len(self._tail) >= self._exact_max:
             self._levels.append(self._build(np.asarray(self._tail, np.int64)))
             self._tail = []
+            check = True
         # Merge equal-sized levels (each level at least twice the next one).
         while len(self._levels) >= 2 and self._levels[-2].ids.size <= 2 * self._levels[-1].ids.size:
             b = self._levels.pop()
             a = self._levels.pop()
             ids = np.concatenate([a.ids, b.ids])
             self._levels.append(self._compact(ids))
-        # Compact levels that are mostly unreferenced.
-        for k, level in enumerate(self._levels):
-            alive = self._refs[level.ids] > 0
-            if alive.mean() < 0.5:
-                self._levels[k] = self._compact(level.ids)
+        # Compact levels that are mostly unreferenced (a level's share of referenced words
+        # only falls when references are removed: otherwise there is nothing to look at).
+        if check:
+            for k, level in enumerate(self._levels):
+                alive = self._refs[level.ids] > 0
+                if alive.mean() < 0.5:
+                    self._levels[k] = self._compact(level.ids)
+            self._refs_dropped = False
         self._levels = [lv for lv in self._levels if lv.ids.size > 0]
 
     def _compact(self, ids: NDArray[np.int64]) -> _Level:
