@@ -1,4 +1,4 @@
-"""Loop-closure range options and the node's time gate in replays."""
+"""Loop closures weakened by the scan's range error, and the node's time gate in replays."""
 
 from __future__ import annotations
 
@@ -6,12 +6,10 @@ import math
 
 import numpy as np
 import pytest
-from slam_world import ROOM, SCAN_ANGLES, drifting_odometry, loop_path, raycast
+from slam_world import ROOM, SCAN_ANGLES, loop_path, raycast
 
 from eddiebot.slam import Scan, SlamConfig, SlamCore
-from eddiebot.slam.errors import ConfigError
 from eddiebot.slam.mapper import scan_position_covariance
-from eddiebot.slam.pose_graph import EdgeKind
 from eddiebot.slam.replay import replay_scans
 from eddiebot.slam.scan import scan_points
 from eddiebot.slam.scan_matcher import MatchResult, point_normals
@@ -19,34 +17,6 @@ from eddiebot.slam.scan_matcher import MatchResult, point_normals
 
 def _scan(pose: np.ndarray, stamp_ns: int) -> Scan:
     return Scan(raycast(ROOM, pose, SCAN_ANGLES, 12.0), SCAN_ANGLES.copy(), 0.05, 12.0, stamp_ns)
-
-
-def _run(cfg: SlamConfig) -> SlamCore:
-    truth = loop_path()
-    odom = drifting_odometry(truth)
-    core = SlamCore(cfg)
-    for k, (p, o) in enumerate(zip(truth, odom)):
-        core.process(_scan(p, k * 100_000_000), o)
-    return core
-
-
-def _loops(core: SlamCore) -> list:
-    return [e for e in core.graph.edges if e.kind is EdgeKind.LOOP]
-
-
-def test_loop_range_cap_limits_the_points_a_loop_match_uses() -> None:
-    base = SlamConfig(minimum_travel_distance=0.9, loop_match_minimum_chain_size=3)
-    off = _run(base)
-    assert len(_loops(off)) >= 1
-    # a cap beyond every range changes nothing
-    same = _run(SlamConfig(**{**base.to_parameters(), "loop_match_max_laser_range": 30.0}))
-    assert len(_loops(same)) == len(_loops(off))
-    assert np.array_equal(same.node_poses(), off.node_poses())
-    # the room's walls are 1.5-10 m away: within 0.5 m too few points remain to try a loop
-    near = _run(SlamConfig(**{**base.to_parameters(), "loop_match_max_laser_range": 0.5}))
-    assert len(_loops(near)) == 0
-    with pytest.raises(ConfigError, match="loop_match_max_laser_range"):
-        SlamConfig(loop_match_max_laser_range=-1.0).validated()
 
 
 def test_loop_range_covariance_weakens_a_far_wall_along_the_view_only() -> None:
@@ -83,3 +53,42 @@ def test_replay_node_time_gate_skips_scans_within_the_interval() -> None:
     assert len(every.node_records) == len(truth)
     # a node every third scan (0.6 s), as the node's minimum_time_interval gate allows
     assert gated.node_records == list(range(0, len(truth), 3))
+
+
+def test_loop_edges_carry_the_range_error_only_when_asked() -> None:
+    from slam_world import drifting_odometry
+
+    from eddiebot.slam.mapper import _rotate_covariance
+    from eddiebot.slam.pose_graph import EdgeKind
+
+    truth = loop_path()
+    odom = drifting_odometry(truth)
+    edges = {}
+    cores = {}
+    for on in (False, True):
+        core = SlamCore(SlamConfig(minimum_travel_distance=0.9, loop_match_minimum_chain_size=3,
+                                   loop_match_range_covariance=on,
+                                   scan_range_sigma_quadratic=0.0025))
+        for k, (p, o) in enumerate(zip(truth, odom)):
+            core.process(_scan(p, k * 100_000_000), o)
+            loops = [e for e in core.graph.edges if e.kind is EdgeKind.LOOP]
+            if loops:
+                edges[on] = loops[0]
+                break
+        cores[on] = core
+    off, on_ = edges[False], edges[True]
+    # the same first loop, measured alike; only its position covariance grows, by the
+    # range error of the closing scan's points turned into the candidate's frame
+    assert (off.i, off.j) == (on_.i, on_.j)
+    assert np.allclose(off.measurement, on_.measurement, atol=1e-9)
+    core = cores[True]
+    pts = core.nodes[on_.j].points
+    geo = scan_position_covariance(pts, point_normals(pts), 0.01, 0.0025)
+    match = core.loop_closures[0].match
+    c, s = math.cos(float(match.pose[2])), math.sin(float(match.pose[2]))
+    rot = np.array([[c, -s], [s, c]])
+    added = np.zeros((3, 3))
+    added[:2, :2] = rot @ geo @ rot.T
+    expected = off.covariance + _rotate_covariance(added, float(core.graph.pose(on_.i)[2]))
+    assert np.trace(on_.covariance[:2, :2]) > np.trace(off.covariance[:2, :2]) + 1e-4
+    assert np.allclose(on_.covariance, expected, atol=1e-6)

@@ -184,16 +184,6 @@ class SlamConfig:
     observes with a variance below this (m²); along the others (a corridor's length, seen only
     on a far end wall) the edge carries no information, as a sequential match fused with
     odometry does. 0 = the match's covariance as it is."""
-    loop_match_max_laser_range: float = 0.0
-    """Range (m) beyond which a scan's points take no part in its loop-closure matches (the
-    sequential match still uses them out to ``max_laser_range``); a node with fewer than
-    ``loop_match_minimum_points`` points within it is not checked for loops. A depth
-    camera's far returns carry a range bias that grows as r² (a Kinect-made scan reads walls
-    ~0.1 m short at 6-7 m): a loop closed on them from afar is off by that much along the
-    view, while the chain it closes to saw the same walls from close by. 0 = every point
-    (slam_toolbox's behaviour)."""
-    loop_match_minimum_points: int = 20
-    """Fewest scan points within ``loop_match_max_laser_range`` for a loop-closure attempt."""
     loop_match_range_covariance: bool = False
     """Add to every loop closure's covariance the position error the scan's range errors
     leave it (`eddiebot.slam.mapper.scan_position_covariance` with ``scan_range_sigma`` and
@@ -253,7 +243,6 @@ class SlamConfig:
             "minimum_travel_heading",
             "max_laser_range",
             "map_max_laser_range",
-            "loop_match_max_laser_range",
             "odometry_heading_quantization",
         ):
             value = getattr(out, name)

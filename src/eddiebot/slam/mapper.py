@@ -886,13 +886,6 @@ class SlamCore:
     ) -> bool:
         cfg = self.config
         closed = False
-        scan_points_all = points
-        if cfg.loop_match_max_laser_range > 0.0:
-            # only the near points (`loop_match_max_laser_range`): far ones carry the range bias
-            near = np.einsum("ij,ij->i", points, points) <= cfg.loop_match_max_laser_range**2
-            points = points[near]
-            if points.shape[0] < min(cfg.loop_match_minimum_points, scan_points_all.shape[0]):
-                return False
         for _ in range(2):
             positions = self._positions()
             linked = near_linked_nodes(
@@ -943,9 +936,9 @@ class SlamCore:
             delta = _between1(cand_pose, base)
             match = found.match
             if cfg.match_degeneracy_analysis:
-                match = self._with_scan_geometry(match, scan_points_all, idx)
+                match = self._with_scan_geometry(match, points, idx)
             if cfg.loop_match_range_covariance:
-                match = self._with_range_error(match, scan_points_all, idx)
+                match = self._with_range_error(match, points, idx)
             cov = _rotate_covariance(match.covariance, float(cand_pose[2]))
             if cfg.loop_match_constrained_variance > 0.0:
                 cov = constrained_covariance(cov, cfg.loop_match_constrained_variance)

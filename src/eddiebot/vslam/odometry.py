@@ -9,7 +9,9 @@ a local scan map from the motion prediction; 2 visual, then ICP from the visual 
 failure of either loses the frame). `Odom/IcpFallbackInliers` (not upstream, 0 = off) adds to
 0 and 2: a frame whose visual registration fails or keeps fewer inliers is registered by ICP
 (from the visual result, else the prediction) and becomes a key frame, so the visual map keeps
-growing through a textureless stretch and re-forms once texture is back. See `depth_icp`.
+growing through a textureless stretch and re-forms once texture is back; with it on,
+strategy 2 also keeps a visual result with that many inliers when ICP fails (no cloud within
+`Icp/RangeMax`). See `depth_icp`.
 """
 
 from __future__ import annotations
@@ -208,11 +210,14 @@ class VisualOdometry:
             if p.odom_motion_consistency > 0 and self._velocity is not None:
                 result = self._keep_tracked_motion(result, local_map, features, camera, predicted)
             new_pose = result.transform
+        fallback = p.odom_icp_fallback_inliers
         if p.reg_strategy == _REG_VIS_ICP and new_pose is not None:
             assert scan is not None
             icp = self._register_icp(scan, self._planar(new_pose), result.covariance)
-            new_pose = icp.transform
-        fallback = p.odom_icp_fallback_inliers
+            # upstream loses the frame when ICP fails; with the fallback on, a visual result
+            # with enough inliers stands (facing open space beyond Icp/RangeMax, no cloud)
+            if icp.ok or fallback <= 0 or result.inliers < fallback:
+                new_pose = icp.transform
         if (p.reg_strategy != _REG_ICP and fallback > 0 and scan is not None
                 and (new_pose is None or result.inliers < fallback)):
             if new_pose is not None:

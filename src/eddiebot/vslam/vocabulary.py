@@ -15,12 +15,13 @@ miss a far second neighbour; a missing second candidate is then taken at 80 bits
 distance between unrelated ORB descriptors), so a lone candidate is accepted only when it is
 clearly close (≤ 64 bits at 0.8).
 
-The LSH indexes are FLANN's (`cv2.flann`, algorithm 6) reimplemented as one compiled search
-over the exact tail and every level: the same bit selections (drawn from OpenCV's RNG as
-FLANN's `LshTable` draws them), the same buckets in the same order and FLANN's result set
-(unique candidates, a candidate at the current second distance turned away), so each query
-returns what `cv2.flann.Index.knnSearch` returned, without its per-candidate allocations and
-the per-level merging in numpy (`tests/vslam/test_vslam_speed_lsh.py` compares both).
+The LSH indexes are FLANN's (`cv2.flann`, algorithm 6) reimplemented as a compiled search,
+one pass per level that also merges its answers with the tail's: the same bit selections
+(drawn from OpenCV's RNG as FLANN's `LshTable` draws them), the same buckets in the same order
+and FLANN's result set (unique candidates, a candidate at the current second distance turned
+away), so each query returns what `cv2.flann.Index.knnSearch` returned, without its
+per-candidate allocations and the merging in numpy (`tests/vslam/test_vslam_speed_lsh.py`
+compares both).
 """
 
 from __future__ import annotations
@@ -206,9 +207,6 @@ class Vocabulary:
         self._indexed[self._n : need] = False
         self._n = need
 
-    def _active_mask(self) -> NDArray[np.bool_]:
-        return self._refs[: self._n] > 0
-
     def _build(self, ids: NDArray[np.int64]) -> _Level:
         # FLANN draws its LSH bit selections from OpenCV's process-wide RNG, so without a seed
         # the index (and every loop closure after it) depended on what ran before in the
@@ -272,6 +270,9 @@ class Vocabulary:
         else:
             best_i = np.full((n, 2), -1, np.int64)
             best_d = np.full((n, 2), _NO_WORD, np.int64)
+        # Unreferenced words in the exact tail were created by recent frames whose node is not
+        # stored (yet): they stay searchable, like RTAB-Map's not-yet-referenced new words.
+        # Unreferenced words inside an LSH level are dead and skipped.
         usable = self._refs[: self._n] > 0
         usable[tail] = True
         for level in self._levels:
