@@ -164,19 +164,29 @@ class VisualOdometry:
         uses_icp = p.reg_strategy in (_REG_ICP, _REG_VIS_ICP) or p.odom_icp_fallback_inliers > 0
         if depth is None and p.reg_strategy in (_REG_ICP, _REG_VIS_ICP):
             raise ParameterError(f"Reg/Strategy={p.reg_strategy} needs the depth image")
-        scan = make_scan(depth, camera, self._icp) if uses_icp and depth is not None else None
+        has_scan = uses_icp and depth is not None
+        # the depth cloud is built lazily: only when ICP runs or the frame becomes a key frame
+        # that feeds the scan map (a tracked visual frame needs none)
+        built: list[ScanCloud] = []
+
+        def get_scan() -> ScanCloud:
+            if not built:
+                assert depth is not None
+                built.append(make_scan(depth, camera, self._icp))
+            return built[0]
+
         n_depth = int(features.has_depth.sum())
         if not self._initialised:
             visual_ok = p.reg_strategy != _REG_ICP and n_depth >= p.vis_min_inliers
-            scan_ok = scan is not None and len(scan) >= p.vis_min_inliers
+            scan_ok = has_scan and (visual_ok or len(get_scan()) >= p.vis_min_inliers)
             if not (visual_ok or (scan_ok and (p.reg_strategy == _REG_ICP
                                                or p.odom_icp_fallback_inliers > 0))):
                 return OdometryResult(None, lost=True, features=len(features),
                                       frame_features=features)
             if p.reg_strategy != _REG_ICP:
                 self._start_map(features)
-            if scan is not None:
-                self._scan_map.reset(scan.transformed(self._pose), self._frame)
+            if has_scan:
+                self._scan_map.reset(get_scan().transformed(self._pose), self._frame)
             self._last_stamp_ns = stamp_ns
             self._initialised = True
             self._lost_count = 0
@@ -191,8 +201,7 @@ class VisualOdometry:
             steady = self._predict(dt, median_translation=True)
             steady_pose, steady_cov = self._pose @ steady, self._prediction_covariance(steady)
         if p.reg_strategy == _REG_ICP:
-            assert scan is not None
-            icp = self._register_icp(scan, steady_pose, steady_cov)
+            icp = self._register_icp(get_scan(), steady_pose, steady_cov)
             result = RegistrationResult(None)
             new_pose = icp.transform
         elif p.odom_strategy == ODOM_STRATEGY_F2F:
@@ -212,19 +221,19 @@ class VisualOdometry:
             new_pose = result.transform
         fallback = p.odom_icp_fallback_inliers
         if p.reg_strategy == _REG_VIS_ICP and new_pose is not None:
-            assert scan is not None
-            icp = self._register_icp(scan, self._planar(new_pose), result.covariance)
+            icp = self._register_icp(get_scan(), self._planar(new_pose), result.covariance)
             # upstream loses the frame when ICP fails; with the fallback on, a visual result
             # with enough inliers stands (facing open space beyond Icp/RangeMax, no cloud)
             if icp.ok or fallback <= 0 or result.inliers < fallback:
                 new_pose = icp.transform
-        if (p.reg_strategy != _REG_ICP and fallback > 0 and scan is not None
+        if (p.reg_strategy != _REG_ICP and fallback > 0 and has_scan
                 and (new_pose is None or result.inliers < fallback)):
             if new_pose is not None:
-                second = self._register_icp(scan, self._planar(new_pose), result.covariance)
+                second = self._register_icp(get_scan(), self._planar(new_pose),
+                                            result.covariance)
                 second = _fuse_free_axis(second, result.covariance, steady_pose, steady_cov)
             else:
-                second = self._register_icp(scan, steady_pose, steady_cov)
+                second = self._register_icp(get_scan(), steady_pose, steady_cov)
             if second.ok:
                 icp, new_pose = second, second.transform
         if new_pose is None:
@@ -252,8 +261,8 @@ class VisualOdometry:
                     self._keyframe_pose = new_pose.copy()
             else:
                 self._update_map(features, result, new_pose)
-        if keyframe and scan is not None:
-            moved = scan.transformed(new_pose)
+        if keyframe and has_scan:
+            moved = get_scan().transformed(new_pose)
             if p.odom_strategy == ODOM_STRATEGY_F2F:
                 self._scan_map.reset(moved, self._frame)
             else:
