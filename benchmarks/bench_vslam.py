@@ -6,6 +6,8 @@ Synthetic data: a textured corridor rendered by the pinhole ray-caster of the te
 
     .venv/bin/python benchmarks/bench_vslam.py [--nodes 1000] [--vo-frames 120] [--tum DIR]
         [--cpu-parts]  (per-part breakdown in CPU time; --vo-frames 0 skips odometry)
+        [--vo-params defaults vo_stage] [--vo-only] [--vo-profile FILE]  (odometry settings,
+        odometry alone, cProfile of the odometry frames on the CPU clock)
         [--profile FILE]  (cProfile, CPU clock, of the updates from node --nodes − 100 on)
 """
 
@@ -17,6 +19,7 @@ import datetime as dt
 import hashlib
 import importlib.util
 import json
+import os
 import platform
 import pstats
 import sys
@@ -73,13 +76,24 @@ def _stats(ms: list[float]) -> dict[str, float]:
             "max_ms": float(a.max()), "n": int(a.size)}
 
 
-def bench_vo(syn, world, n_frames: int) -> dict[str, dict[str, Any]]:
+def _vo_parameters(name: str) -> dict[str, str]:
+    """`--vo-params` sets: the library defaults (the published rows) or the simulated robot's
+    odometry settings (`eddiebot.demo.vslam_stage.VO_PARAMETERS`, ICP fallback on)."""
+    if name == "defaults":
+        return {}
+    from eddiebot.demo.vslam_stage import VO_PARAMETERS
+    return dict(VO_PARAMETERS)
+
+
+def bench_vo(syn, world, n_frames: int, params: dict[str, str] | None = None,
+             profile: Path | None = None) -> dict[str, dict[str, Any]]:
     cam = syn.kinect_camera(640, 480)
     traj = corridor_loop(step=0.03, turn_step=0.05)[:n_frames]
     frames = [syn.render(world, syn.planar_pose(*p), cam) for p in traj]
     out = {}
     for name, strategy in (("F2M", "0"), ("F2F", "1")):
-        vo = VisualOdometry(RtabmapParameters.from_dict({"Odom/Strategy": strategy}))
+        vo = VisualOdometry(RtabmapParameters.from_dict({**(params or {}),
+                                                          "Odom/Strategy": strategy}))
         rgb0, depth0 = frames[0]
         vo.process(rgb0, depth0, cam, 0)  # warm-up (numba, first map)
         vo.reset()
@@ -88,11 +102,18 @@ def bench_vo(syn, world, n_frames: int) -> dict[str, dict[str, Any]]:
         errors = []
         lost = 0
         first = syn.planar_pose(*traj[0])
+        prof = cProfile.Profile(time.process_time) if profile is not None else None
+        poses = []
         for k, (rgb, depth) in enumerate(frames):
+            if prof is not None and k > 0:
+                prof.enable()
             t0, c0 = time.perf_counter(), time.process_time()
             r = vo.process(rgb, depth, cam, k * 33_333_333)
             times.append((time.perf_counter() - t0) * 1e3)
             cpu.append((time.process_time() - c0) * 1e3)
+            if prof is not None:
+                prof.disable()
+            poses.append(None if r.pose is None else r.pose.round(9).tobytes())
             if r.pose is None:
                 lost += 1
                 continue
@@ -100,8 +121,14 @@ def bench_vo(syn, world, n_frames: int) -> dict[str, dict[str, Any]]:
             errors.append(float(np.linalg.norm(r.pose[:3, 3] - truth[:3, 3])))
         path = float(sum(np.hypot(traj[k + 1][0] - traj[k][0], traj[k + 1][1] - traj[k][1])
                          for k in range(len(traj) - 1)))
+        if prof is not None and profile is not None:
+            prof.dump_stats(profile.with_name(f"{profile.stem}_{name}{profile.suffix}"))
+            print(f"-- VO {name}: cProfile (CPU clock), top 25 by own time")
+            pstats.Stats(prof).sort_stats("tottime").print_stats(25)
+        md5 = hashlib.md5(b"".join(b"-" if q is None else q for q in poses)).hexdigest()
         out[name] = {**_stats(times[1:]), "cpu": _stats(cpu[1:]), "lost": lost, "final_error_m": errors[-1],
-                     "rmse_m": float(np.sqrt(np.mean(np.square(errors)))), "path_m": path}
+                     "rmse_m": float(np.sqrt(np.mean(np.square(errors)))), "path_m": path,
+                     "poses_md5": md5}
     return out
 
 
@@ -215,6 +242,19 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
     }
 
 
+def _print_vo(vo: dict[str, dict[str, Any]]) -> None:
+    print(f"{'measure':44s} {'median':>9s} {'p95':>9s} {'goal':>8s}")
+    for name in vo:
+        v = vo[name]
+        print(f"VO {name} per 640x480 frame, wall (ms)         {v['median_ms']:9.1f} "
+              f"{v['p95_ms']:9.1f} {'<= 30':>8s}")
+        print(f"VO {name} per 640x480 frame, CPU (ms)          {v['cpu']['median_ms']:9.1f} "
+              f"{v['cpu']['p95_ms']:9.1f}")
+        print(f"VO {name} error after {v['path_m']:.1f} m (m)"
+              f"{'':18s}{v['final_error_m']:9.3f} {'':9s} lost={v['lost']} "
+              f"poses md5 {v['poses_md5'][:12]}")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--nodes", type=int, default=1000)
@@ -231,6 +271,13 @@ def main() -> int:
     ap.add_argument("--profile", type=Path, metavar="FILE",
                     help="cProfile (CPU time) of the updates from node --nodes - 100 on: "
                          "top 20 printed, stats in FILE (profiling slows the timed nodes)")
+    ap.add_argument("--vo-params", nargs="+", choices=["defaults", "vo_stage"],
+                    default=["defaults"],
+                    help="odometry settings: library defaults and/or vslam_stage.VO_PARAMETERS")
+    ap.add_argument("--vo-only", action="store_true", help="skip the loop-closure benchmark")
+    ap.add_argument("--vo-profile", type=Path, metavar="FILE",
+                    help="cProfile (CPU clock) of the timed odometry frames: top 25 printed, "
+                         "stats in FILE_<F2M|F2F> (profiling slows the timed frames)")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     cv2.setNumThreads(1)  # one core, as the published figures
@@ -241,8 +288,24 @@ def main() -> int:
         "python": platform.python_version(),
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
     }
-    vo = bench_vo(syn, world, args.vo_frames) if args.vo_frames > 1 else {}
+    vo: dict[str, dict[str, Any]] = {}
+    if args.vo_frames > 1:
+        for pset in args.vo_params:
+            prof = (None if args.vo_profile is None else
+                    args.vo_profile.with_name(f"{args.vo_profile.stem}_{pset}{args.vo_profile.suffix}"))
+            part = bench_vo(syn, world, args.vo_frames, _vo_parameters(pset), prof)
+            suffix = "" if pset == "defaults" else f" {pset}"
+            vo.update({f"{k}{suffix}": {**v, "params": pset} for k, v in part.items()})
     results["vo"] = vo
+    results["vo_load_avg"] = list(os.getloadavg())
+    if args.vo_only:
+        if args.out == RESULTS:  # keep the full run's file
+            args.out = RESULTS.with_name("vslam_vo_speed_run.json")
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(results, indent=2))
+        _print_vo(vo)
+        print(f"load average {results['vo_load_avg']}; wrote {args.out}")
+        return 0
     if args.frame_cache:
         args.frame_cache.mkdir(parents=True, exist_ok=True)
     lc = bench_loop_closure(syn, world, args.nodes, args.extra, args.memory_thr, args.cpu_parts,
@@ -255,15 +318,7 @@ def main() -> int:
         results["tum"] = {"folder": str(args.tum), **rep.__dict__}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=2))
-    print(f"{'measure':44s} {'median':>9s} {'p95':>9s} {'goal':>8s}")
-    for name in vo:
-        v = vo[name]
-        print(f"VO {name} per 640x480 frame, wall (ms)         {v['median_ms']:9.1f} "
-              f"{v['p95_ms']:9.1f} {'<= 30':>8s}")
-        print(f"VO {name} per 640x480 frame, CPU (ms)          {v['cpu']['median_ms']:9.1f} "
-              f"{v['cpu']['p95_ms']:9.1f}")
-        print(f"VO {name} error after {v['path_m']:.1f} m (m)"
-              f"{'':18s}{v['final_error_m']:9.3f} {'':9s} lost={v['lost']}")
+    _print_vo(vo)
     a = lc["at_1000_wm"]
     c = lc["at_1000_wm_cpu"]
     print(f"loop closure + update per node, WM~{lc['wm_final']}, wall (ms) {a['median_ms']:9.1f} "

@@ -148,16 +148,20 @@ class FeatureExtractor:
         keypoints, descriptors = self._orb.compute(gray, keypoints)
         if descriptors is None or len(keypoints) == 0:
             return FrameFeatures.empty()
-        uv = np.array([kp.pt for kp in keypoints], dtype=np.float32).reshape(-1, 2)
-        responses = np.array([kp.response for kp in keypoints], dtype=np.float32)
+        uv = np.asarray(cv2.KeyPoint.convert(keypoints), dtype=np.float32).reshape(-1, 2)
+        # one pass over the keypoint objects (float32 values and small ints: exact in float64)
+        attrs = np.array([(kp.response, kp.size, kp.angle, kp.octave) for kp in keypoints],
+                         dtype=np.float64).reshape(-1, 4)
+        responses = attrs[:, 0].astype(np.float32)
         order = np.argsort(-responses, kind="stable")
         if self._max_features > 0:
             order = order[: self._max_features]
         uv = uv[order]
         responses = responses[order]
-        sizes = np.array([keypoints[i].size for i in order], dtype=np.float32)
-        angles = np.array([keypoints[i].angle for i in order], dtype=np.float32)
-        octaves = np.array([keypoints[i].octave for i in order], dtype=np.int32)
+        attrs = attrs[order]
+        sizes = attrs[:, 1].astype(np.float32)
+        angles = attrs[:, 2].astype(np.float32)
+        octaves = attrs[:, 3].astype(np.int32)
         desc: NDArray[np.uint8] = np.ascontiguousarray(np.asarray(descriptors, np.uint8)[order])
         points = np.full((uv.shape[0], 3), np.nan)
         if depth_m is not None:
