@@ -1,7 +1,7 @@
 """`RGBD/LoopClosureMaxMahalanobis`: the graph-path covariance and the closure plausibility gate."""
 
 import numpy as np
-from vslam_synthetic import frame, kinect_camera, planar_pose
+from vslam_synthetic import frame, kinect_camera, link_adjacency, planar_pose
 
 from eddiebot.vslam.memory import Link, LinkType
 from eddiebot.vslam.rtabmap import Rtabmap, closure_mahalanobis, path_covariance
@@ -15,18 +15,10 @@ def _info(sx: float, sy: float, st: float) -> np.ndarray:
     return np.diag([1 / sx**2, 1 / sy**2, 1.0, 1.0, 1.0, 1 / st**2])
 
 
-def _adjacency(links: list[Link]) -> dict[int, dict[int, Link]]:
-    adj: dict[int, dict[int, Link]] = {}
-    for lk in links:
-        adj.setdefault(lk.from_id, {})[lk.to_id] = lk
-        adj.setdefault(lk.to_id, {})[lk.from_id] = lk.inverse()
-    return adj
-
-
 def test_path_covariance_composes_heading_into_lateral_uncertainty():
     sx, sy, st = 0.01, 0.02, 0.05
     step = planar_pose(1.0, 0.0, 0.0)
-    adj = _adjacency([Link(1, 2, LinkType.NEIGHBOR, step, _info(sx, sy, st)),
+    adj = link_adjacency([Link(1, 2, LinkType.NEIGHBOR, step, _info(sx, sy, st)),
                       Link(2, 3, LinkType.NEIGHBOR, step, _info(sx, sy, st))])
     result = path_covariance(adj, 1, 3)
     assert result is not None
@@ -50,10 +42,10 @@ def test_path_covariance_takes_the_least_uncertain_route():
     loose = _info(0.05, 0.05, 0.05)
     links = [Link(k, k + 1, LinkType.NEIGHBOR, planar_pose(0.1, 0.0, 0.0), loose)
              for k in range(1, 21)]
-    chain = path_covariance(_adjacency(links), 1, 21)
+    chain = path_covariance(link_adjacency(links), 1, 21)
     tight = Link(21, 1, LinkType.GLOBAL_CLOSURE, planar_pose(-2.0, 0.0, 0.0),
                  _info(0.01, 0.01, 0.01))
-    short = path_covariance(_adjacency([*links, tight]), 1, 21)
+    short = path_covariance(link_adjacency([*links, tight]), 1, 21)
     assert chain is not None and short is not None
     assert np.trace(short[1]) < 0.01 * np.trace(chain[1])
     np.testing.assert_allclose(short[0], [2.0, 0.0, 0.0], atol=1e-9)
@@ -61,7 +53,7 @@ def test_path_covariance_takes_the_least_uncertain_route():
 
 def test_closure_mahalanobis_scores_consistent_and_jumping_closures():
     info = _info(0.02, 0.02, 0.01)
-    adj = _adjacency([Link(k, k + 1, LinkType.NEIGHBOR, planar_pose(0.5, 0.0, 0.0), info)
+    adj = link_adjacency([Link(k, k + 1, LinkType.NEIGHBOR, planar_pose(0.5, 0.0, 0.0), info)
                       for k in range(1, 11)])
     here, there = planar_pose(5.0, 0.0, 0.0), planar_pose(0.0, 0.0, 0.0)
     closure_info = _info(0.01, 0.01, 0.005)

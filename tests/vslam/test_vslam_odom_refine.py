@@ -6,8 +6,8 @@ tests measure the estimator alone and run in well under a second.
 """
 
 import numpy as np
+from vslam_synthetic import eddie_kinect_320
 
-from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.features import FrameFeatures
 from eddiebot.vslam.odometry import VisualOdometry
 from eddiebot.vslam.parameters import RtabmapParameters
@@ -18,16 +18,13 @@ from eddiebot.vslam.registration import (
     solve_pnp,
 )
 from eddiebot.vslam.transforms import (
-    OPTICAL_ROTATION,
     from_xyz_yaw,
     se3_inverse,
     to_3dof,
     yaw_of,
 )
 
-_LT = OPTICAL_ROTATION.copy()
-_LT[:3, 3] = (-0.12, -0.0125, 0.61)  # Eddie's Kinect on base_footprint
-CAM = CameraIntrinsics(263.3, 263.3, 159.0, 120.3, 320, 240, _LT)
+CAM = eddie_kinect_320()
 
 
 def _wall_points(rng: np.random.Generator, n: int) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from vslam_synthetic import frame, kinect_camera, planar_pose
+from vslam_synthetic import frame, kinect_camera, link_adjacency, planar_pose
 
 from eddiebot.vslam.errors import ParameterError
 from eddiebot.vslam.graph import GtsamPoseGraph
@@ -124,19 +124,11 @@ def test_odometry_frame_graph_moves_the_neighbour_links_onto_the_frames():
     np.testing.assert_array_equal(pairs[(3, 1)].information, closure.information)
 
 
-def _adjacency(links: list[Link]) -> dict[int, dict[int, Link]]:
-    adj: dict[int, dict[int, Link]] = {}
-    for lk in links:
-        adj.setdefault(lk.from_id, {})[lk.to_id] = lk
-        adj.setdefault(lk.to_id, {})[lk.from_id] = lk.inverse()
-    return adj
-
-
 def test_path_covariance_adds_the_frame_heading_offset_at_both_ends_of_odometry():
     sx, st, s = 0.01, 0.003, 0.02
     step = planar_pose(1.0, 0.0, 0.0)
     info = np.diag([1 / sx**2, 1 / sx**2, 1.0, 1.0, 1.0, 1 / st**2])
-    adj = _adjacency([Link(1, 2, LinkType.NEIGHBOR, step, info),
+    adj = link_adjacency([Link(1, 2, LinkType.NEIGHBOR, step, info),
                       Link(2, 3, LinkType.NEIGHBOR, step, info)])
     plain = path_covariance(adj, 1, 3)
     framed = path_covariance(adj, 1, 3, heading_sigma=s)
@@ -147,7 +139,7 @@ def test_path_covariance_adds_the_frame_heading_offset_at_both_ends_of_odometry(
                                rtol=1e-9, atol=1e-15)
     # a path of loop closures only has no odometry frames
     closure = Link(1, 3, LinkType.GLOBAL_CLOSURE, step @ step, info)
-    only = _adjacency([closure])
+    only = link_adjacency([closure])
     a = path_covariance(only, 1, 3)
     b = path_covariance(only, 1, 3, heading_sigma=s)
     assert a is not None and b is not None

@@ -8,8 +8,8 @@ so the tests run in about a second.
 
 import numpy as np
 import pytest
+from vslam_synthetic import eddie_kinect_320
 
-from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.depth_icp import (
     IcpSettings,
     ScanCloud,
@@ -25,11 +25,9 @@ from eddiebot.vslam.errors import ParameterError
 from eddiebot.vslam.features import FrameFeatures
 from eddiebot.vslam.odometry import VisualOdometry
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.transforms import OPTICAL_ROTATION, from_xyz_yaw, se3_inverse, yaw_of
+from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, yaw_of
 
-_LT = OPTICAL_ROTATION.copy()
-_LT[:3, 3] = (-0.12, -0.0125, 0.61)  # Eddie's Kinect on base_footprint
-CAM = CameraIntrinsics(263.3, 263.3, 159.0, 120.3, 320, 240, _LT)
+CAM = eddie_kinect_320()
 #: a 4 × 3 m room, 2.5 m high: planes (normal, offset) with normal · x = offset
 ROOM = [((1.0, 0.0, 0.0), 2.0), ((1.0, 0.0, 0.0), -2.0), ((0.0, 1.0, 0.0), 1.5),
         ((0.0, 1.0, 0.0), -1.5), ((0.0, 0.0, 1.0), 0.0), ((0.0, 0.0, 1.0), 2.5)]

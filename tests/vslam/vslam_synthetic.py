@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from eddiebot.vslam.camera import CameraIntrinsics
+from eddiebot.vslam.memory import Link
 from eddiebot.vslam.transforms import OPTICAL_ROTATION, from_xyz_yaw
 
 TEXELS_PER_M = 100.0
@@ -95,6 +96,22 @@ def render(
         gray[sel] = sampled[sel]
     depth = np.clip(np.rint(best_t * 1000.0), 0, 65535).astype(np.uint16)
     return np.repeat(gray[..., None], 3, axis=2), depth
+
+
+def eddie_kinect_320() -> CameraIntrinsics:
+    """Eddie's Kinect at 320×240 as the simulator mounts it on base_footprint."""
+    lt = OPTICAL_ROTATION.copy()
+    lt[:3, 3] = (-0.12, -0.0125, 0.61)
+    return CameraIntrinsics(263.3, 263.3, 159.0, 120.3, 320, 240, lt)
+
+
+def link_adjacency(links: list[Link]) -> dict[int, dict[int, Link]]:
+    """Both directions of each link, keyed by node id, as `rtabmap.path_covariance` reads them."""
+    adj: dict[int, dict[int, Link]] = {}
+    for lk in links:
+        adj.setdefault(lk.from_id, {})[lk.to_id] = lk
+        adj.setdefault(lk.to_id, {})[lk.from_id] = lk.inverse()
+    return adj
 
 
 def planar_pose(x: float, y: float, yaw: float) -> NDArray[np.float64]:
