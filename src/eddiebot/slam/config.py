@@ -30,6 +30,7 @@ _MODES = ("mapping", "localization", "lifelong")
 _OPTIMIZERS = ("isam2", "levenberg_marquardt")
 _MATCH_COVARIANCES = ("response", "icp")
 _KERNELS = ("none", "huber", "cauchy", "dcs")
+_STEP_HEADINGS = ("odometry", "quantization", "match")
 
 
 @dataclass(frozen=True)
@@ -157,6 +158,12 @@ class SlamConfig:
     odometry_heading_quantization: float = 0.01
     """σ (rad) of the odometry heading's non-accumulating error (encoder quantisation), used by
     ``odometry_span_nodes``."""
+    fused_step_heading: str = "odometry"
+    """Odometry heading σ of each fused sequential step (``fuse_odometry``): "odometry" = the
+    noise model above; "quantization" = raised to at least √2 · ``odometry_heading_quantization``
+    (two quantised poses' error, which does not accumulate); "match" = the step's heading from
+    the scan match alone (the odometry gives no heading information to the step). The last two
+    apply only with ``odometry_span_nodes`` > 0, whose span edges hold the heading drift."""
     loop_match_maximum_variance_fine: float = 0.0
     """Reject a loop closure whose fine match has a position variance (m², along its weakest
     direction) above this: an aliased corridor match constrains only one direction; 0 = off."""
@@ -237,6 +244,11 @@ class SlamConfig:
             raise ConfigError(
                 f"parameter 'match_covariance' must be one of {_MATCH_COVARIANCES}, "
                 f"got {out.match_covariance!r}"
+            )
+        if out.fused_step_heading not in _STEP_HEADINGS:
+            raise ConfigError(
+                f"parameter 'fused_step_heading' must be one of {_STEP_HEADINGS}, "
+                f"got {out.fused_step_heading!r}"
             )
         for name in (
             "minimum_travel_distance",

@@ -164,6 +164,8 @@ def matcher_params(
 
 _PI = np.pi
 _TWO_PI = 2.0 * np.pi
+_NO_HEADING_VARIANCE = 1.0e4
+"""Odometry heading variance (rad²) standing for no heading information in a fused step."""
 
 
 def _wrap1(a: float) -> float:
@@ -755,7 +757,7 @@ class SlamCore:
                     # directions the scan observes (a corridor match only across it)
                     info, _ = constrained_information(cov, cfg.corridor_covariance_threshold)
                     delta, cov = fuse_increments(
-                        odo_delta, _odometry_covariance(odo_delta, cfg), delta, info
+                        odo_delta, self._step_odometry_covariance(odo_delta), delta, info
                     )
                     pose = _compose1(prev_pose, delta)
                 edge = (delta, cov, EdgeKind.SCAN_MATCH)
@@ -800,6 +802,20 @@ class SlamCore:
             loop_closed=loop_closed,
             warnings=tuple(warnings),
         )
+
+    def _step_odometry_covariance(self, odo_delta: FloatArray) -> FloatArray:
+        """Odometry covariance of one sequential step for fusion (`fused_step_heading`)."""
+        cfg = self.config
+        cov = _odometry_covariance(odo_delta, cfg)
+        if cfg.odometry_span_nodes <= 0 or cfg.fused_step_heading == "odometry":
+            return cov
+        if cfg.fused_step_heading == "quantization":
+            floor = 2.0 * cfg.odometry_heading_quantization**2
+            cov[2, 2] = max(float(cov[2, 2]), floor)
+        else:
+            # no heading information from the odometry: the match's heading sets the step
+            cov[2, 2] = _NO_HEADING_VARIANCE
+        return cov
 
     def _add_odometry_span(self, j: int, idx: int) -> None:
         """Odometry alone from node ``j`` to node ``idx`` of one chain (`odometry_span_nodes`)."""
