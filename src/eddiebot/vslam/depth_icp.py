@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 
 from eddiebot.vslam.camera import CameraIntrinsics, depth_to_meters
 from eddiebot.vslam.parameters import RtabmapParameters
+from eddiebot.vslam.registration import LOST_VARIANCE, huge_covariance
 from eddiebot.vslam.transforms import rotation_angle, se3_inverse
 
 __all__ = [
@@ -51,7 +52,6 @@ __all__ = [
 ]
 
 F64 = NDArray[np.float64]
-LOST_VARIANCE = 9999.0
 _RESIDUAL_VARIANCE_FLOOR = 1e-6  # m², (1 mm)²
 _ANGULAR_VARIANCE_FLOOR = 3e-8
 _MIN_CORRESPONDENCES = 10
@@ -272,16 +272,12 @@ def normals_complexity(normals: F64, three_dof: bool) -> tuple[float, F64]:
     return float(vals[0]), vecs[:, 0].copy()
 
 
-def _huge_covariance() -> F64:
-    return np.eye(6) * LOST_VARIANCE
-
-
 @dataclass(frozen=True)
 class IcpResult:
     """Outcome of `icp_register`: the new frame's pose in the map frame, None on failure."""
 
     transform: F64 | None
-    covariance: F64 = field(default_factory=_huge_covariance)
+    covariance: F64 = field(default_factory=huge_covariance)
     correspondences: int = 0
     ratio: float = 0.0
     complexity: float = 0.0
@@ -416,7 +412,7 @@ def icp_register(target: ScanCloud, source: ScanCloud, guess: F64, settings: Icp
     cov_b = sigma2 * (vecs * inv_vals) @ vecs.T
     cov_k = basis @ cov_b @ basis.T
     if free_axis is not None:
-        g = _huge_covariance() if guess_covariance is None else np.asarray(guess_covariance)
+        g = huge_covariance() if guess_covariance is None else np.asarray(guess_covariance)
         var_free = float(free_axis @ g[:3, :3] @ free_axis)
         fk = (np.array([free_axis[0], free_axis[1], 0.0]) if k == 3
               else np.concatenate([free_axis, np.zeros(3)]))

@@ -34,9 +34,9 @@ from eddiebot.vslam.errors import ParameterError
 from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
 from eddiebot.vslam.parameters import ODOM_STRATEGY_F2F, RtabmapParameters
 from eddiebot.vslam.registration import (
-    LOST_VARIANCE,
     RegistrationResult,
     estimate_covariance,
+    huge_covariance,
     refine_pnp,
     register,
     reprojection_errors,
@@ -61,16 +61,12 @@ _REG_ICP = 1
 _REG_VIS_ICP = 2
 
 
-def _lost_covariance() -> F64:
-    return np.eye(6) * LOST_VARIANCE
-
-
 @dataclass(frozen=True)
 class OdometryResult:
     """One odometry update. `pose`: base in odom frame (4×4, m), None when lost."""
 
     pose: F64 | None
-    covariance: F64 = field(default_factory=_lost_covariance)
+    covariance: F64 = field(default_factory=huge_covariance)
     lost: bool = False
     keyframe: bool = False
     inliers: int = 0
@@ -190,7 +186,7 @@ class VisualOdometry:
             self._last_stamp_ns = stamp_ns
             self._initialised = True
             self._lost_count = 0
-            return OdometryResult(self._pose.copy(), _lost_covariance(), keyframe=True,
+            return OdometryResult(self._pose.copy(), huge_covariance(), keyframe=True,
                                   features=len(features), local_map_size=self._map_size(),
                                   frame_features=features, scan_map_size=len(self._scan_map))
         dt = 0.0 if self._last_stamp_ns is None else (stamp_ns - self._last_stamp_ns) * 1e-9
@@ -354,7 +350,7 @@ class VisualOdometry:
         countdown = self.params.odom_reset_countdown
         if countdown > 0 and self._lost_count >= countdown:
             self.reset(self._pose)
-        return OdometryResult(None, _lost_covariance(), lost=True, matches=result.matches,
+        return OdometryResult(None, huge_covariance(), lost=True, matches=result.matches,
                               inliers=result.inliers, features=len(features),
                               local_map_size=self._map_size(), frame_features=features,
                               icp_ratio=0.0 if icp is None else icp.ratio,

@@ -29,6 +29,7 @@ __all__ = [
     "LOST_VARIANCE",
     "RegistrationResult",
     "estimate_covariance",
+    "huge_covariance",
     "match_by_projection",
     "match_descriptors",
     "pnp_jacobian_covariance",
@@ -50,7 +51,8 @@ _HUBER_PX = 1.0  # px: robust kernel width of the refinement
 _REFINE_STEPS = 10  # Gauss-Newton steps per refinement
 
 
-def _huge_covariance() -> F64:
+def huge_covariance() -> F64:
+    """The covariance published for a failed registration or lost tracking (6 × 6)."""
     return np.eye(6) * LOST_VARIANCE
 
 
@@ -59,7 +61,7 @@ class RegistrationResult:
     """Outcome of a registration; `transform` is None on failure (see `reason`)."""
 
     transform: F64 | None
-    covariance: F64 = field(default_factory=_huge_covariance)
+    covariance: F64 = field(default_factory=huge_covariance)
     inliers: int = 0
     matches: int = 0
     from_index: NDArray[np.intp] = field(default_factory=lambda: np.zeros(0, np.intp))
@@ -345,7 +347,7 @@ def estimate_covariance(
     """
     n = from_points.shape[0]
     if n == 0:
-        return _huge_covariance()
+        return huge_covariance()
     lt = camera.local_transform
     cam_to_old = transform @ lt
     origin = cam_to_old[:3, 3]
@@ -394,7 +396,7 @@ def pnp_jacobian_covariance(
     n = from_points.shape[0]
     axes = [0, 1, 5] if three_dof else [0, 1, 2, 3, 4, 5]
     if n < len(axes):
-        return _huge_covariance()
+        return huge_covariance()
     cam_from_base = se3_inverse(camera.local_transform)
 
     def project(t: F64) -> NDArray[np.float64]:
@@ -424,7 +426,7 @@ def pnp_jacobian_covariance(
     try:
         cov_sub = np.linalg.inv(h) * sigma2
     except np.linalg.LinAlgError:
-        return _huge_covariance()
+        return huge_covariance()
     var = np.zeros(6)
     var[axes] = np.clip(np.diag(cov_sub), 0.0, LOST_VARIANCE)
     return np.diag(var)
