@@ -650,11 +650,11 @@ class SlamCore:
             self._normal_cache[idx] = local
         return local
 
-    def _with_scan_geometry(self, match: MatchResult, points: FloatArray, idx: int) -> MatchResult:
-        """A match whose covariance also shows the directions its scan's geometry leaves
-        degenerate: along each eigen-direction of `scan_position_covariance` with a variance
-        above ``corridor_covariance_threshold`` that variance is added (the others, which the
-        scan's lines pin, keep the correlative search's covariance)."""
+    def _scan_geometry(
+        self, match: MatchResult, points: FloatArray, idx: int
+    ) -> tuple[FloatArray, FloatArray]:
+        """`scan_position_covariance` of node ``idx``'s scan (sensor frame) and the rotation
+        by the match's heading that takes it into the map frame."""
         cfg = self.config
         geo = scan_position_covariance(
             points,
@@ -662,12 +662,20 @@ class SlamCore:
             cfg.scan_range_sigma,
             cfg.scan_range_sigma_quadratic,
         )
+        c, s = math.cos(float(match.pose[2])), math.sin(float(match.pose[2]))
+        return geo, np.array([[c, -s], [s, c]])
+
+    def _with_scan_geometry(self, match: MatchResult, points: FloatArray, idx: int) -> MatchResult:
+        """A match whose covariance also shows the directions its scan's geometry leaves
+        degenerate: along each eigen-direction of `scan_position_covariance` with a variance
+        above ``corridor_covariance_threshold`` that variance is added (the others, which the
+        scan's lines pin, keep the correlative search's covariance)."""
+        geo, rot = self._scan_geometry(match, points, idx)
         w, v = np.linalg.eigh(geo)
-        weak = w > cfg.corridor_covariance_threshold
+        weak = w > self.config.corridor_covariance_threshold
         if not np.any(weak):
             return match
-        c, s = math.cos(float(match.pose[2])), math.sin(float(match.pose[2]))
-        d = np.array([[c, -s], [s, c]]) @ v[:, weak]
+        d = rot @ v[:, weak]
         cov = np.array(match.covariance, dtype=np.float64)
         cov[:2, :2] += (d * w[weak]) @ d.T
         return MatchResult(match.pose, match.response, cov)
@@ -676,15 +684,7 @@ class SlamCore:
         """A match whose position covariance also holds the error its scan's range errors
         leave it (`scan_position_covariance`, turned into the map frame by the match's
         heading): ``loop_match_range_covariance``."""
-        cfg = self.config
-        geo = scan_position_covariance(
-            points,
-            self._scan_normals(idx, points),
-            cfg.scan_range_sigma,
-            cfg.scan_range_sigma_quadratic,
-        )
-        c, s = math.cos(float(match.pose[2])), math.sin(float(match.pose[2]))
-        rot = np.array([[c, -s], [s, c]])
+        geo, rot = self._scan_geometry(match, points, idx)
         cov = np.array(match.covariance, dtype=np.float64)
         cov[:2, :2] += rot @ geo @ rot.T
         return MatchResult(match.pose, match.response, cov)
