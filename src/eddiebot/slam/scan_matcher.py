@@ -33,6 +33,7 @@ import numpy.typing as npt
 from numba import njit
 
 from eddiebot.geometry import wrap_angle
+from eddiebot.geometry.grid import bucket_grid
 
 __all__ = [
     "CorrelationGrid",
@@ -1223,41 +1224,6 @@ _ICP_CELLS_PER_RANGE = 4
 
 
 @njit(cache=True)
-def _bucket_grid(
-    reference: FloatArray, cell: float
-) -> tuple[float, float, int, int, npt.NDArray[np.int64], npt.NDArray[np.int64]]:
-    """Reference points bucketed into square cells of side ``cell``: (x0, y0, nx, ny, start,
-    order); cell k = iy·nx + ix holds ``order[start[k]:start[k + 1]]``."""
-    n = reference.shape[0]
-    x0 = reference[0, 0]
-    y0 = reference[0, 1]
-    x1 = x0
-    y1 = y0
-    for i in range(1, n):
-        x0 = min(x0, reference[i, 0])
-        x1 = max(x1, reference[i, 0])
-        y0 = min(y0, reference[i, 1])
-        y1 = max(y1, reference[i, 1])
-    nx = int((x1 - x0) / cell) + 1
-    ny = int((y1 - y0) / cell) + 1
-    key = np.empty(n, np.int64)
-    start = np.zeros(nx * ny + 1, np.int64)
-    for i in range(n):
-        ix = min(int((reference[i, 0] - x0) / cell), nx - 1)
-        iy = min(int((reference[i, 1] - y0) / cell), ny - 1)
-        key[i] = iy * nx + ix
-        start[key[i] + 1] += 1
-    for k in range(nx * ny):
-        start[k + 1] += start[k]
-    fill = start[:-1].copy()
-    order = np.empty(n, np.int64)
-    for i in range(n):
-        order[fill[key[i]]] = i
-        fill[key[i]] += 1
-    return x0, y0, nx, ny, start, order
-
-
-@njit(cache=True)
 def _icp_pairs(
     points: FloatArray,
     reference: FloatArray,
@@ -1653,7 +1619,7 @@ def refine_icp_with_covariance(
         normals = reference_normals
     planar = np.isfinite(normals[:, 0])
     normals = np.ascontiguousarray(np.where(planar[:, None], normals, 0.0), dtype=np.float64)
-    x0, y0, nx, ny, start, order = _bucket_grid(reference, max_distance / _ICP_CELLS_PER_RANGE)
+    x0, y0, nx, ny, start, order = bucket_grid(reference, max_distance / _ICP_CELLS_PER_RANGE)
     jac_buf = np.empty((points.shape[0], 3))
     jac_w_buf = np.empty((points.shape[0], 3))
     r_buf = np.empty(points.shape[0])

@@ -8,6 +8,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from eddiebot.geometry.grid import bucket_grid
+
 __all__ = [
     "as_words64",
     "knn2_hamming",
@@ -124,30 +126,7 @@ def _knn2_window(q, t, q_uv, t_uv, t_rows, radius):  # type: ignore[no-untyped-d
     # grid of cells a little wider than the radius: a point within the radius of a query lies
     # in the query's cell or a neighbouring one, whatever the rounding
     cell = radius * 1.0001 + 1e-9
-    u0 = t_uv[0, 0]
-    v0 = t_uv[0, 1]
-    u1 = u0
-    v1 = v0
-    for k in range(m):
-        u0 = min(u0, t_uv[k, 0])
-        u1 = max(u1, t_uv[k, 0])
-        v0 = min(v0, t_uv[k, 1])
-        v1 = max(v1, t_uv[k, 1])
-    nx = int((u1 - u0) / cell) + 1
-    ny = int((v1 - v0) / cell) + 1
-    start = np.zeros(nx * ny + 1, np.int64)
-    cell_of = np.empty(m, np.int64)
-    for k in range(m):
-        c = int((t_uv[k, 1] - v0) / cell) * nx + int((t_uv[k, 0] - u0) / cell)
-        cell_of[k] = c
-        start[c + 1] += 1
-    for c in range(nx * ny):
-        start[c + 1] += start[c]
-    fill = start[:-1].copy()
-    order = np.empty(m, np.int64)
-    for k in range(m):
-        order[fill[cell_of[k]]] = k
-        fill[cell_of[k]] += 1
+    u0, v0, nx, ny, start, order = bucket_grid(t_uv, cell)
     for i in range(n):
         qu = q_uv[i, 0]
         qv = q_uv[i, 1]
