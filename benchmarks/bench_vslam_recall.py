@@ -47,7 +47,7 @@ import cv2
 import numpy as np
 
 from eddiebot.demo.route import OFFICE_LONG_ROUTE, WAREHOUSE_ROUTE, Waypoint
-from eddiebot.demo.vslam_stage import CORRIDOR_LONG_ROUTE
+from eddiebot.demo.vslam_stage import CORRIDOR_LONG_ROUTE, SLAM_PARAMETERS
 from eddiebot.sim.camera import KinectConfig
 from eddiebot.sim.render import camera_pose, kinect_depth, render_view
 from eddiebot.sim.worlds import load_world
@@ -181,6 +181,19 @@ REPORT_PARAMS = {
 ODOM_VARIANCE = (1e-4, 1e-5)
 #: A verified closure is right only if its transform also agrees with the ground truth.
 TRANSFORM_TOLERANCE = (0.3, math.radians(10.0))
+#: Profiles of the whole detector: `gated` (the set-up of the first runs: link variances
+#: 1e-4 / 1e-5, PnP loop registration) and `product` (the SLAM node's profile for the simulated
+#: Eddie, `eddiebot.demo.vslam_stage.SLAM_PARAMETERS`: link variances 1e-5 / 1e-5, per-node
+#: odometry frames `RGBD/OdomHeadingSigma`, 3D→3D loop registration `Vis/EstimationType` 0).
+PROFILES: dict[str, tuple[tuple[float, float], dict[str, str]]] = {
+    "gated": (ODOM_VARIANCE, {}),
+    "product": ((float(SLAM_PARAMETERS["odom_tf_linear_variance"]),
+                 float(SLAM_PARAMETERS["odom_tf_angular_variance"])),
+                {k: str(v) for k, v in SLAM_PARAMETERS.items() if "/" in k}),
+}
+#: Stages that can stop a positive image (see `stage_breakdown`).
+STAGES = ("right", "below_thr", "gate", "registration", "optimize_max_error", "near", "wrong",
+          "other")
 
 
 def _summary(values: list[float], verdicts: list[int], positive: int, loop_thr: float,
@@ -211,6 +224,50 @@ def _verdict(poses, views, k: int, h: int) -> int:
     if _place(poses, views, k, h, math.inf, 45.0, 0.3, either=True):
         return 0
     return -1
+
+
+def _stage(rec: dict) -> str:
+    """Which stage stopped (or passed) one image of the whole detector."""
+    if rec.get("loop"):
+        return {1: "right", 0: "near", -1: "wrong"}[int(rec["verdict"])]
+    reason = str(rec.get("reason", ""))
+    if not rec.get("rejected"):
+        return "below_thr"
+    if reason.startswith("RGBD/LoopClosureMaxMahalanobis"):
+        return "gate"
+    if reason.startswith("registration failed"):
+        return "registration"
+    if reason.startswith("RGBD/OptimizeMaxError"):
+        return "optimize_max_error"
+    return "other"
+
+
+def stage_breakdown(records: list[dict]) -> dict[str, object]:
+    """Per positive image: the stage that stopped it, split by where its hypothesis pointed
+    (`same`: a same place, `near`, `wrong`, `none`); and over every rejected hypothesis (all
+    images): how many of the gated / optimiser-rejected ones carried a right transform."""
+    names = {1: "same", 0: "near", -1: "wrong"}
+    pos: dict[str, dict[str, int]] = {s: {} for s in STAGES}
+    for rec in records:
+        if not rec.get("positive") or "hyp" not in rec:
+            continue
+        where = names[int(rec["hyp_verdict"])] if rec.get("hyp") else "none"
+        row = pos[_stage(rec)]
+        row[where] = row.get(where, 0) + 1
+    rejected: dict[str, dict[str, int]] = {}
+    for rec in records:
+        if "hyp" not in rec or rec.get("loop") or not rec.get("rejected"):
+            continue
+        stage = _stage(rec)
+        row = rejected.setdefault(stage, {})
+        kind = "right_transform" if rec.get("rej_right") else (
+            "wrong_transform" if "rej_t_err" in rec else "no_transform")
+        where = names[int(rec["hyp_verdict"])]
+        row[kind] = row.get(kind, 0) + 1
+        row[f"{kind}/{where}"] = row.get(f"{kind}/{where}", 0) + 1
+        if rec.get("positive"):
+            row[f"{kind}/positive"] = row.get(f"{kind}/positive", 0) + 1
+    return {"positives": {s: v for s, v in pos.items() if v}, "rejected": rejected}
 
 
 def rgb_camera(config: KinectConfig) -> CameraIntrinsics:
@@ -252,6 +309,7 @@ def run_world(name: str, params: dict[str, str], step: float, turn_step: float,
                              "t_err": [], "r_err": []}
     rejected: dict[str, int] = {}
     positive = 0
+    all_records: list[dict] = []
     render_s = 0.0
     odom = np.eye(4)
     lin_var, ang_var = odom_variance
@@ -261,9 +319,9 @@ def run_world(name: str, params: dict[str, str], step: float, turn_step: float,
         t0 = time.perf_counter()
         cam = camera_pose(pose, config.rgb_position)
         rgb, depth = render_view(world, cam, intr, shading=config.shading)
-        grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float64)
-        noise = rng.normal(0, 2.0, grey.shape)
-        grey = np.clip(grey + noise, 0, 255).astype(np.uint8)
+        grey_f = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float64)
+        noise = np.asarray(rng.normal(0, 2.0, grey_f.shape))
+        grey = np.clip(grey_f + noise, 0, 255).astype(np.uint8)
         render_s += time.perf_counter() - t0
         views.add(cam, depth)
         poses.append(pose)
@@ -271,6 +329,7 @@ def run_world(name: str, params: dict[str, str], step: float, turn_step: float,
         has_loop = any(_place(poses, views, k, j, 1.0, 30.0, 0.5) for j in range(k - stm + 1))
         positive += has_loop
         rec: dict[str, object] = {"k": k, "positive": has_loop}
+        all_records.append(rec)
         if records is not None:
             records.append(rec)
         if "appearance" in modes:
@@ -296,14 +355,31 @@ def run_world(name: str, params: dict[str, str], step: float, turn_step: float,
                              odom_covariance=odom_cov)
             full["wall"].append((time.perf_counter() - t0) * 1e3)
             full["cpu"].append((time.process_time() - c0) * 1e3)
-            if records is not None:
-                rec.update(hyp=r.hypothesis_id, value=r.hypothesis_value, loop=r.loop_closure_id,
-                           rejected=r.rejected_loop_id, reason=r.rejection_reason,
-                           hyp_verdict=_verdict(poses, views, k, r.hypothesis_id - 1)
-                           if r.hypothesis_id else 0)
+            rec.update(hyp=r.hypothesis_id, value=r.hypothesis_value, loop=r.loop_closure_id,
+                       rejected=r.rejected_loop_id, reason=r.rejection_reason,
+                       hyp_verdict=_verdict(poses, views, k, r.hypothesis_id - 1)
+                       if r.hypothesis_id else 0)
+            if has_loop and r.hypothesis_id and rec["hyp_verdict"] != 1:
+                # where the posterior put the same place: rank and share among the locations
+                ids, post = slam.bayes.posterior_arrays()
+                order = np.argsort(-post[1:], kind="stable")[:20] + 1
+                for rank, s in enumerate(order.tolist()):
+                    if post[s] > 0 and _place(poses, views, k, int(ids[s]) - 1, 1.0, 30.0, 0.5):
+                        rec.update(same_rank=rank, same_post=float(post[s]),
+                                   top_post=float(post[order[0]]))
+                        break
             if r.rejected_loop_id:
                 why = r.rejection_reason.split(":")[0].split(" (")[0]
                 rejected[why] = rejected.get(why, 0) + 1
+                if r.rejected_transform is not None:
+                    # was the turned-away transform right? (against the true relative pose)
+                    h = r.rejected_loop_id - 1
+                    true_rel = se3_inverse(from_xyz_yaw(*pose)) @ from_xyz_yaw(*poses[h])
+                    err = se3_inverse(true_rel) @ r.rejected_transform
+                    rt, rr = float(np.hypot(err[0, 3], err[1, 3])), abs(yaw_of(err))
+                    rec.update(rej_t_err=rt, rej_r_err=rr,
+                               rej_right=rt <= TRANSFORM_TOLERANCE[0]
+                               and rr <= TRANSFORM_TOLERANCE[1])
             if not r.loop_closure_id:
                 full["values"].append(0.0)
                 full["verdicts"].append(0)
@@ -321,7 +397,8 @@ def run_world(name: str, params: dict[str, str], step: float, turn_step: float,
                 verdict = -1  # a closure with a wrong transform is an error wherever it is
             elif verdict == -1 and _place(poses, views, k, h, math.inf, 90.0, 0.1, either=True):
                 verdict = 0  # right transform between views that share a little: not counted
-            rec.update(t_err=t_err, r_err=r_err, verdict=verdict)
+            rec.update(t_err=t_err, r_err=r_err, verdict=verdict,
+                       mahalanobis=r.statistics.get("Loop/Mahalanobis/", math.nan))
             full["values"].append(r.hypothesis_value)
             full["verdicts"].append(verdict)
     out: dict[str, object] = {"world": name, "images": len(truth), "positives": positive,
@@ -339,6 +416,7 @@ def run_world(name: str, params: dict[str, str], step: float, turn_step: float,
             "deg": float(np.degrees(np.median(full["r_err"]))) if full["r_err"] else math.nan}
         f["parameters"] = {**REPORT_PARAMS, **params, **(full_params or {})}
         f["odom_variance"] = list(odom_variance)
+        f["stages"] = stage_breakdown(all_records)
         out["full"] = f
     return out
 
@@ -368,17 +446,24 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--max-images", type=int, default=0, help="first N images only (debugging)")
     ap.add_argument("--records", action="store_true", help="per-image decisions in the JSON")
-    ap.add_argument("--odom-variance", nargs=2, type=float, default=ODOM_VARIANCE,
-                    metavar=("LINEAR", "ANGULAR"), help="odometry link variances (m², rad²)")
+    ap.add_argument("--odom-variance", nargs=2, type=float, default=None,
+                    metavar=("LINEAR", "ANGULAR"),
+                    help="odometry link variances (m², rad²; default: the profile's)")
+    ap.add_argument("--profile", choices=sorted(PROFILES), default="product",
+                    help="whole detector's odometry variances and SLAM parameters: `product` "
+                         "(the SLAM node's for the simulated Eddie) or `gated` (first runs)")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     cv2.setNumThreads(1)
     params = dict(item.split("=", 1) for item in args.set)
-    full_params = dict(item.split("=", 1) for item in args.set_full)
+    profile_variance, profile_params = PROFILES[args.profile]
+    full_params = {**profile_params, **dict(item.split("=", 1) for item in args.set_full)}
+    odom_variance = tuple(args.odom_variance or profile_variance)
     results: dict[str, object] = {
         "machine": platform.processor() or platform.machine(),
         "python": platform.python_version(),
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+        "profile": args.profile, "odom_variance": list(odom_variance),
         "parameters": params, "full_parameters": full_params, "step_m": args.step,
         "turn_step_rad": args.turn_step, "transform_tolerance_m_rad": TRANSFORM_TOLERANCE,
     }
@@ -390,12 +475,12 @@ def main() -> int:
         c0 = time.process_time()
         records: list[dict] | None = [] if args.records else None
         r = run_world(name, params, args.step, args.turn_step, args.seed, tuple(args.modes),
-                      full_params, args.max_images, records, tuple(args.odom_variance))
+                      full_params, args.max_images, records, odom_variance)
         if records is not None:
             r["records"] = records
         r["cpu_s"] = time.process_time() - c0
         rows.append(r)
-        n, pos = int(r["images"]), int(r["positives"])
+        n, pos = int(str(r["images"])), int(str(r["positives"]))
         if "appearance" in args.modes:
             print(_row(name, "appearance", r, n, pos), flush=True)
         if "full" in args.modes:
@@ -404,6 +489,7 @@ def main() -> int:
             print(_row(name, "full", f, n, pos) + f"  accepted {f['accepted']}, rejected "
                   f"{f['rejected']}, transform error median {f['transform_error_median']}",
                   flush=True)
+            print(f"{'':21s} stages {json.dumps(f['stages'])}", flush=True)
     results["worlds"] = rows
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=2))

@@ -97,7 +97,7 @@ def _adjust_reference(scores, mode):
         out[VIRTUAL_PLACE_ID] = 2.0
         return out
     mu = float(np.mean(values))
-    sigma = float(np.std(values))
+    sigma = float(np.std(values, ddof=1)) if len(values) > 1 else 0.0
     for k, s in scores.items():
         if s > mu + sigma:
             out[k] = (s - mu) / sigma if mode == 1 else (s - sigma + 1e-4) / mu

@@ -88,6 +88,9 @@ def _dense_reference(lc, vp_stay, prior, likelihood, neighbours, states):
             rows.append(j)
             vals.append(lc[depth + 1])
         v = np.array(vals)
+        missing = sum(lc) - lc[0] - v.sum()  # missing neighbours' mass to the place (upstream)
+        if missing > 1e-9:
+            v[0] += missing
         v = (1.0 - lc[0]) * v / v.sum()
         p[0, k] = lc[0]
         for r, x in zip(rows, v):

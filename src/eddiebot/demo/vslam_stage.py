@@ -79,7 +79,10 @@ SLAM_PARAMETERS: dict[str, Any] = {"odom_tf_linear_variance": 1e-5,
 #: point-to-plane ICP of the depth cloud (every 4th pixel, ≤ 3 m: the Kinect's depth steps
 #: beyond lock ICP onto the last frame) against a 10,000-point scan map
 #: (`Odom/IcpFallbackInliers`, not upstream; docs/benchmarks/vslam_sim.md#vslam-sim-vo).
+#: The PnP RANSAC draws 2-point planar hypotheses (`Vis/PnPMinimal3DoF`, not upstream; far
+#: fewer draws than 6-DoF samples at a low inlier ratio; docs/benchmarks/vslam.md#vslam-vo).
 VO_PARAMETERS: dict[str, str] = {"Reg/Force3DoF": "true", "Vis/PnPRefineIterations": "1",
+                                 "Vis/PnPMinimal3DoF": "true",
                                  "Odom/MotionConsistencyReprojError": "1.0",
                                  "Odom/IcpFallbackInliers": "40", "Icp/PointToPlane": "true",
                                  "Icp/DownsamplingStep": "4", "Icp/RangeMax": "3",

@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 __all__ = ["VIRTUAL_PLACE_ID", "BayesFilter", "adjust_likelihood", "tfidf_scores"]
 
 VIRTUAL_PLACE_ID = -1
+_MASS_TOLERANCE = 1e-9  # column sums closer than this to the full mass count as full
 
 
 def tfidf_scores(
@@ -53,7 +54,8 @@ def adjust_likelihood(scores: Mapping[int, float], virtual_ratio_mode: int = 0) 
 
     With mean μ and std σ of the non-zero scores: s > μ + σ → (s − σ + 1e-4)/μ, else 1; the
     virtual place gets μ/σ + 1 (or 2 when σ ≤ 1e-4 or no score > 0). Mode 1 uses (s − μ)/σ and
-    σ/(max − μ) + 1.
+    σ/(max − μ) + 1. σ is the sample standard deviation (n − 1; 0 for a single score), as
+    upstream's `sqrt(uVariance(values, mean))`.
     """
     all_values = np.fromiter(scores.values(), np.float64, len(scores))
     values = all_values[all_values > 0.0]
@@ -62,7 +64,7 @@ def adjust_likelihood(scores: Mapping[int, float], virtual_ratio_mode: int = 0) 
         out[VIRTUAL_PLACE_ID] = 2.0
         return out
     mu = float(values.mean())
-    sigma = float(values.std())
+    sigma = float(values.std(ddof=1)) if values.size > 1 else 0.0
     top = float(values.max())
     high = np.flatnonzero(all_values > mu + sigma)
     if high.size:
@@ -84,7 +86,8 @@ def adjust_likelihood(scores: Mapping[int, float], virtual_ratio_mode: int = 0) 
 class BayesFilter:
     """posterior_t ∝ likelihood_t ⊙ (prediction · posterior_{t−1}) over {virtual} ∪ WM.
 
-    `neighbours(id, max_depth)` returns {neighbour id: link depth} within the graph, excluding
+    `neighbours(id, max_depth)` returns {neighbour id: link depth} within the graph (depth 0:
+    a loop partner, which gets `PredictionLC[1]` as the place itself), excluding
     short-term-memory nodes; prediction columns are cached per id and invalidated by
     `invalidate(ids)` when a node's neighbourhood changes (incremental prediction update).
 
@@ -96,6 +99,9 @@ class BayesFilter:
     def __init__(self, prediction_lc: tuple[float, ...], virtual_place_prior_thr: float = 0.9):
         self._lc = prediction_lc
         self._vp_stay = virtual_place_prior_thr
+        # a column whose entries sum below this gets the difference on its own cell
+        # (upstream's normalize: "add values of not found neighbours to loop closure")
+        self._full_mass = float(sum(prediction_lc)) - prediction_lc[0]
         self._states = np.zeros(0, np.int64)  # last posterior's states, virtual place first
         self._post = np.zeros(0)
         self.reset()
@@ -115,6 +121,7 @@ class BayesFilter:
         self._states = np.zeros(0, np.int64)
         self._post = np.zeros(0)
         self._columns: dict[int, dict[int, int]] = {}  # column id → {row id: entry}
+        self._short: set[int] = set()  # columns whose own cell holds missing neighbours' mass
         self._e_col = np.zeros(1024, np.int64)
         self._e_row = np.zeros(1024, np.int64)
         self._e_raw = np.zeros(1024)  # 0 = retired entry
@@ -126,6 +133,7 @@ class BayesFilter:
         """Recompute these ids' prediction columns at the next update."""
         for i in ids:
             col = self._columns.pop(i, None)
+            self._short.discard(i)
             if col:
                 self._e_raw[np.fromiter(col.values(), np.int64, len(col))] = 0.0
                 self._dead += len(col)
@@ -133,7 +141,10 @@ class BayesFilter:
     def add_neighbour(self, column_id: int, neighbour_id: int, depth: int) -> None:
         """Incremental prediction update: `neighbour_id` is now `depth` links from `column_id`."""
         col = self._columns.get(column_id)
-        if col is None or not 1 <= depth <= self.max_depth or neighbour_id in col:
+        if col is None or not 0 <= depth <= self.max_depth or neighbour_id in col:
+            return
+        if column_id in self._short:  # its own cell changes too: rebuilt at the next update
+            self.invalidate([column_id])
             return
         if not 0 <= neighbour_id <= self._max_id:
             self._track_ids(neighbour_id, neighbour_id)
@@ -146,6 +157,9 @@ class BayesFilter:
             return
         self._e_raw[col.pop(neighbour_id)] = 0.0
         self._dead += 1
+        if column_id in self._short or float(self._e_raw[
+                np.fromiter(col.values(), np.int64, len(col))].sum()) < self._full_mass - _MASS_TOLERANCE:
+            self.invalidate([column_id])  # the missing mass moves to its own cell
 
     def node_entered(self, node_id: int, neighbourhood: Mapping[int, int]) -> None:
         """A node joined the states; `neighbourhood` = {id: depth} of its WM neighbours.
@@ -158,9 +172,13 @@ class BayesFilter:
         cols: list[int] = []
         vals: list[float] = []
         targets: list[dict[int, int]] = []
+        short: list[int] = []
         for j, depth in neighbourhood.items():
             col = columns.get(j)
-            if col is None or not 1 <= depth <= top or node_id in col:
+            if col is None or not 0 <= depth <= top or node_id in col:
+                continue
+            if j in self._short:
+                short.append(j)
                 continue
             cols.append(j)
             vals.append(lc[depth + 1])
@@ -171,7 +189,7 @@ class BayesFilter:
             first = self._append(cols, [node_id] * len(cols), vals)
             for k, col in enumerate(targets):
                 col[node_id] = first + k
-        self.invalidate([node_id])
+        self.invalidate([node_id, *short])
 
     def node_left(self, node_id: int, neighbourhood: Iterable[int]) -> None:
         """A node left the states (transfer to LTM or deletion)."""
@@ -228,9 +246,13 @@ class BayesFilter:
         rows = [i]
         vals = [lc[1]]
         for j, depth in neighbours(i, top).items():
-            if j != i and 1 <= depth <= top:
+            if j != i and 0 <= depth <= top:
                 rows.append(j)
                 vals.append(lc[depth + 1])
+        missing = self._full_mass - sum(vals)
+        if missing > _MASS_TOLERANCE:
+            vals[0] += missing
+            self._short.add(i)
         self._track_ids(min(rows), max(rows))  # rows include the column's own id
         first = self._append(i, rows, vals)
         self._columns[i] = {r: first + k for k, r in enumerate(rows)}

@@ -27,12 +27,15 @@ Kinect's depth quantisation at 1 m is coarser), on the axes the fit constrains.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from eddiebot.geometry.grid import bucket_grid
 from eddiebot.vslam.camera import CameraIntrinsics, depth_to_meters
 from eddiebot.vslam.parameters import RtabmapParameters
 from eddiebot.vslam.registration import LOST_VARIANCE, huge_covariance
@@ -58,6 +61,7 @@ _MIN_CORRESPONDENCES = 10
 _VERTICAL_NORMAL = 0.9  # |n_z| above this: floor / ceiling (dropped under Reg/Force3DoF)
 _DEFAULT_EPSILON = 1e-6
 _THREE_DOF_AXES = np.array([0, 1, 5])
+_MAX_SUBTRACT_CELLS = 4_000_000  # grid cells of the subtraction search; beyond, a k-d tree
 _NORMAL_HALF_WINDOW = 2
 _JUMP_RATIO = 0.05
 _COARSE_GATE = 4.0
@@ -156,36 +160,53 @@ def depth_cloud(depth: NDArray[np.generic], camera: CameraIntrinsics, step: int 
 
 def _grid_normals(cam: F64, half: int) -> F64:
     """Normals of an organised cloud from the neighbours `half` cells away along the rows and
-    columns (central differences), towards the camera; NaN at depth jumps and borders."""
+    columns (central differences), towards the camera; NaN at depth jumps and borders.
+
+    Inverse depth is affine in the pixel coordinates on a plane: its second difference beyond
+    a share (`_JUMP_RATIO`) of the centre's marks a depth jump (not one surface). A crease (two
+    walls meeting): the normals of the forward and the backward differences disagree by more
+    than 20°; the central one would be a blend of both walls."""
+    return _grid_normals_kernel(np.ascontiguousarray(cam, np.float64), half, _JUMP_RATIO,
+                                _CREASE_COS)
+
+
+@njit(cache=True)
+def _cross_into(a0: float, a1: float, a2: float, b0: float, b1: float,
+                b2: float) -> tuple[float, float, float]:
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
+@njit(cache=True, error_model="numpy")  # 0 / 0 is NaN, as in the array form
+def _grid_normals_kernel(cam: F64, half: int, jump_ratio: float, crease_cos: float) -> F64:
+    """`_grid_normals`, one pass per pixel (the operations of the array form, in its order)."""
     h, w, _ = cam.shape
     out = np.full((h, w, 3), np.nan)
     if h <= 2 * half or w <= 2 * half:
         return out
-    c = cam[half:h - half, half:w - half]
-    du = cam[half:h - half, 2 * half:] - cam[half:h - half, : w - 2 * half]
-    dv = cam[2 * half:, half:w - half] - cam[: h - 2 * half, half:w - half]
-    n = np.cross(du, dv)
-    norm = np.linalg.norm(n, axis=2, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        n = n / norm
-        # Inverse depth is affine in the pixel coordinates on a plane: its second difference
-        # beyond a share of the centre's marks a depth jump (not one surface).
-        inv = 1.0 / cam[..., 2]
-        ic = inv[half:h - half, half:w - half]
-        d2u = inv[half:h - half, 2 * half:] + inv[half:h - half, : w - 2 * half] - 2 * ic
-        d2v = inv[2 * half:, half:w - half] + inv[: h - 2 * half, half:w - half] - 2 * ic
-        jump = (np.abs(d2u) > _JUMP_RATIO * ic) | (np.abs(d2v) > _JUMP_RATIO * ic)
-        # A crease (two walls meeting): the normals of the forward and the backward
-        # differences disagree; the central one would be a blend of both walls.
-        fwd = np.cross(cam[half:h - half, 2 * half:] - c, cam[2 * half:, half:w - half] - c)
-        bwd = np.cross(c - cam[half:h - half, : w - 2 * half], c - cam[: h - 2 * half, half:w - half])
-        cos_fb = np.sum(fwd * bwd, axis=2) / (
-            np.linalg.norm(fwd, axis=2) * np.linalg.norm(bwd, axis=2))
-        jump |= ~(cos_fb > _CREASE_COS)
-    n[jump] = np.nan
-    flip = np.sum(n * c, axis=2) > 0  # the camera is at the origin
-    n[flip] *= -1.0
-    out[half:h - half, half:w - half] = n
+    for i in range(half, h - half):
+        for j in range(half, w - half):
+            c = cam[i, j]
+            r, le = cam[i, j + half], cam[i, j - half]
+            dn, up = cam[i + half, j], cam[i - half, j]
+            n0, n1, n2 = _cross_into(r[0] - le[0], r[1] - le[1], r[2] - le[2],
+                                     dn[0] - up[0], dn[1] - up[1], dn[2] - up[2])
+            norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            n0, n1, n2 = n0 / norm, n1 / norm, n2 / norm
+            ic = 1.0 / c[2]
+            d2u = 1.0 / r[2] + 1.0 / le[2] - 2 * ic
+            d2v = 1.0 / dn[2] + 1.0 / up[2] - 2 * ic
+            jump = abs(d2u) > jump_ratio * ic or abs(d2v) > jump_ratio * ic
+            f0, f1, f2 = _cross_into(r[0] - c[0], r[1] - c[1], r[2] - c[2],
+                                     dn[0] - c[0], dn[1] - c[1], dn[2] - c[2])
+            b0, b1, b2 = _cross_into(c[0] - le[0], c[1] - le[1], c[2] - le[2],
+                                     c[0] - up[0], c[1] - up[1], c[2] - up[2])
+            cos_fb = (f0 * b0 + f1 * b1 + f2 * b2) / (
+                math.sqrt(f0 * f0 + f1 * f1 + f2 * f2) * math.sqrt(b0 * b0 + b1 * b1 + b2 * b2))
+            if jump or not cos_fb > crease_cos:
+                continue
+            if n0 * c[0] + n1 * c[1] + n2 * c[2] > 0:  # the camera is at the origin
+                n0, n1, n2 = -n0, -n1, -n2
+            out[i, j, 0], out[i, j, 1], out[i, j, 2] = n0, n1, n2
     return out
 
 
@@ -199,13 +220,12 @@ def voxel_filter(points: F64, voxel: float, normals: F64 | None = None) -> tuple
     span = keys.max(axis=0) + 1
     flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
     _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
-    sums = np.zeros((counts.size, 3))
-    np.add.at(sums, inverse, points)
+    # per-voxel sums in input order (as np.add.at would add them, without its overhead)
+    sums = np.stack([np.bincount(inverse, points[:, k], counts.size) for k in range(3)], axis=1)
     out: F64 = sums / counts[:, None]
     if normals is None:
         return out, None
-    nsum = np.zeros((counts.size, 3))
-    np.add.at(nsum, inverse, normals)
+    nsum = np.stack([np.bincount(inverse, normals[:, k], counts.size) for k in range(3)], axis=1)
     nrm: F64 = nsum / np.maximum(np.linalg.norm(nsum, axis=1, keepdims=True), 1e-12)
     return out, nrm
 
@@ -425,6 +445,39 @@ def icp_register(target: ScanCloud, source: ScanCloud, guess: F64, settings: Icp
     return IcpResult(t, cov, n_ok, ratio, complexity, free_axis, "", it)
 
 
+@njit(cache=True)
+def _far_from(reference: F64, query: F64, radius: float, x0: float, y0: float, nx: int, ny: int,
+              start: NDArray[np.int64], order: NDArray[np.int64]) -> NDArray[np.bool_]:
+    """True for the query points with no reference point closer than `radius` (3D distance;
+    the reference bucketed by `bucket_grid` in cells of `radius`)."""
+    r2 = radius * radius
+    out = np.ones(query.shape[0], np.bool_)
+    for i in range(query.shape[0]):
+        fx = math.floor((query[i, 0] - x0) / radius)
+        fy = math.floor((query[i, 1] - y0) / radius)
+        if fx < -1 or fy < -1 or fx > nx or fy > ny:
+            continue
+        cx, cy = int(fx), int(fy)
+        found = False
+        for gy in range(max(cy - 1, 0), min(cy + 1, ny - 1) + 1):
+            for gx in range(max(cx - 1, 0), min(cx + 1, nx - 1) + 1):
+                k = gy * nx + gx
+                for j in range(start[k], start[k + 1]):
+                    m = order[j]
+                    dx = query[i, 0] - reference[m, 0]
+                    dy = query[i, 1] - reference[m, 1]
+                    dz = query[i, 2] - reference[m, 2]
+                    if dx * dx + dy * dy + dz * dz < r2:
+                        found = True
+                        break
+                if found:
+                    break
+            if found:
+                break
+        out[i] = not found
+    return out
+
+
 class ScanMap:
     """Local scan map of the odometry (`OdomF2M/ScanMaxSize`, `OdomF2M/ScanSubtractRadius`):
     points of key-frame clouds in the odometry frame, the oldest dropped first."""
@@ -453,8 +506,7 @@ class ScanMap:
             return 0
         keep = np.ones(len(cloud), bool)
         if len(self.cloud) and self.subtract_radius > 0:
-            d, _ = self.tree.query(cloud.points, distance_upper_bound=self.subtract_radius)
-            keep = ~np.isfinite(d)
+            keep = self._far(cloud.points)
         n = int(keep.sum())
         if n == 0:
             return 0
@@ -469,6 +521,20 @@ class ScanMap:
         self._born = born
         self._tree = None
         return n
+
+    def _far(self, points: F64) -> NDArray[np.bool_]:
+        """Points with no map point closer than the subtract radius. A grid of the map in
+        cells of the radius (no k-d tree is built for it: the map changes at every key frame,
+        the tree is needed only when ICP runs); the same test as the tree's query."""
+        ref = self.cloud.points
+        r = float(self.subtract_radius)
+        lo, hi = ref[:, :2].min(axis=0), ref[:, :2].max(axis=0)
+        if float(np.prod((hi - lo) / r + 1.0)) > _MAX_SUBTRACT_CELLS:
+            d, _ = self.tree.query(points, distance_upper_bound=r)
+            return ~np.isfinite(d)
+        x0, y0, nx, ny, start, order = bucket_grid(ref, r)
+        return _far_from(ref, np.ascontiguousarray(points, np.float64), r, x0, y0, nx, ny,
+                         start, order)
 
     def reset(self, cloud: ScanCloud | None = None, stamp: int = 0) -> None:
         """Forget the map (and start it with `cloud`)."""

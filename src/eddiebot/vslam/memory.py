@@ -234,8 +234,17 @@ class Memory:
         return [link for (a, b), link in self._pairs.items() if a in allowed and b in allowed]
 
     def neighbours(self, node_id: int, max_depth: int, *, exclude_stm: bool = True,
-                   wm_only: bool = True) -> dict[int, int]:
-        """Breadth-first {id: depth} over links up to `max_depth` (STM cut out of the search)."""
+                   wm_only: bool = True, loop_margin: bool = False) -> dict[int, int]:
+        """Breadth-first {id: depth} over links up to `max_depth` (STM cut out of the search).
+
+        `loop_margin`: as upstream's `Memory::getNeighborsId` for the Bayes prediction
+        (`incrementMarginOnLoop` false, `ignoreLocalSpaceLoopIds` true): a loop-closure link
+        keeps the depth of the node it leaves (a place's loop partners are at depth 0, and
+        their neighbours at the depths of its own), a proximity link is not followed, and
+        only odometry links add one.
+        """
+        if loop_margin:
+            return self._neighbours_loop_margin(node_id, max_depth, exclude_stm, wm_only)
         stm = set(self.stm) if exclude_stm else set()
         out: dict[int, int] = {}
         frontier = [node_id]
@@ -254,6 +263,44 @@ class Memory:
             if not nxt:
                 break
             frontier = nxt
+        return out
+
+    def _neighbours_loop_margin(self, node_id: int, max_depth: int, exclude_stm: bool,
+                                wm_only: bool) -> dict[int, int]:
+        stm = set(self.stm) if exclude_stm else set()
+        odometry = (LinkType.NEIGHBOR, LinkType.NEIGHBOR_MERGED)
+        out: dict[int, int] = {}
+        seen = {node_id}
+        margin = [node_id]
+        for depth in range(max_depth + 1):
+            k = 0
+            while k < len(margin):  # loop partners join the margin being walked
+                n = margin[k]
+                k += 1
+                for m, lk in self.links.get(n, {}).items():
+                    if (m in seen or m in stm or lk.type in odometry
+                            or lk.type == LinkType.LOCAL_SPACE_CLOSURE):
+                        continue
+                    seen.add(m)
+                    if wm_only and m not in self.wm:
+                        continue
+                    out[m] = depth
+                    margin.append(m)
+            if depth == max_depth:
+                break
+            nxt = []
+            for n in margin:
+                for m, lk in self.links.get(n, {}).items():
+                    if m in seen or m in stm or lk.type not in odometry:
+                        continue
+                    seen.add(m)
+                    if wm_only and m not in self.wm:
+                        continue
+                    out[m] = depth + 1
+                    nxt.append(m)
+            if not nxt:
+                break
+            margin = nxt
         return out
 
     def component(self, node_id: int, within: set[int]) -> set[int]:

@@ -75,6 +75,12 @@ class RtabmapParameters:
         "Vis/PnPJacobianCovariance", False,
         "not upstream: per axis, the larger of the 3D-error variance and the PnP geometry's "
         "σ²(JᵀJ)⁻¹ marginal (inlier reprojection residual, ≥ 0.5 px)")
+    vis_pnp_minimal_3dof: bool = _p(
+        "Vis/PnPMinimal3DoF", False,
+        "not upstream: with Reg/Force3DoF, PnP RANSAC on 2-point hypotheses in x, y, yaw "
+        "(old 3D points, new keypoints; adaptive to Vis/Iterations at confidence 0.99), the "
+        "Vis/PnPReprojError inlier test, then a planar re-solve on the inliers; false = "
+        "OpenCV's 6-DoF solvePnPRansac projected to 3 DoF (upstream)")
     reg_force_3dof: bool = _p("Reg/Force3DoF", False, "x, y, yaw only")
     reg_repeat_once: bool = _p("Reg/RepeatOnce", True, "second pass with the first result as guess")
     reg_strategy: int = _p(
@@ -168,6 +174,12 @@ class RtabmapParameters:
         "not upstream; sigmas, 0 = off: reject a loop/proximity closure whose (x, y, yaw) is "
         "farther than this Mahalanobis distance from the graph's prediction, with the "
         "covariance of the closure plus the link covariances composed along the graph path")
+    rgbd_loop_closure_hypotheses: int = _p(
+        "RGBD/LoopClosureHypotheses", 1,
+        "not upstream; places verified per image (1 = upstream: the top hypothesis only): when "
+        "the top one (value ≥ Rtabmap/LoopThr) is rejected by the registration or the gate, "
+        "the next places of the posterior, each ≥ 4 links from those already tried, until one "
+        "passes")
     rgbd_odom_heading_sigma: float = _p(
         "RGBD/OdomHeadingSigma", 0.0,
         "not upstream; rad, 0 = off: σ of a non-accumulating error of the odometry heading at "
@@ -227,6 +239,8 @@ class RtabmapParameters:
             raise ParameterError("Grid/Sensor must be 0, 1 or 2")
         if self.rgbd_odom_heading_sigma < 0:
             raise ParameterError("RGBD/OdomHeadingSigma must be >= 0")
+        if self.rgbd_loop_closure_hypotheses < 1:
+            raise ParameterError("RGBD/LoopClosureHypotheses must be >= 1")
         if self.mem_stm_size < 0:
             raise ParameterError("Mem/STMSize must be >= 0")
         if self.vis_min_inliers < 4:

@@ -56,6 +56,9 @@ _CLOUD_VOXEL = 0.02
 ODOM_FRAME_ID_OFFSET = 1 << 40
 _FRAME_TIE_VARIANCE = 1e-8  # m², rad²: a node's odometry frame shares its position (and the root's yaw)
 _ODOMETRY_LINKS = (LinkType.NEIGHBOR, LinkType.NEIGHBOR_MERGED)
+#: `RGBD/LoopClosureHypotheses`: a further hypothesis is not within this many links of one
+#: already verified (the span where `Bayes/PredictionLC` gives a place's neighbours ≥ 1 %)
+_HYPOTHESIS_MARGIN = 4
 
 
 @dataclass(frozen=True)
@@ -78,6 +81,9 @@ class ProcessResult:
     rejection_reason: str = ""
     localized: bool = False
     statistics: dict[str, float] = field(default_factory=dict)
+    #: the registered transform (new node → old node, 4×4) of a hypothesis that passed the
+    #: registration but was rejected after it (gate or `RGBD/OptimizeMaxError`), else None
+    rejected_transform: F64 | None = None
 
 
 @dataclass(frozen=True)
@@ -152,6 +158,8 @@ class Rtabmap:
         self._localized = False
         self._odom_max_info: F64 | None = None  # per-axis largest odometry information
         self._frame_poses: dict[int, F64] = {}  # optimised odometry frames (RGBD/OdomHeadingSigma)
+        self._candidate: Link | None = None  # last registered loop-closure hypothesis
+        self._mahalanobis = float("nan")  # its distance from the graph's prediction (σ)
         if database is not None:
             database.load_into(self)
 
@@ -235,7 +243,7 @@ class Rtabmap:
         for link in new_links:
             self.memory.add_link(link)
         for m in moved:
-            self.bayes.node_entered(m, self.memory.neighbours(m, self.bayes.max_depth))
+            self.bayes.node_entered(m, self._bayes_neighbours(m, self.bayes.max_depth))
 
         # --- loop-closure hypothesis over WM ---
         hyp_id, hyp_value = 0, 0.0
@@ -244,7 +252,7 @@ class Rtabmap:
         if not skip_update and wm:
             scores = self._likelihood_scores(node, wm)
             like = adjust_likelihood(scores, p.rtabmap_virtual_place_likelihood_ratio)
-            self.bayes.update(like, lambda i, d: self.memory.neighbours(i, d))
+            self.bayes.update(like, self._bayes_neighbours)
             hyp_id, hyp_value = self.bayes.highest_hypothesis()
             stats["Loop/Likelihood_max/"] = max(scores.values(), default=0.0)
         elif skip_update:
@@ -262,6 +270,8 @@ class Rtabmap:
         loop_id = 0
         rejected_id = 0
         reason = ""
+        self._candidate = None
+        self._mahalanobis = float("nan")
         graph_changed = bool(retrieved)
         closure_links: list[Link] = []
         accept_hyp = (
@@ -280,7 +290,24 @@ class Rtabmap:
                 loop_id = hyp_id
             else:
                 rejected_id = hyp_id
+                # RGBD/LoopClosureHypotheses (not upstream): the next places of the posterior
+                candidate = self._candidate
+                tried = [hyp_id]
+                for other in self._next_hypotheses(hyp_id, p.rgbd_loop_closure_hypotheses - 1):
+                    tried.append(other)
+                    closure, _ = self._verify(self.memory.nodes[other], node, camera,
+                                              LinkType.GLOBAL_CLOSURE)
+                    if closure is not None:
+                        closure_links.append(closure)
+                        loop_id = other
+                        rejected_id, reason = 0, ""
+                        break
+                else:
+                    self._candidate = candidate  # report the top hypothesis' rejection
+                stats["Loop/Hypotheses_verified/"] = float(len(tried))
 
+        if loop_id:
+            stats["Loop/Mahalanobis/"] = self._mahalanobis
         # --- proximity by space ---
         proximity_id = 0
         if p.rgbd_proximity_by_space and not loop_id and not self.localization_mode:
@@ -348,6 +375,8 @@ class Rtabmap:
             loop_closure_id=loop_id, proximity_id=proximity_id, hypothesis_id=hyp_id,
             hypothesis_value=hyp_value, rejected_loop_id=rejected_id, rejection_reason=reason,
             localized=self._localized, statistics=stats,
+            rejected_transform=(self._candidate.transform.copy()
+                                if rejected_id and self._candidate is not None else None),
         )
 
     # -- maps -------------------------------------------------------------------------------
@@ -415,6 +444,33 @@ class Rtabmap:
             scores[j] = common / max(1, max(n_new, sum(other.values())))
         return scores
 
+    def _bayes_neighbours(self, node_id: int, max_depth: int) -> dict[int, int]:
+        """A node's neighbourhood in the Bayes prediction: loop partners at the same depth
+        (upstream's `getNeighborsId` as `BayesFilter` calls it)."""
+        return self.memory.neighbours(node_id, max_depth, loop_margin=True)
+
+    def _next_hypotheses(self, top: int, count: int) -> list[int]:
+        """Up to `count` further places to verify after `top` was rejected, in decreasing
+        posterior: each the best location not within `_HYPOTHESIS_MARGIN` links of one
+        already chosen (the posterior spreads over a place's neighbours), with data in RAM."""
+        if count <= 0:
+            return []
+        ids, post = self.bayes.posterior_arrays()
+        order = np.argsort(-post[1:], kind="stable") + 1
+        taken = {top: 0} | self.memory.neighbours(top, _HYPOTHESIS_MARGIN)
+        out: list[int] = []
+        for k in order.tolist():
+            if post[k] <= 0.0 or len(out) >= count:
+                break
+            i = int(ids[k])
+            node = self.memory.nodes.get(i)
+            if i in taken or node is None or node.data is None:
+                continue
+            out.append(i)
+            taken.update(self.memory.neighbours(i, _HYPOTHESIS_MARGIN))
+            taken[i] = 0
+        return out
+
     def _verify(self, old: Node, new: Node, camera: CameraIntrinsics,
                 link_type: LinkType) -> tuple[Link | None, str]:
         if old.data is None or new.data is None:
@@ -432,6 +488,8 @@ class Rtabmap:
             idx = np.flatnonzero((np.diag(info) > cap) & (cap > 0))
             info[idx, idx] = cap[idx]
         link = Link(new.id, old.id, link_type, se3_inverse(reg.transform), info)
+        if link_type == LinkType.GLOBAL_CLOSURE:
+            self._candidate = link
         gate = self.params.rgbd_loop_closure_max_mahalanobis
         if gate > 0 and not self.localization_mode:
             old_pose = self.optimized_poses.get(old.id)
@@ -439,6 +497,8 @@ class Rtabmap:
                 d = closure_mahalanobis(link, self.map_to_odom @ new.odom_pose, old_pose,
                                         self.memory.links,
                                         heading_sigma=self.params.rgbd_odom_heading_sigma)
+                if d is not None:
+                    self._mahalanobis = d
                 if d is not None and d > gate:
                     return None, (f"RGBD/LoopClosureMaxMahalanobis exceeded ({d:.1f} > "
                                   f"{gate:g})")
@@ -558,7 +618,7 @@ class Rtabmap:
                 break
             frontier = nxt
         for m in out:
-            self.bayes.node_entered(m, mem.neighbours(m, self.bayes.max_depth))
+            self.bayes.node_entered(m, self._bayes_neighbours(m, self.bayes.max_depth))
         return out
 
     def _manage_memory(self, t0: float, protected: set[int]) -> int:
@@ -575,7 +635,7 @@ class Rtabmap:
         protected = protected | {self._last_loop_id}
         cands = mem.transfer_candidates(protected, p.mem_recent_wm_ratio)[:n]
         for i in cands:
-            neighbourhood = mem.neighbours(i, self.bayes.max_depth)
+            neighbourhood = self._bayes_neighbours(i, self.bayes.max_depth)
             mem.transfer_to_ltm(i)
             self.bayes.node_left(i, neighbourhood)
         return len(cands)

@@ -1,0 +1,95 @@
+"""Per-frame work of the depth cloud without changing it: the compiled grid normals equal the
+array form, and the scan map's grid subtraction keeps the points the k-d tree query keeps."""
+
+import numpy as np
+from scipy.spatial import cKDTree
+from vslam_synthetic import BoxRoom, kinect_camera, planar_pose, render
+
+from eddiebot.vslam import depth_icp
+from eddiebot.vslam.depth_icp import ScanCloud, ScanMap
+
+
+def _grid_normals_arrays(cam, half):
+    """The array form `_grid_normals` had (reference)."""
+    h, w, _ = cam.shape
+    out = np.full((h, w, 3), np.nan)
+    c = cam[half:h - half, half:w - half]
+    du = cam[half:h - half, 2 * half:] - cam[half:h - half, : w - 2 * half]
+    dv = cam[2 * half:, half:w - half] - cam[: h - 2 * half, half:w - half]
+    n = np.cross(du, dv)
+    norm = np.linalg.norm(n, axis=2, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = n / norm
+        inv = 1.0 / cam[..., 2]
+        ic = inv[half:h - half, half:w - half]
+        d2u = inv[half:h - half, 2 * half:] + inv[half:h - half, : w - 2 * half] - 2 * ic
+        d2v = inv[2 * half:, half:w - half] + inv[: h - 2 * half, half:w - half] - 2 * ic
+        jump = (np.abs(d2u) > depth_icp._JUMP_RATIO * ic) | (np.abs(d2v) > depth_icp._JUMP_RATIO * ic)
+        fwd = np.cross(cam[half:h - half, 2 * half:] - c, cam[2 * half:, half:w - half] - c)
+        bwd = np.cross(c - cam[half:h - half, : w - 2 * half], c - cam[: h - 2 * half, half:w - half])
+        cos_fb = np.sum(fwd * bwd, axis=2) / (
+            np.linalg.norm(fwd, axis=2) * np.linalg.norm(bwd, axis=2))
+        jump |= ~(cos_fb > depth_icp._CREASE_COS)
+    n[jump] = np.nan
+    flip = np.sum(n * c, axis=2) > 0
+    n[flip] *= -1.0
+    out[half:h - half, half:w - half] = n
+    return out
+
+
+def test_compiled_grid_normals_equal_the_array_form():
+    cam = kinect_camera(320, 240)
+    room = BoxRoom(size_x=8.0, size_y=4.0, height=2.5, seed=3)
+    checked = 0
+    for x, y, yaw in ((1.0, 1.0, 0.3), (6.5, 3.2, 2.5), (4.0, 2.0, -1.2)):
+        _, depth = render(room, planar_pose(x, y, yaw), cam)
+        depth[100:110, 50:90] = 0  # holes: NaN neighbours
+        for step in (1, 2, 4):
+            grid = depth_icp._organised_points(depth, cam, step)
+            got = depth_icp._grid_normals(grid, 2)
+            ref = _grid_normals_arrays(grid, 2)
+            np.testing.assert_array_equal(got, ref)
+            checked += int(np.isfinite(got[..., 0]).sum())
+    assert checked > 20000
+    # a crease and a jump are both NaN; a plane is not
+    assert np.isnan(got).any() and np.isfinite(got).any()
+
+
+def test_scan_map_grid_subtraction_equals_tree_query():
+    rng = np.random.default_rng(5)
+    radius = 0.05
+    pts = rng.uniform([0, 0, 0], [4, 3, 2], (6000, 3))
+    m = ScanMap(max_size=100000, subtract_radius=radius)
+    m.add(ScanCloud(pts, np.tile([1.0, 0, 0], (6000, 1))), 1)
+    # queries near the map (many within the radius), far outside it, and on the cell borders
+    q = np.concatenate([pts[:2000] + rng.normal(0, 0.03, (2000, 3)),
+                        rng.uniform([-3, -3, -1], [7, 6, 3], (2000, 3)),
+                        pts[:200] + np.array([radius, 0, 0])])
+    ref = ~np.isfinite(cKDTree(pts).query(q, distance_upper_bound=radius)[0])
+    got = m._far(q)
+    np.testing.assert_array_equal(got, ref)
+    assert 500 < ref.sum() < len(q) - 500
+    # add() keeps the far points only
+    added = m.add(ScanCloud(q, np.tile([0, 1.0, 0], (len(q), 1))), 2)
+    assert added == int(ref.sum()) and len(m) == 6000 + added
+
+
+def test_voxel_sums_equal_add_at():
+    rng = np.random.default_rng(2)
+    pts = rng.uniform(-2, 2, (4000, 3))
+    nrm = rng.normal(size=(4000, 3))
+    for voxel in (0.05, 0.3):
+        got, got_n = depth_icp.voxel_filter(pts, voxel, nrm)
+        keys = np.floor(pts / voxel).astype(np.int64)
+        keys -= keys.min(axis=0)
+        span = keys.max(axis=0) + 1
+        flat = (keys[:, 0] * span[1] + keys[:, 1]) * span[2] + keys[:, 2]
+        _, inverse, counts = np.unique(flat, return_inverse=True, return_counts=True)
+        sums = np.zeros((counts.size, 3))
+        np.add.at(sums, inverse, pts)
+        nsum = np.zeros((counts.size, 3))
+        np.add.at(nsum, inverse, nrm)
+        np.testing.assert_array_equal(got, sums / counts[:, None])
+        np.testing.assert_array_equal(
+            got_n, nsum / np.maximum(np.linalg.norm(nsum, axis=1, keepdims=True), 1e-12))
+        assert got.shape[0] < pts.shape[0]
