@@ -30,7 +30,12 @@ moved enough, no node time gate) with ``--set NAME:=VALUE`` overrides on config/
 how the parameters below were chosen. Writes ``benchmarks/results/<--name>.json``.
 
     .venv/bin/python benchmarks/bench_slam_sim.py --replay DIR [DIR ...] [--worlds ...]
-        [--set K:=V ...]
+        [--set K:=V ...] [--node-time-gate] [--ensemble K]
+
+``--ensemble K`` replays each drive K times, member 0 as recorded and members 1.. with every
+odometry pose moved by seeded N(0, 1e-9) noise: the SLAM result is chaotic at the level of
+floating-point rounding (a loop accepted or not near a threshold changes everything after it),
+so one run of a drive is one sample; the ensemble's mean and spread are the figure to compare.
 """
 
 from __future__ import annotations
@@ -150,10 +155,16 @@ def _interp(t: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     return out
 
 
+#: odometry perturbation of an ensemble member (m, rad): far below anything physical, it only
+#: changes floating-point rounding, which decides loop closures near their thresholds
+PERTURBATION_SIGMA = 1e-9
+
+
 def replay_one(name: str, bag: Path, overrides: dict[str, Any],
-               node_time_gate: bool = False) -> dict[str, Any]:
+               node_time_gate: bool = False, perturbation: int = 0) -> dict[str, Any]:
     """Replay a recorded run's bag and score it against its ground truth (``node_time_gate``:
-    the node's ``minimum_time_interval`` gate too, as in the live run)."""
+    the node's ``minimum_time_interval`` gate too, as in the live run; ``perturbation`` > 0:
+    every odometry pose gets seeded N(0, `PERTURBATION_SIGMA`) noise, one ensemble member)."""
     from eddiebot.cli.slam import _default_params
     from eddiebot.geometry import se2_compose
     from eddiebot.sim.worlds import load_world
@@ -172,7 +183,11 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
                                    for m in reader.messages(topics.all)),
                                   topics, odom_frame=config.odom_frame,
                                   base_frame=config.base_frame)
-    res = replay_scans(log.scans, log.odometry, config, sensor_offset=log.sensor_offset,
+    odometry = [np.asarray(o, dtype=np.float64) for o in log.odometry]
+    if perturbation:
+        rng = np.random.default_rng(perturbation)
+        odometry = [o + rng.normal(0.0, PERTURBATION_SIGMA, 3) for o in odometry]
+    res = replay_scans(log.scans, odometry, config, sensor_offset=log.sensor_offset,
                        source=str(bag), node_time_gate=node_time_gate)
     stamps, poses = res.trajectory()
     q = np.round(stamps * 1e9).astype(np.int64)
@@ -190,6 +205,7 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
     cpu = 1e3 * np.asarray(res.scan_cpu_s)
     return {
         "run": name, "overrides": " ".join(f"{k}:={v}" for k, v in overrides.items()) or "-",
+        "perturbation": perturbation,
         "nodes": len(poses), "loop_closures": len(res.core.loop_closures),
         "ate_rmse_m": float(np.sqrt(np.mean(err**2))), "ate_max_m": float(err.max()),
         "slam_end_m": float(err[-1]), "odom_ate_rmse_m": float(np.sqrt(np.mean(oerr**2))),
@@ -208,21 +224,43 @@ def main_replay(args: argparse.Namespace) -> int:
         key, value = item.split(":=", 1)
         overrides[key.strip()] = yaml.safe_load(value)
     rows = []
+    summary = []
     for folder in args.replay:
         for name in args.worlds:
             bag = folder / name / "mapping_bag"
             if not bag.exists():
                 print(f"{name}: no {bag}, skipped")
                 continue
-            rows.append({"drive": folder.name, "node_time_gate": args.node_time_gate,
-                         **replay_one(name, bag, overrides, args.node_time_gate)})
-            print(rows[-1], flush=True)
-    print_table(rows, ["drive", "run", "nodes", "loop_closures", "ate_rmse_m", "ate_max_m",
-                       "slam_end_m", "odom_ate_rmse_m", "odom_end_m", "end_ratio",
+            members = []
+            for k in range(max(1, args.ensemble)):
+                members.append({"drive": folder.name, "node_time_gate": args.node_time_gate,
+                                **replay_one(name, bag, overrides, args.node_time_gate, k)})
+                print(members[-1], flush=True)
+            rows += members
+            if args.ensemble > 1:
+                summary.append(_ensemble_row(members))
+    print_table(rows, ["drive", "run", "perturbation", "nodes", "loop_closures", "ate_rmse_m",
+                       "ate_max_m", "slam_end_m", "odom_ate_rmse_m", "odom_end_m", "end_ratio",
                        "heading_drift_max_deg",
                        "odom_heading_drift_max_deg", "scan_cpu_median_ms", "overrides"])
-    print(f"\nwrote {write_results(args.name, rows)}")
+    if summary:
+        print()
+        print_table(summary, ["drive", "run", "members", "ate_rmse_mean_m", "ate_rmse_sd_m",
+                              "ate_rmse_min_m", "ate_rmse_max_m", "end_ratio_median",
+                              "overrides"])
+    print(f"\nwrote {write_results(args.name, rows + summary)}")
     return 0
+
+
+def _ensemble_row(members: list[dict[str, Any]]) -> dict[str, Any]:
+    """Mean, spread and range of an ensemble's RMSE (one drive, one configuration)."""
+    rmse = np.array([m["ate_rmse_m"] for m in members])
+    return {"drive": members[0]["drive"], "run": members[0]["run"], "summary": "ensemble",
+            "members": len(members), "overrides": members[0]["overrides"],
+            "ate_rmse_mean_m": float(rmse.mean()), "ate_rmse_sd_m": float(rmse.std(ddof=1)),
+            "ate_rmse_min_m": float(rmse.min()), "ate_rmse_max_m": float(rmse.max()),
+            "end_ratio_median": float(np.median([m["end_ratio"] for m in members])),
+            "loop_closures_mean": float(np.mean([m["loop_closures"] for m in members]))}
 
 
 def main() -> int:
@@ -245,6 +283,10 @@ def main() -> int:
     ap.add_argument("--node-time-gate", action="store_true",
                     help="with --replay: also skip scans within minimum_time_interval of the "
                     "last processed one, as the node does (closer to the live run)")
+    ap.add_argument("--ensemble", type=int, default=1, metavar="K",
+                    help="with --replay: K replays per drive, member k > 0 with its odometry "
+                    "perturbed by seeded 1e-9 noise (rounding-level: shows how far loop "
+                    "decisions near their thresholds move the figure); prints mean and spread")
     ap.add_argument("--noise-correlation-px", type=float, default=None,
                     help="the simulator's noise_correlation_px (Kinect depth-noise correlation "
                     "window, native pixels; default: the node's default)")

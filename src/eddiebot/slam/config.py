@@ -198,6 +198,14 @@ class SlamConfig:
     depth camera's range bias, which grows as r², does not average out. A loop closed on
     walls 6-8 m ahead is then weak along the view and as strong as before across it. Off:
     the correlative search's covariance alone (Karto's)."""
+    loop_match_range_bias_quadratic: float = 0.0
+    """Known quadratic range bias (1/m) removed from the points of a loop-closure match only:
+    the new scan's and its candidate chain's points are read at ``r + k · r²`` (each point moved
+    away from its sensor). A loop typically compares a scan of walls metres ahead with a chain
+    that saw them from close by, so a range bias that grows as r² (a depth camera's scan taken
+    as the nearest of several image rows) shifts the closure along the view; sequential
+    matching and the map keep the ranges as they are (see ``scan_range_bias_quadratic`` for
+    correcting everything). 0 = off (slam_toolbox's behaviour)."""
     map_max_laser_range: float = 0.0
     """Range (m) beyond which beams leave no hit in the occupancy grid (cut there, clearing
     up to it), when shorter than ``max_laser_range`` (which still bounds scan matching): a
@@ -256,6 +264,7 @@ class SlamConfig:
             "max_laser_range",
             "map_max_laser_range",
             "odometry_heading_quantization",
+            "loop_match_range_bias_quadratic",
         ):
             value = getattr(out, name)
             if not math.isfinite(value) or value < 0:

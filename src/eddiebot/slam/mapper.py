@@ -66,6 +66,7 @@ __all__ = [
     "SlamCore",
     "SlamWarning",
     "matcher_params",
+    "unbiased_points",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -245,6 +246,13 @@ def corrected_scan(scan: Scan, bias_quadratic: float) -> Scan:
     ok = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
     r[ok] = np.minimum(r[ok] + bias_quadratic * r[ok] ** 2, scan.range_max)
     return dataclasses.replace(scan, ranges=r)
+
+
+def unbiased_points(points: FloatArray, bias_quadratic: float) -> FloatArray:
+    """Sensor-frame points (M, 2) each moved away from the sensor to range ``r + k · r²``
+    (``k = bias_quadratic``, 1/m): a quadratic range bias removed from a scan's end points."""
+    r = np.hypot(points[:, 0], points[:, 1])
+    return np.asarray(points * (1.0 + bias_quadratic * r)[:, None], dtype=np.float64)
 
 
 def scan_position_covariance(
@@ -512,6 +520,17 @@ class SlamCore:
         world[:, 0] = sensor[0] + c * pts[:, 0] - s * pts[:, 1]
         world[:, 1] = sensor[1] + s * pts[:, 0] + c * pts[:, 1]
         self._ref_cache[idx] = (pose, world)
+        return world
+
+    def _unbiased_world_points(self, idx: int, pose: FloatArray, bias: float) -> FloatArray:
+        """Node ``idx``'s end points with the range bias removed (`unbiased_points`), in the
+        map frame at ``pose`` (loop-closure matching only: not cached)."""
+        sensor = _compose1(pose, self.sensor_offset)
+        pts = unbiased_points(self.nodes[idx].points, bias)
+        c, s = math.cos(sensor[2]), math.sin(sensor[2])
+        world = np.empty_like(pts)
+        world[:, 0] = sensor[0] + c * pts[:, 0] - s * pts[:, 1]
+        world[:, 1] = sensor[1] + s * pts[:, 0] + c * pts[:, 1]
         return world
 
     def _world_normals(self, idx: int, pose: FloatArray | None = None) -> FloatArray:
@@ -919,10 +938,16 @@ class SlamCore:
             poses = self.graph.poses  # in sync since _positions: no second pass
             sensor = _compose1(poses[idx], self.sensor_offset)
             icp_cov = cfg.use_icp_refinement and cfg.match_covariance == "icp"
+            bias = cfg.loop_match_range_bias_quadratic
+            query = points if bias <= 0.0 else unbiased_points(points, bias)
             for chain in chains:
-                ref = np.concatenate([self._world_points(i, poses[i]) for i in chain])
+                if bias > 0.0:
+                    ref = np.concatenate([self._unbiased_world_points(i, poses[i], bias)
+                                          for i in chain])
+                else:
+                    ref = np.concatenate([self._world_points(i, poses[i]) for i in chain])
                 found = verify_loop(
-                    points,
+                    query,
                     sensor,
                     chain,
                     ref,
@@ -936,7 +961,7 @@ class SlamCore:
                 )
                 if found is not None and icp_cov:
                     normals = np.concatenate([self._world_normals(i, poses[i]) for i in chain])
-                    polished = self._polish(found.match, points, ref, normals, self._loop_fine)
+                    polished = self._polish(found.match, query, ref, normals, self._loop_fine)
                     found = dataclasses.replace(found, match=polished)
                     if cfg.loop_match_maximum_variance_fine > 0.0 and (
                         float(np.linalg.eigvalsh(polished.covariance[:2, :2])[-1])
