@@ -9,6 +9,7 @@ Synthetic data: a textured corridor rendered by the pinhole ray-caster of the te
         [--vo-params defaults vo_stage] [--vo-only] [--vo-profile FILE]  (odometry settings,
         odometry alone, cProfile of the odometry frames on the CPU clock)
         [--profile FILE]  (cProfile, CPU clock, of the updates from node --nodes − 100 on)
+        [--set NAME=VALUE ...]  (further RTAB-Map parameters for the loop-closure run)
 """
 
 from __future__ import annotations
@@ -136,12 +137,15 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
                        memory_thr: int = 0, cpu_parts: bool = False,
                        frame_cache: Path | None = None,
                        compare_relinearize: float | None = None,
-                       profile: Path | None = None) -> dict[str, Any]:
+                       profile: Path | None = None,
+                       overrides: dict[str, str] | None = None,
+                       records: Path | None = None) -> dict[str, Any]:
     cam = syn.kinect_camera(640, 480)
     # ~Eddie at 1 Hz: 0.25 m or 0.25 rad between nodes; laps repeat, so revisits start at lap 2
     traj = corridor_loop(step=0.25, turn_step=0.25)
     laps = (traj * (1 + (n_nodes + extra) // len(traj)))[: n_nodes + extra]
-    params = RtabmapParameters.from_dict({**REPORT_PARAMS, "Rtabmap/MemoryThr": str(memory_thr)})
+    params = RtabmapParameters.from_dict({**REPORT_PARAMS, "Rtabmap/MemoryThr": str(memory_thr),
+                                          **(overrides or {})})
     extractor = FeatureExtractor(params, max_features=params.vis_max_features,
                                  strategy=params.kp_detector_strategy)
     # with cpu_parts the core's own Timing/* statistics are CPU time (the machine is shared)
@@ -169,6 +173,7 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
     # every node's decision (hypothesis id and value, loop, rejected loop), hashed: two code
     # versions that give the same digest took the same decisions
     decisions = hashlib.md5()
+    rows: list[dict[str, Any]] = []
     render_s = 0.0
     for k, pose in enumerate(laps):
         truth = syn.planar_pose(*pose)
@@ -211,6 +216,14 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
         loops += bool(r.loop_closure_id)
         decisions.update(repr((r.hypothesis_id, round(r.hypothesis_value, 9), r.loop_closure_id,
                                r.rejected_loop_id)).encode())
+        if records is not None:
+            rows.append({"node": r.node_id, "hyp": r.hypothesis_id,
+                         "value": round(r.hypothesis_value, 6), "loop": r.loop_closure_id,
+                         "rejected": r.rejected_loop_id, "reason": r.rejection_reason,
+                         "verified": r.statistics.get("Loop/Hypotheses_verified/", 0.0),
+                         "cpu_ms": round(cpu[-1], 2), "wm": wm[-1]})
+    if records is not None:
+        records.write_text(json.dumps(rows))
     if profiler is not None and profile is not None:
         profiler.disable()
         profiler.dump_stats(str(profile))
@@ -278,8 +291,14 @@ def main() -> int:
     ap.add_argument("--vo-profile", type=Path, metavar="FILE",
                     help="cProfile (CPU clock) of the timed odometry frames: top 25 printed, "
                          "stats in FILE_<F2M|F2F> (profiling slows the timed frames)")
+    ap.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                    help="RTAB-Map parameter for the loop-closure run (repeatable), e.g. "
+                         "--set Rtabmap/LoopThr=0.05")
+    ap.add_argument("--records", type=Path, metavar="FILE",
+                    help="every node's loop-closure decision and CPU time, as JSON, in FILE")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
+    overrides = dict(kv.split("=", 1) for kv in args.set)
     cv2.setNumThreads(1)  # one core, as the published figures
     syn = _synthetic()
     world = syn.BoxRoom(size_x=30.0, size_y=5.0, height=2.5, seed=7)
@@ -309,8 +328,11 @@ def main() -> int:
     if args.frame_cache:
         args.frame_cache.mkdir(parents=True, exist_ok=True)
     lc = bench_loop_closure(syn, world, args.nodes, args.extra, args.memory_thr, args.cpu_parts,
-                            args.frame_cache, args.compare_relinearize, args.profile)
+                            args.frame_cache, args.compare_relinearize, args.profile, overrides,
+                            args.records)
     lc["memory_thr"] = args.memory_thr
+    lc["parameters"] = {**REPORT_PARAMS, **overrides}
+    lc["load_avg_end"] = list(os.getloadavg())
     lc["breakdown_clock"] = "cpu" if args.cpu_parts else "wall"
     results["loop_closure"] = lc
     if args.tum:

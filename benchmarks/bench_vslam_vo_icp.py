@@ -7,7 +7,8 @@ extraction), the depth cloud (`depth_icp.make_scan`) and the ICP registration
 With ``--full`` the features are extracted again from the RGB (the whole VO per frame), and
 ``--scale 2`` runs on the images upsampled to 640×480 (nearest neighbour; the camera model
 scaled, `Icp/DownsamplingStep` doubled so the cloud keeps its density, or ``--step``).
-OpenCV runs on one thread (``--cv-threads``; the target is CPU per frame on one core). Also
+OpenCV runs on one thread (``--cv-threads``; the target is CPU per frame on one core);
+``--retain-heap`` keeps freed memory in the heap (glibc ``mallopt``). Also
 printed: key frames, the median inliers / features (`Odom/KeyFrameThr` compares the two), frames
 lost, the end-point error against the recorded truth and the md5 of all poses.
 Writes ``benchmarks/results/vslam_vo_icp_cpu.json``.
@@ -19,6 +20,7 @@ Writes ``benchmarks/results/vslam_vo_icp_cpu.json``.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import datetime as dt
 import hashlib
 import json
@@ -144,10 +146,17 @@ def main() -> int:
     ap.add_argument("--frames", type=int, default=0, help="first N frames only (0 = all)")
     ap.add_argument("--set", action="append", default=[], metavar="Group/Name=VALUE")
     ap.add_argument("--cv-threads", type=int, default=1, help="cv2.setNumThreads (0 = OpenCV's)")
+    ap.add_argument("--retain-heap", action="store_true",
+                    help="keep freed memory in the heap (glibc mallopt, as "
+                         "eddiebot.vslam.features.retain_freed_memory)")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     if args.cv_threads > 0:
         cv2.setNumThreads(args.cv_threads)
+    if args.retain_heap:  # done here, not imported: an older tree under PYTHONPATH lacks it
+        mallopt = ctypes.CDLL("libc.so.6").mallopt
+        mallopt(-3, 32 << 20)  # M_MMAP_THRESHOLD
+        mallopt(-1, 256 << 20)  # M_TRIM_THRESHOLD
     overrides = dict(item.split("=", 1) for item in args.set)
     rows = [run(d, overrides, args.full, args.scale, args.frames, args.step)
             for d in args.sessions]
@@ -166,9 +175,10 @@ def main() -> int:
     previous: dict[str, Any] = {}
     if args.out.exists():
         previous = json.loads(args.out.read_text())
-    key = f"{rows[0]['image']}_{rows[0]['features']}"
+    key = f"{rows[0]['image']}_{rows[0]['features']}" + ("_retain_heap" if args.retain_heap else "")
     previous[key] = {"date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
                      "overrides": overrides, "cv_threads": args.cv_threads,
+                     "retain_heap": args.retain_heap,
                      "load_avg": list(os.getloadavg()), "runs": rows}
     args.out.write_text(json.dumps(previous, indent=2))
     print(f"wrote {args.out} [{key}]")

@@ -1,11 +1,13 @@
-"""Per-frame work of the depth cloud without changing it: the compiled grid normals equal the
-array form, and the scan map's grid subtraction keeps the points the k-d tree query keeps."""
+"""Per-frame work without changing results: the compiled grid normals and keypoint depths equal
+their array forms, the voxel sums equal np.add.at's, and the scan map's grid subtraction keeps
+the points the k-d tree query keeps."""
 
 import numpy as np
 from scipy.spatial import cKDTree
 from vslam_synthetic import BoxRoom, kinect_camera, planar_pose, render
 
-from eddiebot.vslam import depth_icp
+from eddiebot.vslam import depth_icp, features
+from eddiebot.vslam.camera import depth_to_meters
 from eddiebot.vslam.depth_icp import ScanCloud, ScanMap
 
 
@@ -93,3 +95,50 @@ def test_voxel_sums_equal_add_at():
         np.testing.assert_array_equal(
             got_n, nsum / np.maximum(np.linalg.norm(nsum, axis=1, keepdims=True), 1e-12))
         assert got.shape[0] < pts.shape[0]
+
+
+def _keypoint_depths_arrays(depth_m, uv):
+    """The array form `features.keypoint_depths` had (reference)."""
+    h, w = depth_m.shape
+    n = uv.shape[0]
+    u = np.clip(np.rint(uv[:, 0]).astype(np.intp), 0, w - 1)
+    v = np.clip(np.rint(uv[:, 1]).astype(np.intp), 0, h - 1)
+    offsets = np.array([-1, 0, 1])
+    uu = np.clip(u[:, None, None] + offsets[None, None, :], 0, w - 1)
+    vv = np.clip(v[:, None, None] + offsets[None, :, None], 0, h - 1)
+    patch = depth_m[vv, uu].reshape(n, 9)
+    centre = patch[:, 4]
+    valid = (patch > 0) & (np.abs(patch - centre[:, None])
+                           <= features._DEPTH_NEIGHBOUR_TOLERANCE * centre[:, None])
+    weights = valid * features._DEPTH_WEIGHTS[None, :]
+    total = weights.sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = (patch * weights).sum(axis=1) / total
+    z[~(centre > 0)] = np.nan
+    return z.astype(np.float32)
+
+
+def test_compiled_keypoint_depths_equal_the_array_form():
+    cam = kinect_camera(320, 240)
+    room = BoxRoom(size_x=8.0, size_y=4.0, height=2.5, seed=4)
+    rng = np.random.default_rng(9)
+    for x, y, yaw in ((1.0, 1.0, 0.3), (6.5, 3.2, 2.5)):
+        _, depth = render(room, planar_pose(x, y, yaw), cam)
+        depth[100:110, 50:90] = 0  # holes
+        depth_m = depth_to_meters(depth)
+        # keypoints anywhere, on the borders and beyond them, on exact pixel centres too
+        uv = np.concatenate([rng.uniform(-3, 323, (3000, 2)),
+                             rng.integers(0, 320, (500, 2)) + 0.5]).astype(np.float32)
+        got = features.keypoint_depths(depth_m, uv)
+        ref = _keypoint_depths_arrays(depth_m, uv)
+        np.testing.assert_array_equal(got, ref)
+        assert 0.5 * len(uv) < np.isfinite(got).sum() < len(uv)
+
+
+def test_retain_freed_memory_sets_glibc_thresholds():
+    import platform
+
+    ok = features.retain_freed_memory()
+    assert isinstance(ok, bool)
+    if platform.system() == "Linux" and platform.libc_ver()[0] == "glibc":
+        assert ok

@@ -137,6 +137,9 @@ def _stage_vslam(out: Path, report: Report, seed: int) -> bool:
     from eddiebot.demo.vslam_stage import SLAM_PARAMETERS, run_vslam  # type: ignore[import-not-found]
 
     print("== stage vslam: RGB-D SLAM on the same route ==", flush=True)
+    from eddiebot.vslam.features import retain_freed_memory
+
+    retain_freed_memory()  # the stage runs visual odometry: no page faults per frame
     # Eddie's wheel odometry variance per node link as measured in the simulator (instead of
     # rtabmap_ros's 0.001 default) and loop closures registered 3D->3D from both frames' depth
     r = run_vslam(out, seed=seed, parameters=dict(SLAM_PARAMETERS))

@@ -158,6 +158,9 @@ def _replay(args: argparse.Namespace) -> int:
         return 2
     out = args.output or Path("out") / "vslam" / src.name.split(".")[0]
     params = _settings(args.set)
+    from eddiebot.vslam.features import retain_freed_memory
+
+    retain_freed_memory()  # visual odometry runs in this process: no page faults per frame
     try:
         if _is_bag(src):
             summary = replay_bag(src, out, params)
