@@ -40,6 +40,10 @@ class LinkType(IntEnum):
     LANDMARK = 8
 
 
+#: Odometry links (the only ones that add depth in the Bayes prediction's neighbour search).
+_ODOMETRY_LINK_TYPES = frozenset((LinkType.NEIGHBOR, LinkType.NEIGHBOR_MERGED))
+
+
 @dataclass(frozen=True)
 class Link:
     """Pose of `to_id` in the base frame of `from_id` (4×4, m) with a 6×6 information matrix."""
@@ -268,36 +272,43 @@ class Memory:
     def _neighbours_loop_margin(self, node_id: int, max_depth: int, exclude_stm: bool,
                                 wm_only: bool) -> dict[int, int]:
         stm = set(self.stm) if exclude_stm else set()
-        odometry = (LinkType.NEIGHBOR, LinkType.NEIGHBOR_MERGED)
+        odometry = _ODOMETRY_LINK_TYPES
+        local_space = LinkType.LOCAL_SPACE_CLOSURE
+        links, wm = self.links, self.wm
         out: dict[int, int] = {}
         seen = {node_id}
         margin = [node_id]
         for depth in range(max_depth + 1):
+            # one pass over each margin node's links: loop partners join the margin being
+            # walked; odometry neighbours are kept, in the order met, for the next depth
+            odo: list[int] = []
             k = 0
-            while k < len(margin):  # loop partners join the margin being walked
+            while k < len(margin):
                 n = margin[k]
                 k += 1
-                for m, lk in self.links.get(n, {}).items():
-                    if (m in seen or m in stm or lk.type in odometry
-                            or lk.type == LinkType.LOCAL_SPACE_CLOSURE):
+                for m, lk in links.get(n, {}).items():
+                    t = lk.type
+                    if t in odometry:
+                        odo.append(m)
+                        continue
+                    if m in seen or m in stm or t == local_space:
                         continue
                     seen.add(m)
-                    if wm_only and m not in self.wm:
+                    if wm_only and m not in wm:
                         continue
                     out[m] = depth
                     margin.append(m)
             if depth == max_depth:
                 break
             nxt = []
-            for n in margin:
-                for m, lk in self.links.get(n, {}).items():
-                    if m in seen or m in stm or lk.type not in odometry:
-                        continue
-                    seen.add(m)
-                    if wm_only and m not in self.wm:
-                        continue
-                    out[m] = depth + 1
-                    nxt.append(m)
+            for m in odo:
+                if m in seen or m in stm:
+                    continue
+                seen.add(m)
+                if wm_only and m not in wm:
+                    continue
+                out[m] = depth + 1
+                nxt.append(m)
             if not nxt:
                 break
             margin = nxt

@@ -479,6 +479,38 @@ def solve_pnp_planar(
     return from_xyz_yaw(x, y, yaw), inliers
 
 
+@njit(cache=True)
+def _score_3d3d(rot: F64, trans: F64, valid: NDArray[np.bool_], p: F64, q: F64,
+                thr: float) -> F64:
+    """Per hypothesis h: inliers (|p − (R_h q + t_h)| ≤ thr; −1 when the sample is degenerate)
+    less the summed capped error / (thr·(n + 1)), so ties go to the smaller error."""
+    iters, n = rot.shape[0], p.shape[0]
+    out = np.empty(iters)
+    for h in range(iters):
+        r = rot[h]
+        count = 0
+        total = 0.0
+        for m in range(n):
+            d0 = p[m, 0] - (r[0, 0] * q[m, 0] + r[0, 1] * q[m, 1] + r[0, 2] * q[m, 2] + trans[h, 0])
+            d1 = p[m, 1] - (r[1, 0] * q[m, 0] + r[1, 1] * q[m, 1] + r[1, 2] * q[m, 2] + trans[h, 1])
+            d2 = p[m, 2] - (r[2, 0] * q[m, 0] + r[2, 1] * q[m, 1] + r[2, 2] * q[m, 2] + trans[h, 2])
+            e = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            if e <= thr:
+                count += 1
+                total += e
+            else:
+                total += thr
+        out[h] = (count if valid[h] else -1) - total / (thr * (n + 1))
+    return out
+
+
+def _errors_3d3d(rot: F64, trans: F64, p: F64, q: F64) -> F64:
+    """|p − (R q + t)| per pair, the distances `_score_3d3d` tests."""
+    moved = (q[:, 0:1] * rot[:, 0] + q[:, 1:2] * rot[:, 1]) + q[:, 2:3] * rot[:, 2] + trans
+    d = p - moved
+    return np.asarray(np.sqrt((d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2]))
+
+
 def solve_3d3d(
     from_points: F64,
     to_points: F64,
@@ -504,8 +536,12 @@ def solve_3d3d(
     thr = float(params.vis_inlier_distance)
     rng = np.random.default_rng(n)
     iters = max(1, params.vis_iterations)
-    # all hypotheses at once: k distinct pairs per hypothesis
-    samples = np.argsort(rng.random((iters, n)), axis=1)[:, :k]
+    # all hypotheses at once: k distinct pairs per hypothesis (the k smallest of n random
+    # draws, in increasing order: argsort(draws)[:, :k] without sorting whole rows)
+    draws = rng.random((iters, n))
+    part = np.argpartition(draws, k - 1, axis=1)[:, :k]
+    samples = np.take_along_axis(
+        part, np.argsort(np.take_along_axis(draws, part, axis=1), axis=1), axis=1)
     sp, sq = from_points[samples], to_points[samples]  # (iters, k, 3)
     if three_dof:
         dp, dq = sp[:, 1, :2] - sp[:, 0, :2], sq[:, 1, :2] - sq[:, 0, :2]
@@ -523,12 +559,12 @@ def solve_3d3d(
         rot = np.einsum("nji,nkj->nik", vt, u)
         valid = np.linalg.norm(sp[:, 1] - sp[:, 0], axis=1) > 0.05
     trans = sp.mean(axis=1) - np.einsum("nij,nj->ni", rot, sq.mean(axis=1))
-    moved = np.einsum("nij,mj->nmi", rot, to_points) + trans[:, None, :]
-    err = np.linalg.norm(from_points[None] - moved, axis=2)  # (iters, n)
-    count = np.where(valid, (err <= thr).sum(axis=1), -1)
-    score = count - np.minimum(err, thr).sum(axis=1) / (thr * (n + 1))  # ties: smaller error
+    score = _score_3d3d(np.ascontiguousarray(rot), np.ascontiguousarray(trans), valid,
+                        np.ascontiguousarray(from_points, dtype=np.float64),
+                        np.ascontiguousarray(to_points, dtype=np.float64), thr)
     h_best = int(np.argmax(score))
-    best: NDArray[np.intp] = np.flatnonzero(err[h_best] <= thr).astype(np.intp)
+    best_err = _errors_3d3d(rot[h_best], trans[h_best], from_points, to_points)
+    best: NDArray[np.intp] = np.flatnonzero(best_err <= thr).astype(np.intp)
     if best.size < max(k, 3):
         return None, best
     ranges = np.linalg.norm(from_points - (np.zeros(3) if origin is None else origin), axis=1)
