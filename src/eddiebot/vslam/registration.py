@@ -269,6 +269,21 @@ def _planar_two_point(
     return True, c * a1 - s * a2, s * a1 + c * a2, math.atan2(s, c)
 
 
+@njit(cache=True, inline="always")
+def _planar_project(
+    c: float, s: float, x: float, y: float, pts: NDArray[np.float64], k: int,
+    a: NDArray[np.float64], b: NDArray[np.float64],
+) -> tuple[float, float, float, float, float]:
+    """Point k (old base frame) in the base frame moved by (x, y, yaw = atan2(s, c)): its
+    planar coordinates q0, q1, and in the camera (a · q + b): p0, p1, p2."""
+    dx, dy = pts[k, 0] - x, pts[k, 1] - y
+    q0, q1, q2 = c * dx + s * dy, -s * dx + c * dy, pts[k, 2]
+    p0 = a[0, 0] * q0 + a[0, 1] * q1 + a[0, 2] * q2 + b[0]
+    p1 = a[1, 0] * q0 + a[1, 1] * q1 + a[1, 2] * q2 + b[1]
+    p2 = a[2, 0] * q0 + a[2, 1] * q1 + a[2, 2] * q2 + b[2]
+    return q0, q1, p0, p1, p2
+
+
 @njit(cache=True)
 def _planar_errors(
     x: float, y: float, yaw: float, pts: NDArray[np.float64], uv: NDArray[np.float64],
@@ -279,11 +294,7 @@ def _planar_errors(
     c, s = math.cos(yaw), math.sin(yaw)
     fx, fy, cx, cy = cam[0], cam[1], cam[2], cam[3]
     for k in range(pts.shape[0]):
-        dx, dy = pts[k, 0] - x, pts[k, 1] - y
-        q0, q1, q2 = c * dx + s * dy, -s * dx + c * dy, pts[k, 2]
-        p0 = a[0, 0] * q0 + a[0, 1] * q1 + a[0, 2] * q2 + b[0]
-        p1 = a[1, 0] * q0 + a[1, 1] * q1 + a[1, 2] * q2 + b[1]
-        p2 = a[2, 0] * q0 + a[2, 1] * q1 + a[2, 2] * q2 + b[2]
+        q0, q1, p0, p1, p2 = _planar_project(c, s, x, y, pts, k, a, b)
         if p2 <= 1e-6:
             out[k] = np.inf
         else:
@@ -365,11 +376,7 @@ def _planar_refine(
         g = np.zeros(3)
         behind = False
         for k in range(pts.shape[0]):
-            dx, dy = pts[k, 0] - x, pts[k, 1] - y
-            q0, q1, q2 = c * dx + s * dy, -s * dx + c * dy, pts[k, 2]
-            p0 = a[0, 0] * q0 + a[0, 1] * q1 + a[0, 2] * q2 + b[0]
-            p1 = a[1, 0] * q0 + a[1, 1] * q1 + a[1, 2] * q2 + b[1]
-            p2 = a[2, 0] * q0 + a[2, 1] * q1 + a[2, 2] * q2 + b[2]
+            q0, q1, p0, p1, p2 = _planar_project(c, s, x, y, pts, k, a, b)
             if p2 <= 1e-6:
                 behind = True
                 break
