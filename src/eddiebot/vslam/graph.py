@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import NamedTuple, Protocol
 
 import gtsam
@@ -471,10 +472,20 @@ def make_optimizer(force_3dof: bool, epsilon: float = 1e-5) -> PoseGraphOptimize
 
 def _floored_covariance(information: F64) -> F64:
     """Σ = Ω⁻¹ with eigenvalues ≥ `_MIN_VARIANCE`: near-exact registrations (σ ≈ 0.1 mm on
-    synthetic images) next to the anchor prior otherwise make iSAM2's Cholesky ill-posed."""
+    synthetic images) next to the anchor prior otherwise make iSAM2's Cholesky ill-posed.
+    Cached by the matrix's bytes: a rebuilt graph re-adds the same links (read-only result)."""
+    info = np.ascontiguousarray(information, dtype=np.float64)
+    return _floored_covariance_of(info.tobytes(), info.shape)
+
+
+@lru_cache(maxsize=1 << 16)
+def _floored_covariance_of(data: bytes, shape: tuple[int, ...]) -> F64:
+    information = np.frombuffer(data, dtype=np.float64).reshape(shape)
     w, v = np.linalg.eigh(0.5 * (information + information.T))
     w = 1.0 / np.clip(w, 1e-12, None)
-    return np.asarray((v * np.clip(w, _MIN_VARIANCE, None)) @ v.T)
+    out = np.asarray((v * np.clip(w, _MIN_VARIANCE, None)) @ v.T)
+    out.flags.writeable = False
+    return out
 
 
 def _xyt(t: F64) -> F64:
