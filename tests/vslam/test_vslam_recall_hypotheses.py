@@ -7,7 +7,7 @@ from vslam_synthetic import frame, kinect_camera, planar_pose
 
 from eddiebot.vslam.memory import Link
 from eddiebot.vslam.parameters import ParameterError, RtabmapParameters
-from eddiebot.vslam.rtabmap import Rtabmap
+from eddiebot.vslam.rtabmap import Rtabmap, _Verification
 from eddiebot.vslam.transforms import se3_inverse
 
 CAM = kinect_camera(320, 240)
@@ -29,10 +29,10 @@ def _revisit(hypotheses: int):
     def verify(old, new, camera, link_type):
         verified.append(old.id)
         if len(verified) == 1:
-            return None, "registration failed: too few inliers (3 inliers)"
+            return _Verification(None, "registration failed: too few inliers (3 inliers)")
         info = np.diag([1e4, 1e4, 1e4, 1e4, 1e4, 1e4])
-        return Link(new.id, old.id, link_type, se3_inverse(new.odom_pose) @ old.odom_pose,
-                    info), ""
+        link = Link(new.id, old.id, link_type, se3_inverse(new.odom_pose) @ old.odom_pose, info)
+        return _Verification(link, "", link)
 
     slam._verify = verify  # type: ignore[method-assign]
     r = slam.process(*frame(4, 4.0, 3.0, 0.26 * 3 + 0.03), CAM,

@@ -13,7 +13,7 @@ import heapq
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Protocol
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -84,6 +84,15 @@ class ProcessResult:
     #: the registered transform (new node → old node, 4×4) of a hypothesis that passed the
     #: registration but was rejected after it (gate or `RGBD/OptimizeMaxError`), else None
     rejected_transform: F64 | None = None
+
+
+class _Verification(NamedTuple):
+    """What `Rtabmap._verify` found for one candidate place."""
+
+    link: Link | None  # the closure, None when rejected
+    reason: str  # why it was rejected
+    registered: Link | None = None  # the registered link, also when rejected after registration
+    mahalanobis: float = float("nan")  # its distance from the graph's prediction (σ), if gated
 
 
 @dataclass(frozen=True)
@@ -158,8 +167,6 @@ class Rtabmap:
         self._localized = False
         self._odom_max_info: F64 | None = None  # per-axis largest odometry information
         self._frame_poses: dict[int, F64] = {}  # optimised odometry frames (RGBD/OdomHeadingSigma)
-        self._candidate: Link | None = None  # last registered loop-closure hypothesis
-        self._mahalanobis = float("nan")  # its distance from the graph's prediction (σ)
         if database is not None:
             database.load_into(self)
 
@@ -270,8 +277,8 @@ class Rtabmap:
         loop_id = 0
         rejected_id = 0
         reason = ""
-        self._candidate = None
-        self._mahalanobis = float("nan")
+        candidate: Link | None = None  # the hypothesis' registered link, also when rejected
+        mahalanobis = float("nan")
         graph_changed = bool(retrieved)
         closure_links: list[Link] = []
         accept_hyp = (
@@ -283,31 +290,29 @@ class Rtabmap:
         if not skip_update:
             self._prev_hyp_value = hyp_value
         if accept_hyp:
-            old = self.memory.nodes[hyp_id]
-            closure, reason = self._verify(old, node, camera, LinkType.GLOBAL_CLOSURE)
-            if closure is not None:
-                closure_links.append(closure)
+            top = self._verify(self.memory.nodes[hyp_id], node, camera, LinkType.GLOBAL_CLOSURE)
+            candidate, reason, mahalanobis = top.registered, top.reason, top.mahalanobis
+            if top.link is not None:
+                closure_links.append(top.link)
                 loop_id = hyp_id
             else:
                 rejected_id = hyp_id
                 # RGBD/LoopClosureHypotheses (not upstream): the next places of the posterior
-                candidate = self._candidate
-                tried = [hyp_id]
+                tried = 1
                 for other in self._next_hypotheses(hyp_id, p.rgbd_loop_closure_hypotheses - 1):
-                    tried.append(other)
-                    closure, _ = self._verify(self.memory.nodes[other], node, camera,
-                                              LinkType.GLOBAL_CLOSURE)
-                    if closure is not None:
-                        closure_links.append(closure)
+                    tried += 1
+                    v = self._verify(self.memory.nodes[other], node, camera,
+                                     LinkType.GLOBAL_CLOSURE)
+                    if v.link is not None:
+                        closure_links.append(v.link)
                         loop_id = other
+                        candidate, mahalanobis = v.registered, v.mahalanobis
                         rejected_id, reason = 0, ""
                         break
-                else:
-                    self._candidate = candidate  # report the top hypothesis' rejection
-                stats["Loop/Hypotheses_verified/"] = float(len(tried))
+                stats["Loop/Hypotheses_verified/"] = float(tried)
 
         if loop_id:
-            stats["Loop/Mahalanobis/"] = self._mahalanobis
+            stats["Loop/Mahalanobis/"] = mahalanobis
         # --- proximity by space ---
         proximity_id = 0
         if p.rgbd_proximity_by_space and not loop_id and not self.localization_mode:
@@ -375,8 +380,8 @@ class Rtabmap:
             loop_closure_id=loop_id, proximity_id=proximity_id, hypothesis_id=hyp_id,
             hypothesis_value=hyp_value, rejected_loop_id=rejected_id, rejection_reason=reason,
             localized=self._localized, statistics=stats,
-            rejected_transform=(self._candidate.transform.copy()
-                                if rejected_id and self._candidate is not None else None),
+            rejected_transform=(candidate.transform.copy()
+                                if rejected_id and candidate is not None else None),
         )
 
     # -- maps -------------------------------------------------------------------------------
@@ -472,15 +477,15 @@ class Rtabmap:
         return out
 
     def _verify(self, old: Node, new: Node, camera: CameraIntrinsics,
-                link_type: LinkType) -> tuple[Link | None, str]:
+                link_type: LinkType) -> _Verification:
         if old.data is None or new.data is None:
-            return None, "no data"
+            return _Verification(None, "no data")
         reg = register(old.data.features, new.data.features, camera, self.params)
         if reg.transform is None:
-            return None, f"registration failed: {reg.reason} ({reg.inliers} inliers)"
+            return _Verification(None, f"registration failed: {reg.reason} ({reg.inliers} inliers)")
         limit = self.params.rgbd_max_loop_closure_distance
         if limit > 0 and float(np.linalg.norm(reg.transform[:3, 3])) > limit:
-            return None, "RGBD/MaxLoopClosureDistance exceeded"
+            return _Verification(None, "RGBD/MaxLoopClosureDistance exceeded")
         info = np.asarray(np.linalg.inv(reg.covariance), dtype=np.float64)
         if self.params.rgbd_loop_cov_limited and self._odom_max_info is not None:
             # RGBD/LoopCovLimited: no axis more certain than the best odometry link
@@ -488,8 +493,6 @@ class Rtabmap:
             idx = np.flatnonzero((np.diag(info) > cap) & (cap > 0))
             info[idx, idx] = cap[idx]
         link = Link(new.id, old.id, link_type, se3_inverse(reg.transform), info)
-        if link_type == LinkType.GLOBAL_CLOSURE:
-            self._candidate = link
         gate = self.params.rgbd_loop_closure_max_mahalanobis
         if gate > 0 and not self.localization_mode:
             old_pose = self.optimized_poses.get(old.id)
@@ -497,12 +500,12 @@ class Rtabmap:
                 d = closure_mahalanobis(link, self.map_to_odom @ new.odom_pose, old_pose,
                                         self.memory.links,
                                         heading_sigma=self.params.rgbd_odom_heading_sigma)
-                if d is not None:
-                    self._mahalanobis = d
                 if d is not None and d > gate:
-                    return None, (f"RGBD/LoopClosureMaxMahalanobis exceeded ({d:.1f} > "
-                                  f"{gate:g})")
-        return link, ""
+                    return _Verification(None, f"RGBD/LoopClosureMaxMahalanobis exceeded "
+                                               f"({d:.1f} > {gate:g})", link, d)
+                if d is not None:
+                    return _Verification(link, "", link, d)
+        return _Verification(link, "", link)
 
     def _refine_with_scan(self, link: Link, prev: Node, scan: Scan2D) -> Link:
         """`RGBD/NeighborLinkRefining`: 2D ICP of this scan against the previous node's scan."""
@@ -545,7 +548,7 @@ class Rtabmap:
                 cands.append((d, i))
         for _, i in sorted(cands)[: max(1, p.rgbd_proximity_max_paths)]:
             old = self.memory.nodes[i]
-            link, _ = self._verify(old, node, camera, LinkType.LOCAL_SPACE_CLOSURE)
+            link = self._verify(old, node, camera, LinkType.LOCAL_SPACE_CLOSURE).link
             if link is not None and float(np.linalg.norm(link.transform[:3, 3])) <= radius:
                 return link
         return None
