@@ -11,6 +11,19 @@ clamped; 16UC1 zeros (no return) never produce a value unless ``range_min <= 0``
 
 One deliberate difference: upstream does not compare the image size with camera_info; here a
 disagreement raises `ImageSizeError` naming both.
+
+One option of eddiebot's own, off by default: ``row_selection: nearest_surface``. Upstream's
+rule keeps the nearest of the ``scan_height`` rows. Where the rows see one surface, that is
+the minimum of several noisy readings of one range, which is short by a multiple of the
+sensor's noise: with a Kinect's σ = 1.425e-3·r² and 10 independent rows, ≈ 1.5 σ, i.e.
+2.2e-3·r² (−10 cm at 7 m), growing with range (docs/benchmarks/sim.md#sim-depth-noise). A
+scan matcher reads that as a building that shrinks around the robot as it walks away. With
+``nearest_surface`` a bin keeps the mean of the readings that lie within a tolerance
+(``surface_tolerance`` + ``surface_tolerance_quadratic``·r², a few σ of the sensor's noise
+at the nearest reading's range r) of its nearest reading: the nearest surface still wins —
+a table edge seen by two rows in front of a wall seen by the rest gives the edge's range —
+but its range is the mean of its readings, not their minimum. Bins whose readings are all
+out of range behave as upstream's.
 """
 
 from __future__ import annotations
@@ -26,7 +39,7 @@ from eddiebot.msgs.sensor_msgs import LaserScan
 from eddiebot.perception._image import DEPTH_ENCODINGS, check_size, image_to_array
 from eddiebot.perception.errors import ScanHeightError
 
-__all__ = ["DepthToScanParams", "ScanGeometry", "depth_image_to_laserscan", "scan_geometry"]
+__all__ = ["ROW_SELECTIONS", "DepthToScanParams", "ScanGeometry", "depth_image_to_laserscan", "scan_geometry"]
 
 
 @dataclass(frozen=True)
@@ -43,6 +56,26 @@ class DepthToScanParams:
     """Number of image rows, centred on the principal row, that feed the scan."""
     output_frame: str = "camera_depth_frame"
     """frame_id of the scan; empty keeps the image's frame_id."""
+    row_selection: str = "nearest"
+    """eddiebot's: ``nearest`` (upstream: the smallest range of the bin's rows and columns) or
+    ``nearest_surface`` (the mean of the readings within the surface tolerance of the smallest)."""
+    surface_tolerance: float = 0.02
+    """``nearest_surface``: constant part of the tolerance (m)."""
+    surface_tolerance_quadratic: float = 0.006
+    """``nearest_surface``: part of the tolerance growing with the nearest range squared (1/m);
+    0.006 ≈ 4 σ of the Kinect's disparity noise (1.425e-3·r²)."""
+
+    def __post_init__(self) -> None:
+        if self.row_selection not in ROW_SELECTIONS:
+            raise ValueError(f"row_selection: {self.row_selection!r} is not one of "
+                             f"{', '.join(ROW_SELECTIONS)}")
+        if not (self.surface_tolerance >= 0.0 and self.surface_tolerance_quadratic >= 0.0):
+            raise ValueError("surface_tolerance and surface_tolerance_quadratic must be >= 0, got "
+                             f"{self.surface_tolerance} and {self.surface_tolerance_quadratic}")
+
+
+#: Values of ``DepthToScanParams.row_selection``.
+ROW_SELECTIONS = ("nearest", "nearest_surface")
 
 
 @dataclass(frozen=True)
@@ -160,8 +193,29 @@ def _ranges(
     with_inf = inf_key >= 0
     flat = r.reshape(-1)
     ranges[with_inf] = flat[inf_key[with_inf]]
+    if params.row_selection == "nearest_surface":
+        best = _nearest_surface(r, in_range, bins, best, params)
     ranges[has] = best[has]
     return ranges
+
+
+def _nearest_surface(r: npt.NDArray[np.float64], in_range: npt.NDArray[np.bool_],
+                     bins: npt.NDArray[np.int64], best: npt.NDArray[np.float64],
+                     params: DepthToScanParams) -> npt.NDArray[np.float64]:
+    """Per bin, the mean of the in-range readings within the surface tolerance of its nearest."""
+    n_bins = best.size
+    sample_bin = np.broadcast_to(bins, r.shape)
+    ok = in_range & (sample_bin >= 0)
+    b = sample_bin[ok]
+    v = r[ok]
+    near = best[b]
+    keep = v <= near + params.surface_tolerance + params.surface_tolerance_quadratic * near * near
+    total = np.bincount(b[keep], weights=v[keep], minlength=n_bins)
+    count = np.bincount(b[keep], minlength=n_bins)
+    out = best.copy()
+    found = count > 0
+    out[found] = total[found] / count[found]
+    return out
 
 
 def depth_image_to_laserscan(

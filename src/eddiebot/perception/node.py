@@ -38,6 +38,11 @@ class DepthToScanNode(Node):
             range_max=float(self.declare_parameter("range_max", d.range_max).value),
             scan_height=int(self.declare_parameter("scan_height", d.scan_height).value),
             output_frame=str(self.declare_parameter("output_frame", d.output_frame).value),
+            row_selection=str(self.declare_parameter("row_selection", d.row_selection).value),
+            surface_tolerance=float(
+                self.declare_parameter("surface_tolerance", d.surface_tolerance).value),
+            surface_tolerance_quadratic=float(self.declare_parameter(
+                "surface_tolerance_quadratic", d.surface_tolerance_quadratic).value),
         )
         self.info: Any = None
         self.pub = self.create_publisher(LaserScan, "scan", qos_profile_sensor_data)
