@@ -36,6 +36,10 @@ how the parameters below were chosen. Writes ``benchmarks/results/<--name>.json`
 odometry pose moved by seeded N(0, 1e-9) noise: the SLAM result is chaotic at the level of
 floating-point rounding (a loop accepted or not near a threshold changes everything after it),
 so one run of a drive is one sample; the ensemble's mean and spread are the figure to compare.
+
+``--profile DIR`` (with ``--replay``) writes a cProfile of each drive's ``SlamCore.process``
+calls to ``DIR/<drive>_<run>_<member>.prof`` (``python -m pstats FILE``); the profiler inflates the CPU
+figures of that run.
 """
 
 from __future__ import annotations
@@ -161,7 +165,8 @@ PERTURBATION_SIGMA = 1e-9
 
 
 def replay_one(name: str, bag: Path, overrides: dict[str, Any],
-               node_time_gate: bool = False, perturbation: int = 0) -> dict[str, Any]:
+               node_time_gate: bool = False, perturbation: int = 0,
+               profile: Path | None = None) -> dict[str, Any]:
     """Replay a recorded run's bag and score it against its ground truth (``node_time_gate``:
     the node's ``minimum_time_interval`` gate too, as in the live run; ``perturbation`` > 0:
     every odometry pose gets seeded N(0, `PERTURBATION_SIGMA`) noise, one ensemble member)."""
@@ -187,8 +192,33 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
     if perturbation:
         rng = np.random.default_rng(perturbation)
         odometry = [o + rng.normal(0.0, PERTURBATION_SIGMA, 3) for o in odometry]
-    res = replay_scans(log.scans, odometry, config, sensor_offset=log.sensor_offset,
-                       source=str(bag), node_time_gate=node_time_gate)
+    if profile is None:
+        res = replay_scans(log.scans, odometry, config, sensor_offset=log.sensor_offset,
+                           source=str(bag), node_time_gate=node_time_gate)
+    else:
+        import cProfile
+
+        import eddiebot.slam.replay as replay_module
+
+        prof = cProfile.Profile()
+        plain = replay_module.SlamCore
+
+        class _Profiled(plain):  # type: ignore[misc, valid-type]
+            def process(self, *a: Any, **k: Any) -> Any:
+                prof.enable()
+                try:
+                    return super().process(*a, **k)
+                finally:
+                    prof.disable()
+
+        replay_module.SlamCore = _Profiled  # type: ignore[misc]
+        try:
+            res = replay_scans(log.scans, odometry, config, sensor_offset=log.sensor_offset,
+                               source=str(bag), node_time_gate=node_time_gate)
+        finally:
+            replay_module.SlamCore = plain  # type: ignore[misc]
+        profile.parent.mkdir(parents=True, exist_ok=True)
+        prof.dump_stats(str(profile))
     stamps, poses = res.trajectory()
     q = np.round(stamps * 1e9).astype(np.int64)
     est = se2_compose(np.broadcast_to(start, poses.shape), poses)
@@ -234,7 +264,9 @@ def main_replay(args: argparse.Namespace) -> int:
             members = []
             for k in range(max(1, args.ensemble)):
                 members.append({"drive": folder.name, "node_time_gate": args.node_time_gate,
-                                **replay_one(name, bag, overrides, args.node_time_gate, k)})
+                                **replay_one(name, bag, overrides, args.node_time_gate, k,
+                                             None if args.profile is None else
+                                             args.profile / f"{folder.name}_{name}_{k}.prof")})
                 print(members[-1], flush=True)
             rows += members
             if args.ensemble > 1:
@@ -287,6 +319,9 @@ def main() -> int:
                     help="with --replay: K replays per drive, member k > 0 with its odometry "
                     "perturbed by seeded 1e-9 noise (rounding-level: shows how far loop "
                     "decisions near their thresholds move the figure); prints mean and spread")
+    ap.add_argument("--profile", type=Path, default=None, metavar="DIR",
+                    help="with --replay: cProfile each drive's SlamCore.process calls into "
+                    "DIR/<drive>_<run>_<member>.prof (inflates that run's CPU figures)")
     ap.add_argument("--noise-correlation-px", type=float, default=None,
                     help="the simulator's noise_correlation_px (Kinect depth-noise correlation "
                     "window, native pixels; default: the node's default)")

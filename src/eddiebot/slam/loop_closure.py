@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from collections.abc import Callable, Sequence
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,23 +49,26 @@ class LoopClosure:
 def near_linked_nodes(
     start: int,
     positions: FloatArray,
-    neighbours: Callable[[int], set[int]],
+    neighbours: Callable[[int], AbstractSet[int]],
     max_distance: float,
 ) -> set[int]:
     """Nodes reachable from ``start`` through edges, every hop staying within ``max_distance``."""
     origin = positions[start]
     seen = {start}
+    far: set[int] = set()  # tested once: a node's distance does not change during the search
     queue = deque([start])
     d2 = max_distance * max_distance
     while queue:
         node = queue.popleft()
         for nb in neighbours(node):
-            if nb in seen:
+            if nb in seen or nb in far:
                 continue
             diff = positions[nb] - origin
             if float(diff @ diff) <= d2:
                 seen.add(nb)
                 queue.append(nb)
+            else:
+                far.add(nb)
     return seen
 
 
@@ -151,7 +155,7 @@ def verify_loop(
     grid = build_correlation_grid(
         chain_points_world, bounds, fine.resolution, fine.smear_deviation, _levels_for(fine)
     )
-    fine_match = match_scan(points, grid, coarse_match.pose, fine)
+    fine_match = match_scan(points, grid, coarse_match.pose, fine, reject_below=min_response_fine)
     if fine_match.response < min_response_fine:
         return None
     if max_variance_fine > 0.0:

@@ -30,11 +30,12 @@ import dataclasses
 import enum
 import math
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 import numpy.typing as npt
+from numba import njit
 
 from eddiebot.geometry import se2_compose, se2_inverse, wrap_angle
 from eddiebot.maps import OccupancyMap
@@ -194,6 +195,50 @@ def _inverse1(a: FloatArray) -> FloatArray:
 def _between1(a: FloatArray, b: FloatArray) -> FloatArray:
     """`se2_between` of two single poses, bit-identical (see `_compose1`)."""
     return _compose1(_inverse1(a), b)
+
+
+def _compose_rows(a: FloatArray, b: FloatArray) -> FloatArray:
+    """`_compose1` of each row of ``a`` (K, 3) with one pose ``b`` (3,): the same ufuncs in
+    the same order, element by element (each row bit-identical to `_compose1`)."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1 = b[0], b[1]
+    c, s = np.cos(a2), np.sin(a2)
+    out = np.empty_like(a)
+    out[:, 0] = a0 + c * b0 - s * b1
+    out[:, 1] = a1 + s * b0 + c * b1
+    w = np.mod(a2 + b[2] + _PI, _TWO_PI) - _PI
+    out[:, 2] = np.where(w == -_PI, _PI, w)
+    return out
+
+
+@njit(cache=True)
+def _place_rows(
+    local: FloatArray,
+    counts: npt.NDArray[np.int64],
+    tx: FloatArray,
+    ty: FloatArray,
+    c: FloatArray,
+    s: FloatArray,
+    translate: bool,
+    out: FloatArray,
+) -> None:
+    """Rows of ``local`` (run j: ``counts[j]`` rows) rotated by (c[j], s[j]) and, with
+    ``translate``, moved by (tx[j], ty[j]): ``tx + c·x − s·y``, ``ty + s·x + c·y`` (without:
+    ``c·x − s·y``, ``s·x + c·y``), each operation in the order numpy evaluates those
+    expressions (no fused multiply-add), so the values are numpy's bit for bit."""
+    k = 0
+    for j in range(counts.size):
+        cj, sj, xj, yj = c[j], s[j], tx[j], ty[j]
+        for _ in range(counts[j]):
+            x = local[k, 0]
+            y = local[k, 1]
+            if translate:
+                out[k, 0] = xj + cj * x - sj * y
+                out[k, 1] = yj + sj * x + cj * y
+            else:
+                out[k, 0] = cj * x - sj * y
+                out[k, 1] = sj * x + cj * y
+            k += 1
 
 
 def _odometry_covariance(delta: FloatArray, config: SlamConfig | None = None) -> FloatArray:
@@ -385,6 +430,7 @@ class SlamCore:
         self._bary_local = np.zeros((0, 2))
         self._normal_cache: dict[int, FloatArray] = {}
         self._world_normal_cache: dict[int, tuple[FloatArray, FloatArray]] = {}
+        self._active = np.zeros(0, dtype=bool)
 
     @property
     def mode(self) -> str:
@@ -410,6 +456,15 @@ class SlamCore:
     def active_mask(self) -> npt.NDArray[np.bool_]:
         """Nodes not retired (N,)."""
         return np.array([not n.retired for n in self.nodes], dtype=bool)
+
+    def _active_nodes(self) -> npt.NDArray[np.bool_]:
+        """`active_mask` kept across scans: extended by the nodes added since, cleared where
+        `_retire_superseded` retires one (the only place a node of the graph retires)."""
+        have = self._active.shape[0]
+        if have != len(self.nodes):
+            extra = np.array([not n.retired for n in self.nodes[have:]], dtype=bool)
+            self._active = np.concatenate([self._active[: len(self.nodes)], extra])
+        return self._active
 
     def set_initial_pose(self, pose: npt.ArrayLike, odom_pose: npt.ArrayLike | None = None) -> None:
         """Localisation start: robot pose in the map frame (and its odom pose, default 0)."""
@@ -552,6 +607,44 @@ class SlamCore:
         self._world_normal_cache[idx] = (pose, world)
         return world
 
+    def _local_normals(self, idx: int) -> FloatArray:
+        local = self._normal_cache.get(idx)
+        if local is None:
+            local = point_normals(self.nodes[idx].points)
+            self._normal_cache[idx] = local
+        return local
+
+    def _reference(
+        self, nodes: Sequence[int], poses: FloatArray, *, normals: bool = False
+    ) -> tuple[FloatArray, FloatArray | None]:
+        """The end points (and with ``normals`` their normals) of ``nodes``, concatenated in
+        the map frame at their rows of ``poses``: `_world_points` / `_world_normals` of every
+        node in one pass (the same operations on each value, so bit-identical to those)."""
+        rows = poses[np.asarray(nodes, dtype=np.intp)]
+        sensor = _compose_rows(rows, self.sensor_offset)
+        th = sensor[:, 2].tolist()
+        c = np.array([math.cos(t) for t in th])
+        s = np.array([math.sin(t) for t in th])
+        tx, ty = sensor[:, 0].copy(), sensor[:, 1].copy()
+        local = np.concatenate([self.nodes[i].points for i in nodes])
+        counts = np.array([self.nodes[i].points.shape[0] for i in nodes], dtype=np.int64)
+        world = np.empty_like(local)
+        if local.dtype == np.float64:
+            _place_rows(local, counts, tx, ty, c, s, True, world)
+        else:  # (float32 scans) numpy's own promotion rules, as `_world_points`
+            pick = np.repeat(np.arange(len(nodes)), counts)
+            lx, ly = local[:, 0], local[:, 1]
+            for j, (pj, cj, sj) in enumerate(zip(sensor.tolist(), c.tolist(), s.tolist())):
+                m = pick == j
+                world[m, 0] = np.float64(pj[0]) + cj * lx[m] - sj * ly[m]
+                world[m, 1] = np.float64(pj[1]) + sj * lx[m] + cj * ly[m]
+        if not normals:
+            return world, None
+        ln = np.concatenate([self._local_normals(i) for i in nodes])
+        wn = np.empty_like(ln)
+        _place_rows(ln, counts, tx, ty, c, s, False, wn)
+        return world, wn
+
     def _reference_position(self, idx: int) -> FloatArray:
         pose = self.graph.pose(idx)
         cached = self._pos_cache.get(idx)
@@ -569,7 +662,9 @@ class SlamCore:
         n = len(self.nodes)
         if n == 0:
             return np.zeros((0, 2))
-        sensors = self.sensor_poses()
+        poses = self.graph.poses
+        # `sensor_poses` (se2_compose on every row): the same ufuncs without its set-up
+        sensors = _compose_rows(poses, self.sensor_offset) if poses.shape[0] else poses
         if not self.config.use_scan_barycenter:
             return sensors[:, :2].copy()
         if self._bary_local.shape[0] != n:
@@ -586,16 +681,25 @@ class SlamCore:
         )
 
     def _match_against(
-        self, nodes: list[int], points: FloatArray, prior_sensor: FloatArray, params: MatcherParams
+        self,
+        nodes: list[int],
+        points: FloatArray,
+        prior_sensor: FloatArray,
+        params: MatcherParams,
+        *,
+        reject_below: float | None = None,
     ) -> MatchResult:
+        # ``reject_below``: the caller discards a match whose response is below it, so such a
+        # match stops once its response is known (`match_scan`) and is not polished
         # one pass over the optimiser's estimate (the same values as one look-up per node,
         # which the reference points and normals below would otherwise make ~40 times)
         poses = self.graph.poses
-        ref = (
-            np.concatenate([self._world_points(i, poses[i]) for i in nodes])
-            if nodes
-            else np.zeros((0, 2))
-        )
+        polish = self.config.use_icp_refinement and params is not self._slip_params
+        normals: FloatArray | None = None
+        if nodes:
+            ref, normals = self._reference(nodes, poses, normals=polish)
+        else:
+            ref = np.zeros((0, 2))
         c, s = math.cos(prior_sensor[2]), math.sin(prior_sensor[2])
         wx = prior_sensor[0] + c * points[:, 0] - s * points[:, 1]
         wy = prior_sensor[1] + s * points[:, 0] + c * points[:, 1]
@@ -609,13 +713,12 @@ class SlamCore:
         grid = build_correlation_grid(
             ref, bounds, params.resolution, params.smear_deviation, pyramid_levels(params)
         )
-        match = match_scan(points, grid, prior_sensor, params)
-        if (
-            self.config.use_icp_refinement
-            and match.response > 0.0
-            and params is not self._slip_params
-        ):
-            normals = np.concatenate([self._world_normals(i, poses[i]) for i in nodes])
+        match = match_scan(points, grid, prior_sensor, params, reject_below=reject_below)
+        if reject_below is not None and match.response < reject_below:
+            return match
+        if polish and match.response > 0.0:
+            if normals is None:
+                normals = np.zeros((0, 2))
             match = self._polish(match, points, ref, normals, params)
         return match
 
@@ -879,7 +982,10 @@ class SlamCore:
         if match.response >= cfg.loop_match_minimum_response_fine and not at_edge:
             return match
         wide = self._match_against(nodes, points, prior_sensor, self._slip_params)
-        fine = self._match_against(nodes, points, wide.pose, self._loop_fine)
+        # (a response at or below the bar below is discarded: no need to finish such a match)
+        fine = self._match_against(
+            nodes, points, wide.pose, self._loop_fine, reject_below=match.response + 0.05
+        )
         if (
             fine.response > match.response + 0.05
             and (cfg.slip_search_maximum_sigmas <= 0.0 or self._well_constrained(fine.covariance))
@@ -924,7 +1030,7 @@ class SlamCore:
         for _ in range(2):
             positions = self._positions()
             linked = near_linked_nodes(
-                idx, positions, self.graph.neighbours, cfg.loop_search_maximum_distance
+                idx, positions, self.graph.adjacent, cfg.loop_search_maximum_distance
             )
             chains = find_loop_candidates(
                 idx,
@@ -932,7 +1038,7 @@ class SlamCore:
                 linked,
                 max_distance=cfg.loop_search_maximum_distance,
                 min_chain_size=cfg.loop_match_minimum_chain_size,
-                active=self.active_mask(),
+                active=self._active_nodes(),
             )
             found: LoopClosure | None = None
             poses = self.graph.poses  # in sync since _positions: no second pass
@@ -945,7 +1051,7 @@ class SlamCore:
                     ref = np.concatenate([self._unbiased_world_points(i, poses[i], bias)
                                           for i in chain])
                 else:
-                    ref = np.concatenate([self._world_points(i, poses[i]) for i in chain])
+                    ref = self._reference(chain, poses)[0]
                 found = verify_loop(
                     query,
                     sensor,
@@ -960,7 +1066,8 @@ class SlamCore:
                     max_variance_fine=0.0 if icp_cov else cfg.loop_match_maximum_variance_fine,
                 )
                 if found is not None and icp_cov:
-                    normals = np.concatenate([self._world_normals(i, poses[i]) for i in chain])
+                    normals = self._reference(chain, poses, normals=True)[1]
+                    assert normals is not None
                     polished = self._polish(found.match, query, ref, normals, self._loop_fine)
                     found = dataclasses.replace(found, match=polished)
                     if cfg.loop_match_maximum_variance_fine > 0.0 and (
@@ -1008,6 +1115,8 @@ class SlamCore:
             sensor = se2_compose(self.graph.pose(j), self.sensor_offset)
             if score_pose(node.points, sensor, grid) >= cfg.lifelong_node_overlap:
                 node.retired = True
+                if j < self._active.shape[0]:
+                    self._active[j] = False
 
     # -- localization
     def _localize(self, scan: Scan, odom: FloatArray, warnings: list[SlamWarning]) -> ProcessResult:

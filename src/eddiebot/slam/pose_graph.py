@@ -57,6 +57,7 @@ from __future__ import annotations
 import enum
 import math
 from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass
 from typing import Any
 
@@ -337,6 +338,10 @@ class PoseGraph:
     def neighbours(self, idx: int) -> set[int]:
         """Nodes sharing an edge with ``idx``."""
         return set(self._adjacency[idx])
+
+    def adjacent(self, idx: int) -> AbstractSet[int]:
+        """`neighbours` without the copy: the graph's own set, valid until the next edge."""
+        return self._adjacency[idx]
 
     # ------------------------------------------------------------------ factors
     def _noise(self, edge: Edge, width: float | None = None) -> gtsam.noiseModel.Base:

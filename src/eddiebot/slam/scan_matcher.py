@@ -153,13 +153,17 @@ def _splat(
                     cells[q] = weights[q]
 
 
+@functools.lru_cache(maxsize=8)
 def _smear_kernel(resolution: float, smear_deviation: float) -> npt.NDArray[np.float32]:
+    """The smear kernel (read-only: shared by every grid with the same resolution and σ)."""
     half = max(1, round(2.0 * smear_deviation / resolution))
     d = np.arange(-half, half + 1, dtype=np.float64) * resolution
     dist2 = d[None, :] ** 2 + d[:, None] ** 2
     kernel = np.exp(-0.5 * dist2 / (smear_deviation * smear_deviation))
     kernel[dist2 > (half * resolution) ** 2 + 1e-12] = 0.0
-    return kernel.astype(np.float32)
+    out = kernel.astype(np.float32)
+    out.flags.writeable = False
+    return out
 
 
 def build_correlation_grid(
@@ -875,13 +879,25 @@ def _cells_for_angles(
     )
 
 
+#: the last `_thin` result per cell size, with the points it came from (bytes): one scan is
+#: thinned alike by its sequential match, a slip search and every loop chain it verifies
+_THIN_MEMO: dict[float, tuple[tuple[tuple[int, ...], str, bytes], FloatArray]] = {}
+
+
 def _thin(points: FloatArray, cell: float) -> FloatArray:
     """One point per ``cell``-sized square (the first in scan order)."""
     if points.shape[0] < 2:
         return points
+    key = (points.shape, points.dtype.str, points.tobytes())
+    memo = _THIN_MEMO.get(cell)
+    if memo is not None and memo[0] == key:
+        return memo[1]
     keys = np.floor(points / cell).astype(np.int64)
     _, first = np.unique(keys[:, 0] * 1_000_003 + keys[:, 1], return_index=True)
-    return np.ascontiguousarray(points[np.sort(first)])
+    out = np.ascontiguousarray(points[np.sort(first)])
+    out.flags.writeable = False
+    _THIN_MEMO[cell] = (key, out)
+    return out
 
 
 @functools.lru_cache(maxsize=8)
@@ -1039,12 +1055,18 @@ def match_scan(
     grid: CorrelationGrid,
     prior: FloatArray,
     params: MatcherParams,
+    *,
+    reject_below: float | None = None,
 ) -> MatchResult:
     """Match scan end points (M, 2, sensor frame) to ``grid`` around ``prior`` (sensor pose).
 
     With a single-level grid the translations are searched as Karto does (every second to
     fourth cell, then every cell around the best); with a pyramid (`build_correlation_grid(levels=n)`,
     n ≈ log2 of the window in cells) by branch and bound, exactly, at every cell.
+
+    ``reject_below``: for a caller that discards a match whose response is below it, such a
+    match returns as soon as its response is known, with the fine search's discrete pose and
+    no covariance (``diag(1e3)``); the response is the one the full match would return.
     """
     prior = np.asarray(prior, dtype=np.float64)
     pts = np.ascontiguousarray(points, dtype=np.float64)
@@ -1143,6 +1165,8 @@ def match_scan(
     dx = bx - radius + int(fix)
     dy = by - radius + int(fiy)
     pose = np.array([prior[0] + dx * res, prior[1] + dy * res, prior[2] + fdth[fa]])
+    if reject_below is not None and best_resp < reject_below:
+        return MatchResult(pose, best_resp, np.diag([1e3, 1e3, 1e3]))
     # covariance: translation spread over the whole window at the best heading (thinned
     # points: the spread, not the exact values, matters here)
     cpx, cpy = _cells_for_angles(coarse_pts, prior, prior[2] + fdth[fa : fa + 1], grid)

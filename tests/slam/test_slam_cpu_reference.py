@@ -1,0 +1,128 @@
+"""Batched per-scan paths of SlamCore give bit for bit what the per-node code gives."""
+
+from __future__ import annotations
+
+import numpy as np
+from slam_world import ROOM, SCAN_ANGLES, drifting_odometry, loop_path, raycast
+
+from eddiebot.geometry import se2_compose
+from eddiebot.slam import Scan, SlamConfig, SlamCore
+from eddiebot.slam.mapper import _compose1, _compose_rows
+
+
+def _poses(rng: np.random.Generator, n: int) -> np.ndarray:
+    p = rng.normal(0.0, 20.0, (n, 3))
+    p[:, 2] = rng.uniform(-4.0, 4.0, n)
+    p[:8, 2] = [np.pi, -np.pi, 0.0, -0.0, 0.5 * np.pi, -0.5 * np.pi, 2 * np.pi, -2 * np.pi]
+    p[8:12, :2] = [[0.0, -0.0], [-0.0, 0.0], [1e-300, -1e-300], [1e12, -1e12]]
+    return p
+
+
+def test_row_compose_is_the_scalar_compose_bit_for_bit() -> None:
+    rng = np.random.default_rng(11)
+    a = _poses(rng, 4000)
+    offsets = [np.array([0.1, -0.02, 0.03]), np.zeros(3), np.array([-0.0, 0.0, np.pi]),
+               np.array([1e-3, 2.5, -np.pi])]
+    # headings whose sum with the offset lands on the ±π boundary
+    a[12:16, 2] = [np.pi - 0.03, -np.pi - 0.03, 0.0, -2 * np.pi]
+    for off in offsets:
+        rows = _compose_rows(a, off)
+        want = np.array([_compose1(x, off) for x in a])
+        assert rows.tobytes() == want.tobytes()
+        assert rows.tobytes() == se2_compose(a, np.broadcast_to(off, a.shape)).tobytes()
+
+
+def _core_after_loop(n: int = 70) -> SlamCore:
+    cfg = SlamConfig(minimum_travel_distance=0.5, loop_match_minimum_chain_size=6)
+    truth = loop_path()[:n]
+    odom = drifting_odometry(loop_path())[:n]
+    core = SlamCore(cfg, sensor_offset=(0.1, -0.02, 0.03))
+    for k, (p, o) in enumerate(zip(truth, odom)):
+        scan = Scan(raycast(ROOM, p, SCAN_ANGLES, 12.0), SCAN_ANGLES.copy(), 0.05, 12.0, k * 10**8)
+        core.process(scan, o)
+    return core
+
+
+def test_batched_reference_equals_per_node_points_and_normals() -> None:
+    core = _core_after_loop()
+    poses = core.graph.poses
+    n = poses.shape[0]
+    assert n > 20
+    rng = np.random.default_rng(5)
+    # the pose rows may also be any estimate (e.g. mid-update), not only the graph's
+    moved = poses + rng.normal(0.0, 0.3, poses.shape)
+    for rows in (poses, moved):
+        for nodes in ([0], list(range(n)), list(range(n - 10, n)), [5, 3, 9, 9, 1],
+                      [int(i) for i in rng.choice(n, 17, replace=False)]):
+            ref, normals = core._reference(nodes, rows, normals=True)
+            fresh = SlamCore(core.config, sensor_offset=core.sensor_offset)
+            fresh.graph, fresh.nodes = core.graph, core.nodes
+            want = np.concatenate([fresh._world_points(i, rows[i]) for i in nodes])
+            want_n = np.concatenate([fresh._world_normals(i, rows[i]) for i in nodes])
+            assert ref.tobytes() == want.tobytes()
+            assert normals is not None and normals.tobytes() == want_n.tobytes()
+            only, none = core._reference(nodes, rows)
+            assert none is None and only.tobytes() == want.tobytes()
+
+
+def test_kept_active_mask_follows_retirement(tmp_path) -> None:
+    from eddiebot.slam.session import load_session, save_session
+
+    core = _core_after_loop(40)
+    assert core._active_nodes().tobytes() == core.active_mask().tobytes()
+    path = save_session(core, tmp_path / "room.eslam")
+    life = load_session(path, mode="lifelong")
+    truth = loop_path()
+    life.set_initial_pose(truth[0])
+    retired_seen = False
+    for k in range(0, 24, 2):
+        d = truth[k] - truth[0]
+        c, s = np.cos(-truth[0, 2]), np.sin(-truth[0, 2])
+        odom = np.array([c * d[0] - s * d[1], s * d[0] + c * d[1], d[2]])
+        scan = Scan(raycast(ROOM, truth[k], SCAN_ANGLES, 12.0), SCAN_ANGLES.copy(), 0.05, 12.0,
+                    10**9 + k * 10**8)
+        life.process(scan, odom)
+        want = life.active_mask()
+        assert life._active_nodes().tobytes() == want.tobytes()
+        retired_seen |= not want.all()
+    assert retired_seen  # the revisited stretch's old scans retired on the way
+
+
+def test_batched_reference_keeps_float32_points_float32() -> None:
+    import dataclasses
+
+    core = _core_after_loop(30)
+    poses = core.graph.poses
+    core.nodes = [dataclasses.replace(n, points=n.points.astype(np.float32)) for n in core.nodes]
+    core._ref_cache.clear()  # the float64 points of the run
+    nodes = list(range(3, poses.shape[0]))
+    ref, _ = core._reference(nodes, poses)
+    want = np.concatenate([core._world_points(i, poses[i]) for i in nodes])
+    assert want.dtype == ref.dtype == np.float32
+    assert ref.tobytes() == want.tobytes()
+
+
+def test_place_rows_kernel_is_numpy_bit_for_bit() -> None:
+    from eddiebot.slam.mapper import _place_rows
+
+    rng = np.random.default_rng(17)
+    counts = rng.integers(0, 400, 60).astype(np.int64)
+    n = int(counts.sum())
+    local = rng.normal(0.0, 1.0, (n, 2)) * 10.0 ** rng.uniform(-3, 3, (n, 1))
+    th = rng.uniform(-4.0, 4.0, counts.size)
+    c, s = np.cos(th), np.sin(th)
+    tx, ty = rng.normal(0.0, 50.0, counts.size), rng.normal(0.0, 50.0, counts.size)
+    pick = np.repeat(np.arange(counts.size), counts)
+    lx, ly = local[:, 0], local[:, 1]
+    want = np.stack([tx[pick] + c[pick] * lx - s[pick] * ly,
+                     ty[pick] + s[pick] * lx + c[pick] * ly], axis=-1)
+    want_rot = np.stack([c[pick] * lx - s[pick] * ly, s[pick] * lx + c[pick] * ly], axis=-1)
+    got = np.empty_like(local)
+    _place_rows(local, counts, tx, ty, c, s, True, got)
+    assert got.tobytes() == want.tobytes()
+    _place_rows(local, counts, tx, ty, c, s, False, got)
+    assert got.tobytes() == want_rot.tobytes()
+    # a fused multiply-add would round differently on a good share of these values
+    fused = np.array([np.float64(np.longdouble(a) * np.longdouble(b) + np.longdouble(t))
+                      for a, b, t in zip(c[pick][:2000], lx[:2000], tx[pick][:2000])])
+    assert np.any(fused != tx[pick][:2000] + c[pick][:2000] * lx[:2000])
