@@ -11,6 +11,7 @@ Synthetic data: a textured corridor rendered by the pinhole ray-caster of the te
         [--profile FILE]  (cProfile, CPU clock, of the updates from node --nodes − 100 on)
         [--set NAME=VALUE ...]  (further RTAB-Map parameters for the loop-closure run)
         [--records FILE]  (every node's loop decision, CPU time and closure error, as JSON)
+        [--compare-records A B]  (two --records files: same decisions? largest pose difference?)
 """
 
 from __future__ import annotations
@@ -222,7 +223,11 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
                          "value": round(r.hypothesis_value, 6), "loop": r.loop_closure_id,
                          "rejected": r.rejected_loop_id, "reason": r.rejection_reason,
                          "verified": r.statistics.get("Loop/Hypotheses_verified/", 0.0),
-                         "cpu_ms": round(cpu[-1], 2), "wm": wm[-1]})
+                         "cpu_ms": round(cpu[-1], 2), "wm": wm[-1],
+                         # the node's map pose as returned (x, y, yaw; full precision)
+                         "pose": (None if r.pose is None else
+                                  [float(r.pose[0, 3]), float(r.pose[1, 3]),
+                                   float(np.arctan2(r.pose[1, 0], r.pose[0, 0]))])})
             link = slam.memory.links.get(r.node_id, {}).get(r.loop_closure_id)
             if link is not None:  # the closure's error against the rendered poses (m)
                 true = se3_inverse(syn.planar_pose(*laps[r.node_id - 1])) @ syn.planar_pose(
@@ -230,6 +235,11 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
                 rows[-1]["closure_error_m"] = round(float(np.linalg.norm(
                     (se3_inverse(true) @ link.transform)[:2, 3])), 4)
     if records is not None:
+        # the last row also carries the final optimised graph (id → x, y, yaw)
+        if rows:
+            rows[-1]["final_poses"] = {
+                str(i): [float(t[0, 3]), float(t[1, 3]), float(np.arctan2(t[1, 0], t[0, 0]))]
+                for i, t in sorted(slam.optimized_poses.items())}
         records.write_text(json.dumps(rows))
     if profiler is not None and profile is not None:
         profiler.disable()
@@ -275,6 +285,22 @@ def _print_vo(vo: dict[str, dict[str, Any]]) -> None:
               f"poses md5 {v['poses_md5'][:12]}")
 
 
+def compare_records(a_path: Path, b_path: Path) -> dict[str, Any]:
+    """Two `--records` files: whether every node took the same decision, and the largest
+    difference of the returned poses and of the final graphs (x, y in m, yaw in rad)."""
+    a, b = json.loads(a_path.read_text()), json.loads(b_path.read_text())
+    keys = ("node", "hyp", "value", "loop", "rejected", "reason")
+    same = len(a) == len(b) and all(tuple(x[k] for k in keys) == tuple(y[k] for k in keys)
+                                    for x, y in zip(a, b))
+    pose_diff = max((abs(u - v) for x, y in zip(a, b) if x.get("pose") and y.get("pose")
+                     for u, v in zip(x["pose"], y["pose"])), default=0.0)
+    fa, fb = a[-1].get("final_poses", {}), b[-1].get("final_poses", {})
+    graph_diff = max((abs(u - v) for i in fa.keys() & fb.keys() for u, v in zip(fa[i], fb[i])),
+                     default=0.0)
+    return {"nodes": len(a), "same_decisions": same, "max_pose_diff": pose_diff,
+            "same_graph_nodes": fa.keys() == fb.keys(), "max_graph_diff": graph_diff}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--nodes", type=int, default=1000)
@@ -303,8 +329,13 @@ def main() -> int:
                          "--set Rtabmap/LoopThr=0.05")
     ap.add_argument("--records", type=Path, metavar="FILE",
                     help="every node's loop-closure decision and CPU time, as JSON, in FILE")
+    ap.add_argument("--compare-records", type=Path, nargs=2, metavar=("A", "B"),
+                    help="compare two --records files (decisions, poses) and exit")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
+    if args.compare_records:
+        print(json.dumps(compare_records(*args.compare_records)))
+        return 0
     overrides = dict(kv.split("=", 1) for kv in args.set)
     cv2.setNumThreads(1)  # one core, as the published figures
     syn = _synthetic()

@@ -128,15 +128,22 @@ class BayesFilter:
         self._n = 0
         self._dead = 0
         self._max_id = 0  # largest id in the table
+        # per column id: Σ of its live entries' values, added in table order (the sums the
+        # prediction divides by, kept as entries come and go); while ids stay small and ≥ 0
+        self._col_sum = np.zeros(1024)
+        self._col_sum_ok = True
 
     def invalidate(self, ids: Iterable[int]) -> None:
         """Recompute these ids' prediction columns at the next update."""
+        sums = self._col_sum
         for i in ids:
             col = self._columns.pop(i, None)
             self._short.discard(i)
             if col:
                 self._e_raw[np.fromiter(col.values(), np.int64, len(col))] = 0.0
                 self._dead += len(col)
+                if 0 <= i < sums.size:
+                    sums[i] = 0.0
 
     def add_neighbour(self, column_id: int, neighbour_id: int, depth: int) -> None:
         """Incremental prediction update: `neighbour_id` is now `depth` links from `column_id`."""
@@ -160,6 +167,12 @@ class BayesFilter:
         if column_id in self._short or float(self._e_raw[
                 np.fromiter(col.values(), np.int64, len(col))].sum()) < self._full_mass - _MASS_TOLERANCE:
             self.invalidate([column_id])  # the missing mass moves to its own cell
+        elif self._col_sum_ok:
+            # the column's sum again, its live entries added in table order
+            total = 0.0
+            for e in sorted(col.values()):
+                total += float(self._e_raw[e])
+            self._col_sum[column_id] = total
 
     def node_entered(self, node_id: int, neighbourhood: Mapping[int, int]) -> None:
         """A node joined the states; `neighbourhood` = {id: depth} of its WM neighbours.
@@ -224,7 +237,28 @@ class BayesFilter:
         self._e_row[n:n + m] = rows
         self._e_raw[n:n + m] = raw
         self._n = n + m
+        if self._col_sum_ok:
+            self._add_to_sums(column_id, raw)
         return n
+
+    def _add_to_sums(self, column_id: int | list[int], raw: list[float]) -> None:
+        """Add appended entries to their columns' sums, in table order."""
+        top = column_id if isinstance(column_id, int) else max(column_id, default=0)
+        low = column_id if isinstance(column_id, int) else min(column_id, default=0)
+        if low < 0 or top >= 1 << 24:
+            self._col_sum_ok = False  # ids unsuited to a dense table: sums in the pass
+            return
+        sums = self._col_sum
+        if top >= sums.size:
+            sums = self._col_sum = np.concatenate(
+                [sums, np.zeros(max(top + 1, 2 * sums.size) - sums.size)])
+        if isinstance(column_id, int):
+            total = float(sums[column_id])
+            for v in raw:
+                total += v
+            sums[column_id] = total
+        else:  # one entry per column, in order (np.add.at adds repeated columns in order)
+            np.add.at(sums, np.asarray(column_id, np.int64), np.asarray(raw, np.float64))
 
     def _compact(self) -> None:
         alive = np.flatnonzero(self._e_raw[: self._n] > 0.0)
@@ -302,11 +336,22 @@ class BayesFilter:
             for s in sorted(set(states[active].tolist()) - self._columns.keys()):
                 self._ensure_column(s, neighbours)
             table = _dense_table(states, self._max_id)
-            if table is not None:
+            if table is not None and self._col_sum_ok:
+                # one compiled pass over the live entries, the column sums kept (the same
+                # values as summing the table in the pass: same order, same rounding)
+                kept_sums = np.zeros(n + 1)
+                ids = states[1:]
+                inside = ids < self._col_sum.size
+                kept_sums[1:n][inside] = self._col_sum[ids[inside]]
+                predicted += _predict_entries(self._e_col, self._e_row, self._e_raw, self._n,
+                                              table, np.append(prior, 0.0), 1.0 - self._lc[0],
+                                              kept_sums)
+            elif table is not None:
                 # one compiled pass: the gathers and bincounts below, entry by entry (same
                 # order of sums, same rounding)
-                predicted += _predict_entries(self._e_col, self._e_row, self._e_raw, self._n,
-                                              table, np.append(prior, 0.0), 1.0 - self._lc[0], n)
+                predicted += _predict_entries_summed(self._e_col, self._e_row, self._e_raw,
+                                                     self._n, table, np.append(prior, 0.0),
+                                                     1.0 - self._lc[0], n)
             else:
                 # absent ids map to the extra state n (prior 0, dropped at the end); no boolean
                 # compressions, which cost more than the gathers on ~10⁵ entries
@@ -358,7 +403,7 @@ def _dense_table(states: NDArray[np.int64], max_id: int) -> NDArray[np.int64] | 
 
 
 @njit(cache=True)
-def _predict_entries(e_col, e_row, e_raw, m, table, prior, keep, n):  # type: ignore[no-untyped-def]
+def _predict_entries_summed(e_col, e_row, e_raw, m, table, prior, keep, n):  # type: ignore[no-untyped-def]
     """Σ over table entries of raw · prior[col] · keep / Σ_col raw, accumulated per row: the
     bincount formulation of `BayesFilter.update` entry by entry (same order, same rounding)."""
     sums = np.zeros(n + 1)
@@ -372,6 +417,25 @@ def _predict_entries(e_col, e_row, e_raw, m, table, prior, keep, n):  # type: ig
     for k in range(m):
         c = table[e_col[k]]
         acc[table[e_row[k]]] += e_raw[k] * prior[c] * scale[c]
+    return acc[:n]
+
+
+@njit(cache=True)
+def _predict_entries(e_col, e_row, e_raw, m, table, prior, keep, sums):  # type: ignore[no-untyped-def]
+    """`_predict_entries_summed` with the per-state column sums given (`sums`, n + 1): one
+    pass, retired entries (value 0, which add nothing) skipped."""
+    n = sums.size - 1
+    scale = np.zeros(n + 1)
+    for c in range(n):
+        if sums[c] > 0:
+            scale[c] = keep / sums[c]
+    acc = np.zeros(n + 1)
+    for k in range(m):
+        r = e_raw[k]
+        if r == 0.0:
+            continue
+        c = table[e_col[k]]
+        acc[table[e_row[k]]] += r * prior[c] * scale[c]
     return acc[:n]
 
 

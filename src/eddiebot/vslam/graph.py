@@ -269,14 +269,17 @@ class IncrementalPose2Graph:
             # the root is re-anchored every call (OptimizeFromGraphEnd): nothing to keep
             self.reset()
             return self._batch.optimize_batch(poses, link_list, root_id, iterations)
+        # keys not in the graph; every graph key was given again iff the others number as many
+        new_keys = keyed.keys() - self._links.keys()
         if (self._isam is None or root_id != self._root
-                or not keyed.keys() >= self._links.keys()
+                or len(keyed) - len(new_keys) != len(self._links)
                 or not poses.keys() >= self._index.keys()):
             if self._isam is not None:
                 self.rebuilds += 1
             self._start(root_id, root_pose)
+            new_keys = set(keyed)
         try:
-            self._update(poses, keyed)
+            self._update(poses, keyed, new_keys)
         except RuntimeError:
             # gtsam reports an ill-conditioned incremental update (a loop edge far from the
             # current linearisation) as IndeterminateSystemException: re-solve in batch and
@@ -339,7 +342,8 @@ class IncrementalPose2Graph:
         self._root_pose = root_pose.copy()
 
     def _update(self, poses: Mapping[int, F64],
-                keyed: Mapping[tuple[int, int, int], LinkLike]) -> None:
+                keyed: Mapping[tuple[int, int, int], LinkLike],
+                new_keys: Iterable[tuple[int, int, int]] | None = None) -> None:
         isam = self._isam
         assert isam is not None
         factors = gtsam.NonlinearFactorGraph()
@@ -349,8 +353,9 @@ class IncrementalPose2Graph:
             root = self._root
             factors.add(gtsam.PriorFactorPose2(root, _pose2(poses[root]), _PRIOR_NOISE))
             self._add_node(root, poses[root], values, new_ids)
-        fresh = [(key, keyed[key]) for key in keyed.keys() - self._links.keys()
-                 if key[0] in poses and key[1] in poses]
+        if new_keys is None:
+            new_keys = keyed.keys() - self._links.keys()
+        fresh = [(key, keyed[key]) for key in new_keys if key[0] in poses and key[1] in poses]
         fresh.sort(key=lambda kv: kv[0])
         # attach new nodes through new links (the root's component only)
         pending = fresh
@@ -579,13 +584,19 @@ def _ratios(d: F64, trace: F64, info: F64) -> tuple[F64, F64]:
     lin_info = np.where(info[:, :3] > _INFO_IGNORED, info[:, :3], np.inf)
     ang_info = np.where(info[:, 3:] > _INFO_IGNORED, info[:, 3:], np.inf)
     # σ floored as the incremental graph floors link variances, so the check judges the
-    # optimum by the noise it was computed with
-    lin_sigma = np.sqrt(np.maximum(1.0 / lin_info.min(axis=1), _MIN_VARIANCE))
-    ang_sigma = np.sqrt(np.maximum(1.0 / ang_info.min(axis=1), _MIN_VARIANCE))
-    lin = np.where(np.isfinite(lin_info), d, 0.0).max(axis=1)
+    # optimum by the noise it was computed with; minima and maxima over the three columns
+    # element-wise (the values of `.min(axis=1)`, without its per-row reduction cost)
+    lin_sigma = np.sqrt(np.maximum(1.0 / _min3(lin_info), _MIN_VARIANCE))
+    ang_sigma = np.sqrt(np.maximum(1.0 / _min3(ang_info), _MIN_VARIANCE))
+    lin_d = np.where(np.isfinite(lin_info), d, 0.0)
+    lin = np.maximum(np.maximum(lin_d[:, 0], lin_d[:, 1]), lin_d[:, 2])
     c = np.clip((trace - 1.0) / 2.0, -1.0, 1.0)
     ang = np.arccos(c)
     with np.errstate(divide="ignore", invalid="ignore"):
         lin_ratio = np.where(lin_sigma > 0, lin / lin_sigma, 0.0)
         ang_ratio = np.where(ang_sigma > 0, ang / ang_sigma, 0.0)
     return lin_ratio, ang_ratio
+
+
+def _min3(a: F64) -> F64:
+    return np.minimum(np.minimum(a[:, 0], a[:, 1]), a[:, 2])

@@ -46,8 +46,8 @@ from eddiebot.vslam.registration import register
 from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, to_3dof, xyz_rpy, yaw_of
 from eddiebot.vslam.vocabulary import Vocabulary
 
-__all__ = ["ODOM_FRAME_ID_OFFSET", "FrameRecord", "ProcessResult", "Rtabmap", "closure_mahalanobis",
-           "odometry_frame_graph", "path_covariance"]
+__all__ = ["ODOM_FRAME_ID_OFFSET", "FrameRecord", "OdometryFrames", "ProcessResult", "Rtabmap",
+           "closure_mahalanobis", "odometry_frame_graph", "path_covariance"]
 
 F64 = NDArray[np.float64]
 _DEFAULT_ODOM_VARIANCE = 0.001
@@ -167,6 +167,7 @@ class Rtabmap:
         self._localized = False
         self._odom_max_info: F64 | None = None  # per-axis largest odometry information
         self._frame_poses: dict[int, F64] = {}  # optimised odometry frames (RGBD/OdomHeadingSigma)
+        self._frames = OdometryFrames()  # their links, kept between graph updates
         if database is not None:
             database.load_into(self)
 
@@ -568,7 +569,7 @@ class Rtabmap:
             root = min(comp)
         sigma = self.params.rgbd_odom_heading_sigma
         if sigma > 0:
-            poses, links = odometry_frame_graph(poses, links, root, sigma, self._frame_poses)
+            poses, links = self._frames.graph(poses, links, root, sigma, self._frame_poses)
         optimized = self.optimizer.optimize(poses, links, root, self.params.optimizer_iterations)
         thr = self.params.rgbd_optimize_max_error
         if thr > 0 and new_links:
@@ -665,24 +666,61 @@ def odometry_frame_graph(poses: Mapping[int, F64], links: Sequence[Link | GraphL
     well: the map frame is the odometry's at the root. Loop-closure and other links stay
     between the nodes. Returns the poses (nodes and frames) and the links to optimise.
     """
-    tie = 1.0 / _FRAME_TIE_VARIANCE
-    heading = np.diag([tie, tie, tie, tie, tie, 1.0 / heading_sigma**2])
-    rigid = np.diag(np.full(6, tie))
-    known = frame_poses or {}
-    out_poses: dict[int, F64] = dict(poses)
-    out: list[GraphLink] = []
-    eye = np.eye(4)
-    for i in poses:
-        f = ODOM_FRAME_ID_OFFSET + i
-        out_poses[f] = known.get(f, poses[i])
-        out.append(GraphLink(i, f, eye, rigid if i == root else heading))
-    for lk in links:
-        if getattr(lk, "type", None) in _ODOMETRY_LINKS:
-            out.append(GraphLink(ODOM_FRAME_ID_OFFSET + lk.from_id,
-                                 ODOM_FRAME_ID_OFFSET + lk.to_id, lk.transform, lk.information))
-        else:
-            out.append(GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information))
-    return out_poses, out
+    return OdometryFrames().graph(poses, links, root, heading_sigma, frame_poses)
+
+
+class OdometryFrames:
+    """`odometry_frame_graph` for a graph that grows between calls: the links it derives (a
+    tie per node, the frame copy of each link) are kept per node and per link object, so a call
+    builds only those of new nodes and new or replaced links. Same result as the function,
+    link for link (the same `GraphLink` fields, in the same order)."""
+
+    def __init__(self) -> None:
+        self._sigma = -1.0
+        self._root = 0
+        self._ties: dict[int, GraphLink] = {}  # node id → tie link (node → its frame)
+        self._moved: dict[tuple[int, int], tuple[Link | GraphLink, GraphLink]] = {}
+        self._heading = np.eye(6)
+        self._rigid = np.eye(6)
+        self._eye = np.eye(4)
+
+    def graph(self, poses: Mapping[int, F64], links: Sequence[Link | GraphLink], root: int,
+              heading_sigma: float, frame_poses: Mapping[int, F64] | None = None,
+              ) -> tuple[dict[int, F64], list[GraphLink]]:
+        """`odometry_frame_graph(poses, links, root, heading_sigma, frame_poses)`."""
+        if heading_sigma != self._sigma or root != self._root:
+            tie = 1.0 / _FRAME_TIE_VARIANCE
+            self._sigma, self._root = heading_sigma, root
+            self._heading = np.diag([tie, tie, tie, tie, tie, 1.0 / heading_sigma**2])
+            self._rigid = np.diag(np.full(6, tie))
+            self._ties = {}
+        known = frame_poses or {}
+        out_poses: dict[int, F64] = dict(poses)
+        out: list[GraphLink] = []
+        ties = self._ties
+        offset = ODOM_FRAME_ID_OFFSET
+        for i in poses:
+            f = offset + i
+            out_poses[f] = known.get(f, poses[i])
+            t = ties.get(i)
+            if t is None:
+                t = ties[i] = GraphLink(i, f, self._eye, self._rigid if i == root else self._heading)
+            out.append(t)
+        moved = self._moved
+        if len(moved) > 2 * len(links) + 1024:  # forget links no longer given
+            moved.clear()
+        for lk in links:
+            key = (lk.from_id, lk.to_id)
+            entry = moved.get(key)
+            if entry is None or entry[0] is not lk:
+                if getattr(lk, "type", None) in _ODOMETRY_LINKS:
+                    g = GraphLink(offset + lk.from_id, offset + lk.to_id, lk.transform,
+                                  lk.information)
+                else:
+                    g = GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information)
+                entry = moved[key] = (lk, g)
+            out.append(entry[1])
+        return out_poses, out
 
 
 # -- loop-closure plausibility ----------------------------------------------------------------
