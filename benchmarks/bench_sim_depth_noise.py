@@ -64,12 +64,15 @@ def wall(cfg: KinectConfig, z: float) -> np.ndarray:
     return np.tile(np.linspace(z - sweep / 2, z + sweep / 2, w, dtype=np.float32), (h, 1))
 
 
-def scan_errors(cfg: KinectConfig, z: float, scan_height: int, frames: int) -> np.ndarray:
-    """(frames, bins) range error of the central ±15° (NaN where no return)."""
+def scan_errors(cfg: KinectConfig, z: float, scan_height: int, frames: int,
+                row_selection: str = "nearest") -> np.ndarray:
+    """(frames, bins) range error of the central ±15° (NaN where no return); the truth is the
+    upstream rule on the noiseless image."""
     info = camera_info_msg(cfg.depth)
-    params = DepthToScanParams(range_min=0.45, range_max=8.0, scan_height=scan_height)
+    exact = DepthToScanParams(range_min=0.45, range_max=8.0, scan_height=scan_height)
+    params = replace(exact, row_selection=row_selection)
     ideal = wall(cfg, z)
-    truth = np.asarray(depth_image_to_laserscan(depth_image_msg(ideal), info, params).ranges,
+    truth = np.asarray(depth_image_to_laserscan(depth_image_msg(ideal), info, exact).ranges,
                        dtype=np.float64)
     centre = np.abs(np.arange(truth.size) - truth.size / 2) < truth.size * 15 / 58
     out = []
@@ -232,6 +235,10 @@ def main() -> int:
                     "(→ benchmarks/results/sim_depth_noise_match.json)")
     ap.add_argument("--poses", type=int, default=16, help="with --match: poses per world")
     ap.add_argument("--trials", type=int, default=6, help="with --match: matches per pose")
+    ap.add_argument("--row-selection", default="nearest", choices=("nearest", "nearest_surface"),
+                    help="depthimage_to_laserscan's row_selection for the bias table")
+    ap.add_argument("--windows", type=float, nargs="+", default=list(WINDOWS),
+                    help="noise_correlation_px values of the bias table (native pixels)")
     args = ap.parse_args()
     if args.live_summary:
         return live_summary()
@@ -241,13 +248,14 @@ def main() -> int:
     rows: list[dict[str, Any]] = []
     for width, height, scan_height in SETUPS:
         base = KinectConfig().at_resolution(width, height)
-        for px in WINDOWS:
+        for px in args.windows:
             cfg = replace(base, noise_correlation_px=px)
             common = {"size": f"{width}x{height}", "scan_height": scan_height,
+                      "row_selection": args.row_selection,
                       "window_native_px": px, "window_px": noise_window_px(cfg, width)}
             extra = {**pixel_stats(cfg, 8), **timing(cfg, 30)} if scan_height == 10 else {}
             for z in DEPTHS:
-                e = scan_errors(cfg, z, scan_height, args.frames)
+                e = scan_errors(cfg, z, scan_height, args.frames, args.row_selection)
                 ok = np.isfinite(e)
                 d = np.where(ok, e - np.nanmean(e), 0.0)
                 both = ok[:, 1:] & ok[:, :-1]
@@ -258,7 +266,7 @@ def main() -> int:
                              "returns": float(ok.mean()), **(extra if z == DEPTHS[0] else {})})
                 print(rows[-1], flush=True)
     print()
-    print_table(rows, ["size", "scan_height", "window_native_px", "window_px", "z_m", "bias_m",
+    print_table(rows, ["size", "scan_height", "row_selection", "window_native_px", "window_px", "z_m", "bias_m",
                        "bias_k", "scan_sd_m", "scan_rho1", "pixel_sd_steps", "pixel_rho1_row",
                        "pixel_rho1_col", "pool_ms", "render_ms", "render_cpu_ms"])
     print(f"\nwrote {write_results(args.name, rows)}")
