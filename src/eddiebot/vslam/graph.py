@@ -13,7 +13,7 @@ in (x, y, z, roll, pitch, yaw).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import NamedTuple, Protocol
@@ -290,10 +290,70 @@ class IncrementalPose2Graph:
             self._update({**poses, **solved}, keyed)
         return dict(zip(self._ids, self.poses_array()))
 
+    def extend(
+        self,
+        new_poses: Mapping[int, F64],
+        new_links: Iterable[LinkLike],
+        root_id: int,
+        root_pose: F64,
+        iterations: int,
+        whole: Callable[[], tuple[Mapping[int, F64], Sequence[LinkLike]]],
+    ) -> bool:
+        """`optimize` for a caller that knows what changed since its last call: the graph
+        given then plus the nodes `new_poses` (initial poses) and the links `new_links`, none
+        removed (a link whose key the graph holds is skipped, as `optimize` skips it). The
+        same iSAM2 update and estimate as `optimize(poses, links, root_id, iterations)` with
+        the whole graph, without building it; `whole()` builds it only if an update fails
+        (the batch recovery). False, with nothing changed, when the graph cannot be continued
+        (no graph yet, another root, the root moved): call `optimize` instead. The estimate:
+        `node_ids`, `poses_array`."""
+        if self._isam is None or root_id != self._root or self._root_pose is None:
+            return False
+        root_pose = np.asarray(root_pose, dtype=np.float64)
+        if not np.allclose(root_pose, self._root_pose, rtol=0.0, atol=1e-3):
+            return False
+        keyed: dict[tuple[int, int, int], LinkLike] = {}
+        for lk in new_links:
+            key = (lk.from_id, lk.to_id, 0)
+            while key in keyed:
+                key = (key[0], key[1], key[2] + 1)
+            keyed[key] = lk
+        new_keys = keyed.keys() - self._links.keys()
+        try:
+            self._update(new_poses, keyed, new_keys)
+        except RuntimeError:
+            poses, link_list = whole()
+            self._recover(poses, link_list, root_id, root_pose, iterations)
+        return True
+
+    def _recover(self, poses: Mapping[int, F64], links: Sequence[LinkLike], root_id: int,
+                 root_pose: F64, iterations: int) -> None:
+        """Re-solve in batch after a failed iSAM2 update and restart iSAM2 from that optimum."""
+        link_list = list(links)
+        keyed: dict[tuple[int, int, int], LinkLike] = {}
+        for lk in link_list:
+            key = (lk.from_id, lk.to_id, 0)
+            while key in keyed:
+                key = (key[0], key[1], key[2] + 1)
+            keyed[key] = lk
+        self.recoveries += 1
+        solved = self._batch.optimize_batch(poses, link_list, root_id, max(iterations, 100))
+        self._start(root_id, root_pose)
+        self._update({**poses, **solved}, keyed)
+
     @property
     def node_count(self) -> int:
         """Nodes in the graph."""
         return len(self._ids)
+
+    @property
+    def root_id(self) -> int:
+        """The graph's root (fixed node)."""
+        return self._root
+
+    def knows(self, node_id: int) -> bool:
+        """True when the node is in the graph."""
+        return node_id in self._index
 
     @property
     def node_ids(self) -> list[int]:
@@ -355,7 +415,10 @@ class IncrementalPose2Graph:
             self._add_node(root, poses[root], values, new_ids)
         if new_keys is None:
             new_keys = keyed.keys() - self._links.keys()
-        fresh = [(key, keyed[key]) for key in new_keys if key[0] in poses and key[1] in poses]
+        # (a node of the graph is in `poses` unless the caller gave only new ones: `extend`)
+        index = self._index
+        fresh = [(key, keyed[key]) for key in new_keys
+                 if (key[0] in poses or key[0] in index) and (key[1] in poses or key[1] in index)]
         fresh.sort(key=lambda kv: kv[0])
         # attach new nodes through new links (the root's component only)
         pending = fresh

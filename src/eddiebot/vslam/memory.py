@@ -277,6 +277,9 @@ class Memory:
         self._uf_members: dict[int, list[int]] = {}
         self._uf_valid = False
         self._adjacency = _Adjacency()  # `links` as arrays, for the loop-margin walk
+        # pairs (a < b) of the links added since `take_link_log`, or None once anything else
+        # changed the graph in RAM (a link or node left, a node entered other than as new)
+        self._link_log: list[tuple[int, int]] | None = None
 
     # -- membership -------------------------------------------------------------------------
     @property
@@ -306,8 +309,19 @@ class Memory:
         if node.data is not None:
             self.vocabulary.remove_references(node.data.words)
 
+    def take_link_log(self) -> list[tuple[int, int]] | None:
+        """The pairs (a < b, in order) of the links added since the last call, or None when
+        the graph of the nodes in RAM changed otherwise meanwhile (a link replaced or removed,
+        a node removed, a node moved between WM and LTM, a node entered with links already);
+        starts a new log either way."""
+        log = self._link_log
+        self._link_log = []
+        return log
+
     def _register(self, node: Node) -> None:
         known = node.id in self.nodes or bool(self.links.get(node.id))
+        if known:
+            self._link_log = None
         self.nodes[node.id] = node
         if node.id not in self.links:
             self.links[node.id] = {}
@@ -333,6 +347,7 @@ class Memory:
 
     def add_to_wm(self, node: Node) -> None:
         """Insert a node straight into WM (database load, retrieval)."""
+        self._link_log = None
         self._register(node)
         self.ltm.discard(node.id)
         self._index_words(node)
@@ -346,6 +361,7 @@ class Memory:
         """Register a node that stays in LTM (poses and links only)."""
         node.data = None
         node.word_counts = {}
+        self._link_log = None
         self._register(node)
         self.ltm.add(node.id)
 
@@ -355,6 +371,7 @@ class Memory:
         if node is None:
             return
         self._uf_valid = False
+        self._link_log = None
         if node_id in self.stm:
             self.stm.remove(node_id)
         self.wm.pop(node_id, None)
@@ -383,7 +400,13 @@ class Memory:
         self.links[b][a] = inverse
         adjacency.put(b, a, kind)
         if a != b:
-            self._pairs[(a, b) if a < b else (b, a)] = link if a < b else inverse
+            pair = (a, b) if a < b else (b, a)
+            if self._link_log is not None:
+                if pair in self._pairs:  # a replaced link (its type may move it in the graph)
+                    self._link_log = None
+                else:
+                    self._link_log.append(pair)
+            self._pairs[pair] = link if a < b else inverse
             if self._uf_valid:
                 if a in self.nodes and b in self.nodes:
                     self._uf_union(a, b)
@@ -392,6 +415,7 @@ class Memory:
 
     def remove_link(self, a: int, b: int) -> None:
         """Remove the link between two nodes."""
+        self._link_log = None
         if self.links.get(a, {}).pop(b, None) is not None:
             self._adjacency.pop(a, b)
         if self.links.get(b, {}).pop(a, None) is not None:
@@ -560,6 +584,7 @@ class Memory:
     def transfer_to_ltm(self, node_id: int) -> None:
         """Move a WM node to LTM; its data leaves RAM when a store holds it."""
         node = self.nodes[node_id]
+        self._link_log = None
         self.wm.pop(node_id, None)
         self._unindex_words(node)
         self.ltm.add(node_id)
@@ -580,6 +605,7 @@ class Memory:
             node.data = data
             node.word_counts = data.word_counts()
         self.ltm.discard(node_id)
+        self._link_log = None
         self._index_words(node)
         self._add_to_wm(node_id)
         return True

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -486,6 +487,15 @@ def solve_pnp_planar(
     return from_xyz_yaw(x, y, yaw), inliers
 
 
+@njit(cache=True, inline="always")
+def _pair_error(p: F64, q: F64, r: F64, t: F64, m: int) -> float:
+    """|p_m − (R q_m + t)|, summed in a fixed order (the RANSAC scores depend on it bit for bit)."""
+    d0 = p[m, 0] - (r[0, 0] * q[m, 0] + r[0, 1] * q[m, 1] + r[0, 2] * q[m, 2] + t[0])
+    d1 = p[m, 1] - (r[1, 0] * q[m, 0] + r[1, 1] * q[m, 1] + r[1, 2] * q[m, 2] + t[1])
+    d2 = p[m, 2] - (r[2, 0] * q[m, 0] + r[2, 1] * q[m, 1] + r[2, 2] * q[m, 2] + t[2])
+    return math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+
+
 @njit(cache=True)
 def _score_3d3d(rot: F64, trans: F64, valid: NDArray[np.bool_], p: F64, q: F64,
                 thr: float) -> F64:
@@ -498,10 +508,7 @@ def _score_3d3d(rot: F64, trans: F64, valid: NDArray[np.bool_], p: F64, q: F64,
         count = 0
         total = 0.0
         for m in range(n):
-            d0 = p[m, 0] - (r[0, 0] * q[m, 0] + r[0, 1] * q[m, 1] + r[0, 2] * q[m, 2] + trans[h, 0])
-            d1 = p[m, 1] - (r[1, 0] * q[m, 0] + r[1, 1] * q[m, 1] + r[1, 2] * q[m, 2] + trans[h, 1])
-            d2 = p[m, 2] - (r[2, 0] * q[m, 0] + r[2, 1] * q[m, 1] + r[2, 2] * q[m, 2] + trans[h, 2])
-            e = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            e = _pair_error(p, q, r, trans[h], m)
             if e <= thr:
                 count += 1
                 total += e
@@ -509,6 +516,108 @@ def _score_3d3d(rot: F64, trans: F64, valid: NDArray[np.bool_], p: F64, q: F64,
                 total += thr
         out[h] = (count if valid[h] else -1) - total / (thr * (n + 1))
     return out
+
+
+@lru_cache(maxsize=2048)
+def _ransac_samples(n: int, iters: int, k: int) -> NDArray[np.int64]:
+    """The RANSAC samples of `solve_3d3d` for n pairs: k distinct pair positions per
+    hypothesis, the k smallest of n random draws in increasing order (argsort(draws)[:, :k]),
+    from a generator seeded with n. A function of (n, iters, k) only, so kept (read-only):
+    closures verified with as many matched pairs draw the same samples."""
+    draws = np.random.default_rng(n).random((iters, n))
+    samples = _smallest_sorted(draws, k)
+    if samples is None:  # tied draws: leave their order to numpy
+        part = np.argpartition(draws, k - 1, axis=1)[:, :k]
+        samples = np.take_along_axis(
+            part, np.argsort(np.take_along_axis(draws, part, axis=1), axis=1), axis=1)
+    samples.flags.writeable = False
+    return samples
+
+
+@njit(cache=True)
+def _smallest_k1(draws: F64, k: int) -> tuple[NDArray[np.int64], bool]:
+    """Per row, the positions of the k + 1 smallest values in increasing order (first seen
+    first among equals), and whether any two of them are equal."""
+    rows, n = draws.shape
+    m = k + 1
+    out = np.empty((rows, m), np.int64)
+    tied = False
+    val = np.empty(m)
+    pos = np.empty(m, np.int64)
+    for r in range(rows):
+        filled = 0
+        for j in range(n):
+            x = draws[r, j]
+            if filled == m and not x < val[m - 1]:
+                if x == val[m - 1]:
+                    tied = True
+                continue
+            # insert after any equal values already kept
+            i = filled if filled < m else m - 1
+            while i > 0 and x < val[i - 1]:
+                if i < m:
+                    val[i] = val[i - 1]
+                    pos[i] = pos[i - 1]
+                i -= 1
+            val[i] = x
+            pos[i] = j
+            if filled < m:
+                filled += 1
+        for i in range(filled):
+            out[r, i] = pos[i]
+            if i > 0 and val[i] == val[i - 1]:
+                tied = True
+    return out, tied
+
+
+def _smallest_sorted(draws: F64, k: int) -> NDArray[np.int64] | None:
+    """`argsort(draws, axis=1)[:, :k]` (the positions of each row's k smallest values, in
+    increasing order) in one pass per row; None when a tie among the k + 1 smallest could make
+    the order depend on the sorting algorithm (the caller then sorts with numpy)."""
+    if draws.shape[1] <= k:
+        return None
+    idx, tied = _smallest_k1(np.ascontiguousarray(draws, dtype=np.float64), k)
+    if tied:
+        return None
+    return np.ascontiguousarray(idx[:, :k])
+
+
+@njit(cache=True)
+def _best_3d3d(rot: F64, trans: F64, valid: NDArray[np.bool_], p: F64, q: F64,
+               thr: float) -> int:
+    """`argmax(_score_3d3d(...))` without finishing hypotheses that cannot win: every 32
+    pairs, a hypothesis whose score could at most reach (all remaining pairs inliers at zero
+    error) stays below the best so far is dropped. The scores that are finished are
+    `_score_3d3d`'s to the bit, so the first best is the same hypothesis."""
+    iters, n = rot.shape[0], p.shape[0]
+    denom = thr * (n + 1)
+    best = -np.inf
+    best_h = 0
+    for h in range(iters):
+        r = rot[h]
+        count = 0
+        total = 0.0
+        dropped = False
+        for m in range(n):
+            e = _pair_error(p, q, r, trans[h], m)
+            if e <= thr:
+                count += 1
+                total += e
+            else:
+                total += thr
+            if (m & 31) == 31:
+                # the total only grows and the count gains at most the pairs left
+                bound = ((count + n - 1 - m) if valid[h] else -1) - total / denom
+                if bound < best:
+                    dropped = True
+                    break
+        if dropped:
+            continue
+        score = (count if valid[h] else -1) - total / (thr * (n + 1))
+        if score > best:
+            best = score
+            best_h = h
+    return best_h
 
 
 def _errors_3d3d(rot: F64, trans: F64, p: F64, q: F64) -> F64:
@@ -541,14 +650,8 @@ def solve_3d3d(
     if n < max(k, 3):
         return None, np.zeros(0, np.intp)
     thr = float(params.vis_inlier_distance)
-    rng = np.random.default_rng(n)
     iters = max(1, params.vis_iterations)
-    # all hypotheses at once: k distinct pairs per hypothesis (the k smallest of n random
-    # draws, in increasing order: argsort(draws)[:, :k] without sorting whole rows)
-    draws = rng.random((iters, n))
-    part = np.argpartition(draws, k - 1, axis=1)[:, :k]
-    samples = np.take_along_axis(
-        part, np.argsort(np.take_along_axis(draws, part, axis=1), axis=1), axis=1)
+    samples = _ransac_samples(n, iters, k)
     sp, sq = from_points[samples], to_points[samples]  # (iters, k, 3)
     if three_dof:
         dp, dq = sp[:, 1, :2] - sp[:, 0, :2], sq[:, 1, :2] - sq[:, 0, :2]
@@ -566,10 +669,9 @@ def solve_3d3d(
         rot = np.einsum("nji,nkj->nik", vt, u)
         valid = np.linalg.norm(sp[:, 1] - sp[:, 0], axis=1) > 0.05
     trans = sp.mean(axis=1) - np.einsum("nij,nj->ni", rot, sq.mean(axis=1))
-    score = _score_3d3d(np.ascontiguousarray(rot), np.ascontiguousarray(trans), valid,
-                        np.ascontiguousarray(from_points, dtype=np.float64),
-                        np.ascontiguousarray(to_points, dtype=np.float64), thr)
-    h_best = int(np.argmax(score))
+    h_best = int(_best_3d3d(np.ascontiguousarray(rot), np.ascontiguousarray(trans), valid,
+                            np.ascontiguousarray(from_points, dtype=np.float64),
+                            np.ascontiguousarray(to_points, dtype=np.float64), thr))
     best_err = _errors_3d3d(rot[h_best], trans[h_best], from_points, to_points)
     best: NDArray[np.intp] = np.flatnonzero(best_err <= thr).astype(np.intp)
     if best.size < max(k, 3):

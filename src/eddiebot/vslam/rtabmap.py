@@ -24,6 +24,7 @@ from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
 from eddiebot.vslam.graph import (
     GraphLink,
     GtsamPoseGraph,
+    IncrementalPose2Graph,
     PoseGraphOptimizer,
     optimized_link_errors,
 )
@@ -128,6 +129,16 @@ class MapDatabase(Protocol):
         ...
 
 
+def _worst_link_error(ids: NDArray[np.int64], lin: F64, ang: F64, sigma: float) -> float:
+    """The largest `RGBD/OptimizeMaxError` ratio of an optimised graph's links. With odometry
+    frames (``sigma`` > 0) a frame shares its node's position by construction (a constraint, not
+    a measurement): only the frame links' heading is judged."""
+    if sigma > 0:
+        tie = (ids[:, 0] < ODOM_FRAME_ID_OFFSET) & (ids[:, 1] >= ODOM_FRAME_ID_OFFSET)
+        lin = np.where(tie, 0.0, lin)
+    return max(float(lin.max(initial=0.0)), float(ang.max(initial=0.0)))
+
+
 class Rtabmap:
     """The SLAM core. Create with RTAB-Map parameters, feed frames with `process`."""
 
@@ -168,6 +179,9 @@ class Rtabmap:
         self._odom_max_info: F64 | None = None  # per-axis largest odometry information
         self._frame_poses: dict[int, F64] = {}  # optimised odometry frames (RGBD/OdomHeadingSigma)
         self._frames = OdometryFrames()  # their links, kept between graph updates
+        # the incremental graph holds the graph of the last `_optimize` (memory's link log
+        # then tells what was added since)
+        self._graph_live = False
         if database is not None:
             database.load_into(self)
 
@@ -554,7 +568,13 @@ class Rtabmap:
                 return link
         return None
 
-    def _optimize(self, current: int, new_links: list[Link]) -> bool:
+    def _incremental(self) -> IncrementalPose2Graph | None:
+        inner = (self.optimizer.incremental if isinstance(self.optimizer, GtsamPoseGraph)
+                 else self.optimizer)
+        return inner if isinstance(inner, IncrementalPose2Graph) else None
+
+    def _whole_graph(self, current: int) -> tuple[dict[int, F64], list[Link] | list[GraphLink], int]:
+        """The graph to optimise: poses, links and root of the component of `current`."""
         mem = self.memory
         in_ram = set(mem.wm) | set(mem.stm)
         comp = mem.component(current, in_ram)
@@ -570,22 +590,101 @@ class Rtabmap:
         sigma = self.params.rgbd_odom_heading_sigma
         if sigma > 0:
             poses, links = self._frames.graph(poses, links, root, sigma, self._frame_poses)
+        return poses, links, root
+
+    def _optimize(self, current: int, new_links: list[Link]) -> bool:
+        log = self.memory.take_link_log()
+        live, self._graph_live = self._graph_live, False
+        if live and log is not None:
+            done = self._optimize_added(current, new_links, log)
+            if done is not None:
+                self._graph_live = done
+                return done
+        poses, links, root = self._whole_graph(current)
+        sigma = self.params.rgbd_odom_heading_sigma
         optimized = self.optimizer.optimize(poses, links, root, self.params.optimizer_iterations)
         thr = self.params.rgbd_optimize_max_error
         if thr > 0 and new_links:
             ids, lin, ang = optimized_link_errors(self.optimizer, optimized, links)
-            if sigma > 0:
-                # a frame shares its node's position by construction (a constraint, not a
-                # measurement): only the frame links' heading is judged
-                tie = (ids[:, 0] < ODOM_FRAME_ID_OFFSET) & (ids[:, 1] >= ODOM_FRAME_ID_OFFSET)
-                lin = np.where(tie, 0.0, lin)
-            worst = max(float(lin.max(initial=0.0)), float(ang.max(initial=0.0)))
-            if worst > thr:
+            if _worst_link_error(ids, lin, ang, sigma) > thr:
                 return False
         if sigma > 0:
             self._frame_poses = {i: p for i, p in optimized.items() if i >= ODOM_FRAME_ID_OFFSET}
             optimized = {i: p for i, p in optimized.items() if i < ODOM_FRAME_ID_OFFSET}
         self.optimized_poses.update(optimized)
+        self._graph_live = (self._incremental() is not None
+                            and not self.params.rgbd_optimize_from_graph_end)
+        return True
+
+    def _optimize_added(self, current: int, new_links: list[Link],
+                        log: list[tuple[int, int]]) -> bool | None:
+        """`_optimize` when the memory graph only grew (by the links of `log`) since the
+        incremental graph last took it: hands the graph the new nodes and links instead of
+        the whole component. The same update, estimate and check as the whole-graph call;
+        None (nothing changed) when the additions do not fit that case."""
+        g = self._incremental()
+        if g is None or self.params.rgbd_optimize_from_graph_end:
+            return None
+        mem = self.memory
+        pairs = list(dict.fromkeys(log))
+        pair_set = set(pairs)
+        new = {i for pair in pairs for i in pair if not g.knows(i)}
+        if not g.knows(current) and current not in new:
+            return None
+        for n in new:  # entered RAM as new nodes: every link they have was logged
+            if n not in mem.nodes or not (n in mem.wm or n in mem.stm):
+                return None
+            for m in mem.links.get(n, ()):
+                if ((n, m) if n < m else (m, n)) not in pair_set:
+                    return None
+        # the component of `current` grows by the new nodes the logged links reach
+        reach: set[int] = set()
+        grew = True
+        while grew:
+            grew = False
+            for a, b in pairs:
+                ina, inb = g.knows(a) or a in reach, g.knows(b) or b in reach
+                if ina != inb:
+                    reach.add(b if ina else a)
+                    grew = True
+        if (not g.knows(current) and current not in reach) or (reach and min(reach) < g.root_id):
+            return None
+        sigma = self.params.rgbd_odom_heading_sigma
+        root = g.root_id
+        if sigma > 0 and not self._frames.fits(root, sigma):
+            return None
+        known = self.optimized_poses
+        m2o = self.map_to_odom
+        poses: dict[int, F64] = {i: known[i] if i in known else m2o @ mem.nodes[i].odom_pose
+                                 for i in reach}
+        root_pose = known[root] if root in known else m2o @ mem.nodes[root].odom_pose
+        links: list[Link] | list[GraphLink] = [
+            mem.links[a][b] for a, b in pairs
+            if (g.knows(a) or a in reach) and (g.knows(b) or b in reach)]
+        if sigma > 0:
+            poses, links = self._frames.extend(poses, links, root, sigma, self._frame_poses)
+
+        def whole() -> tuple[Mapping[int, F64], list[Link] | list[GraphLink]]:
+            p, lk, _ = self._whole_graph(current)
+            return p, lk
+
+        if not g.extend(poses, links, root, root_pose, self.params.optimizer_iterations, whole):
+            return None
+        thr = self.params.rgbd_optimize_max_error
+        if thr > 0 and new_links:
+            ids, lin, ang = g.link_error_ratios()
+            if _worst_link_error(ids, lin, ang, sigma) > thr:
+                return False
+        mats = g.poses_array()
+        ids_all = np.asarray(g.node_ids, np.int64)
+        if sigma > 0:
+            # as splitting the {id: pose} dict of the whole-graph call (graph order kept)
+            frame = ids_all >= ODOM_FRAME_ID_OFFSET
+            self._frame_poses = dict(zip(ids_all[frame].tolist(), mats[frame]))
+            node = ~frame
+            self.optimized_poses.update(zip(ids_all[node].tolist(), mats[node]))
+        else:
+            self.optimized_poses.update(zip(ids_all.tolist(), mats))
         return True
 
     def _localize(self, node: Node, closure_links: list[Link], odom: F64) -> F64:
@@ -684,10 +783,27 @@ class OdometryFrames:
         self._rigid = np.eye(6)
         self._eye = np.eye(4)
 
+    def fits(self, root: int, heading_sigma: float) -> bool:
+        """True when `extend` can continue the last `graph` call's links (same root and σ)."""
+        return heading_sigma == self._sigma and root == self._root
+
+    def extend(self, poses: Mapping[int, F64], links: Sequence[Link | GraphLink], root: int,
+               heading_sigma: float, frame_poses: Mapping[int, F64] | None = None,
+               ) -> tuple[dict[int, F64], list[GraphLink]]:
+        """The part of `graph` for added nodes (`poses`) and links only (`fits` must hold):
+        those nodes, their frames and ties, and the links' graph copies."""
+        assert self.fits(root, heading_sigma)
+        return self._build(poses, links, root, heading_sigma, frame_poses, forget=False)
+
     def graph(self, poses: Mapping[int, F64], links: Sequence[Link | GraphLink], root: int,
               heading_sigma: float, frame_poses: Mapping[int, F64] | None = None,
               ) -> tuple[dict[int, F64], list[GraphLink]]:
         """`odometry_frame_graph(poses, links, root, heading_sigma, frame_poses)`."""
+        return self._build(poses, links, root, heading_sigma, frame_poses, forget=True)
+
+    def _build(self, poses: Mapping[int, F64], links: Sequence[Link | GraphLink], root: int,
+               heading_sigma: float, frame_poses: Mapping[int, F64] | None, forget: bool,
+               ) -> tuple[dict[int, F64], list[GraphLink]]:
         if heading_sigma != self._sigma or root != self._root:
             tie = 1.0 / _FRAME_TIE_VARIANCE
             self._sigma, self._root = heading_sigma, root
@@ -707,7 +823,7 @@ class OdometryFrames:
                 t = ties[i] = GraphLink(i, f, self._eye, self._rigid if i == root else self._heading)
             out.append(t)
         moved = self._moved
-        if len(moved) > 2 * len(links) + 1024:  # forget links no longer given
+        if forget and len(moved) > 2 * len(links) + 1024:  # forget links no longer given
             moved.clear()
         for lk in links:
             key = (lk.from_id, lk.to_id)
@@ -763,8 +879,10 @@ def path_covariance(links: Mapping[int, Mapping[int, Link]], start: int, goal: i
         for m, lk in links.get(n, {}).items():
             if m in done:
                 continue
-            c = _link_covariance_xyt(lk.information)
-            w = cost + float(c[0, 0] + c[1, 1] + c[2, 2])
+            # trace of `_link_covariance_xyt(lk.information)`, in scalars (same values)
+            info = lk.information
+            w = cost + (1.0 / max(float(info[0, 0]), 1e-12) + 1.0 / max(float(info[1, 1]), 1e-12)
+                        + 1.0 / max(float(info[5, 5]), 1e-12))
             if w < best.get(m, np.inf):
                 best[m] = w
                 parent[m] = n
