@@ -87,4 +87,3 @@ def test_world_points_from_passed_pose_equal_graph_lookup() -> None:
         fresh = SlamCore(cfg, sensor_offset=core.sensor_offset)
         fresh.graph, fresh.nodes = core.graph, core.nodes
         assert core._world_points(i, poses[i]).tobytes() == fresh._world_points(i).tobytes()
-        assert core._world_normals(i, poses[i]).tobytes() == fresh._world_normals(i).tobytes()

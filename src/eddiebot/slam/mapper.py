@@ -429,7 +429,6 @@ class SlamCore:
         self._pos_cache: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._bary_local = np.zeros((0, 2))
         self._normal_cache: dict[int, FloatArray] = {}
-        self._world_normal_cache: dict[int, tuple[FloatArray, FloatArray]] = {}
         self._active = np.zeros(0, dtype=bool)
 
     @property
@@ -588,25 +587,6 @@ class SlamCore:
         world[:, 1] = sensor[1] + s * pts[:, 0] + c * pts[:, 1]
         return world
 
-    def _world_normals(self, idx: int, pose: FloatArray | None = None) -> FloatArray:
-        """Normals of a node's end points in the map frame (computed once, in its own frame)."""
-        if pose is None:
-            pose = self.graph.pose(idx)
-        cached = self._world_normal_cache.get(idx)
-        if cached is not None and cached[0].tolist() == pose.tolist():
-            return cached[1]
-        local = self._normal_cache.get(idx)
-        if local is None:
-            local = point_normals(self.nodes[idx].points)
-            self._normal_cache[idx] = local
-        th = float(_compose1(pose, self.sensor_offset)[2])
-        c, s = math.cos(th), math.sin(th)
-        world = np.stack(
-            [c * local[:, 0] - s * local[:, 1], s * local[:, 0] + c * local[:, 1]], axis=-1
-        )
-        self._world_normal_cache[idx] = (pose, world)
-        return world
-
     def _local_normals(self, idx: int) -> FloatArray:
         local = self._normal_cache.get(idx)
         if local is None:
@@ -618,8 +598,9 @@ class SlamCore:
         self, nodes: Sequence[int], poses: FloatArray, *, normals: bool = False
     ) -> tuple[FloatArray, FloatArray | None]:
         """The end points (and with ``normals`` their normals) of ``nodes``, concatenated in
-        the map frame at their rows of ``poses``: `_world_points` / `_world_normals` of every
-        node in one pass (the same operations on each value, so bit-identical to those)."""
+        the map frame at their rows of ``poses``: `_world_points` of every node, and each node's
+        `_local_normals` turned by its sensor heading, in one pass (the same operations on each
+        value as the per-node code, so bit-identical to it)."""
         rows = poses[np.asarray(nodes, dtype=np.intp)]
         sensor = _compose_rows(rows, self.sensor_offset)
         th = sensor[:, 2].tolist()
