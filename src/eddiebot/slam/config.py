@@ -28,6 +28,7 @@ __all__ = ["SlamConfig", "SlamMode", "load_slam_config"]
 SlamMode = str  # "mapping" | "localization" | "lifelong"
 _MODES = ("mapping", "localization", "lifelong")
 _OPTIMIZERS = ("isam2", "levenberg_marquardt")
+_FACTORIZATIONS = ("qr", "cholesky")  # eddiebot.slam.pose_graph.FACTORIZATIONS, without importing GTSAM
 _MATCH_COVARIANCES = ("response", "icp")
 _KERNELS = ("none", "huber", "cauchy", "dcs")
 _STEP_HEADINGS = ("odometry", "quantization", "match")
@@ -96,6 +97,17 @@ class SlamConfig:
     # --- eddiebot's own
     optimizer: str = "isam2"
     """``isam2`` (incremental, every node) or ``levenberg_marquardt`` (batch, on loop closure)."""
+    isam2_factorization: str = "qr"
+    """iSAM2's elimination, ``qr`` or ``cholesky``: Cholesky takes about half the time per
+    update but squares the conditioning; a graph whose update fails with it falls back to QR."""
+    isam2_relinearize_skip: int = 1
+    """iSAM2 checks for relinearisation every this many updates (GTSAM's default 10)."""
+    optimize_every_n_nodes: int = 1
+    """Fold new nodes into the graph's estimate every this many nodes (Cartographer's
+    ``optimize_every_n_nodes``; slam_toolbox optimises only on loop closure). A loop closure,
+    a map update, a session save and every query of the node poses optimise at once; in
+    between, a new node keeps the pose its scan match and odometry gave it."""
+    """iSAM2 checks for relinearisation every this many updates (GTSAM's default 10)."""
     loop_robust_kernel: str = "dcs"
     """Robust kernel on loop-closure edges: ``none``, ``huber``, ``cauchy`` or ``dcs``."""
     loop_robust_kernel_width: float = 1.0
@@ -243,6 +255,19 @@ class SlamConfig:
         if out.optimizer not in _OPTIMIZERS:
             raise ConfigError(
                 f"parameter 'optimizer' must be one of {_OPTIMIZERS}, got {out.optimizer!r}"
+            )
+        if out.isam2_factorization not in _FACTORIZATIONS:
+            raise ConfigError(
+                f"parameter 'isam2_factorization' must be one of {_FACTORIZATIONS}, "
+                f"got {out.isam2_factorization!r}"
+            )
+        if out.isam2_relinearize_skip < 1:
+            raise ConfigError(
+                f"parameter 'isam2_relinearize_skip' must be >= 1, got {out.isam2_relinearize_skip}"
+            )
+        if out.optimize_every_n_nodes < 1:
+            raise ConfigError(
+                f"parameter 'optimize_every_n_nodes' must be >= 1, got {out.optimize_every_n_nodes}"
             )
         if out.loop_robust_kernel not in _KERNELS:
             raise ConfigError(

@@ -414,6 +414,8 @@ class SlamCore:
             optimizer=self.config.optimizer,
             robust_kernel=self.config.loop_robust_kernel,
             kernel_width=self.config.loop_robust_kernel_width,
+            factorization=self.config.isam2_factorization,
+            relinearize_skip=self.config.isam2_relinearize_skip,
         )
         self.nodes: list[NodeRecord] = []
         self.loop_closures: list[LoopClosure] = []
@@ -442,11 +444,14 @@ class SlamCore:
         return self._state.map_to_odom.copy()
 
     def node_poses(self) -> FloatArray:
-        """Robot (base) poses of every node in the map frame (N, 3)."""
+        """Robot (base) poses of every node in the map frame (N, 3), optimised (nodes left
+        pending by `optimize_every_n_nodes` are folded in first)."""
+        self.graph.optimize()
         return self.graph.poses
 
     def sensor_poses(self) -> FloatArray:
-        """Sensor poses of every node in the map frame (N, 3)."""
+        """Sensor poses of every node in the map frame (N, 3), optimised as `node_poses`."""
+        self.graph.optimize()
         poses = self.graph.poses
         if poses.shape[0] == 0:
             return poses
@@ -888,7 +893,9 @@ class SlamCore:
         loop_closed = False
         if cfg.do_loop_closing and idx > 0:
             loop_closed = self._try_close_loops(idx, points, warnings, stamp)
-        self.graph.optimize(full=loop_closed)
+        every = cfg.optimize_every_n_nodes
+        if loop_closed or every <= 1 or (idx + 1) % every == 0:
+            self.graph.optimize(full=loop_closed)
         final = self.graph.pose(idx)
         if self.mode == "lifelong":
             self._retire_superseded(idx)

@@ -68,10 +68,12 @@ from scipy.special import gammaincinv
 
 from eddiebot.geometry import se2_between
 
-__all__ = ["Edge", "EdgeKind", "PoseGraph"]
+__all__ = ["FACTORIZATIONS", "Edge", "EdgeKind", "PoseGraph"]
 
 FloatArray = npt.NDArray[np.float64]
 
+FACTORIZATIONS = ("qr", "cholesky")
+"""iSAM2 eliminations `PoseGraph` offers."""
 _PRIOR_SIGMAS = np.array([1e-4, 1e-4, 1e-5])
 _EXTRA_ROUNDS = 4
 """At most this many extra iSAM2 relinearisation rounds after a loop closure."""
@@ -167,6 +169,8 @@ class PoseGraph:
         false_loop_extent: tuple[float, float, float] = (3.0, 3.0, math.pi),
         retest_interval: int = 50,
         max_retests: int = 2,
+        factorization: str = "qr",
+        relinearize_skip: int = 1,
     ) -> None:
         if optimizer not in ("isam2", "levenberg_marquardt"):
             raise ValueError(
@@ -176,7 +180,15 @@ class PoseGraph:
             raise ValueError(f"unknown robust kernel {robust_kernel!r}")
         if gate_probability is not None and not 0.0 < gate_probability < 1.0:
             raise ValueError(f"gate_probability must be in (0, 1) or None, got {gate_probability}")
+        if factorization not in FACTORIZATIONS:
+            raise ValueError(f"factorization must be one of {FACTORIZATIONS}, got {factorization!r}")
+        if int(relinearize_skip) < 1:
+            raise ValueError(f"relinearize_skip must be >= 1, got {relinearize_skip}")
         self.optimizer = optimizer
+        self.factorization = factorization
+        """iSAM2's elimination: ``qr`` or ``cholesky`` (falls back to ``qr`` for good when an
+        update reports an indeterminate system)."""
+        self.relinearize_skip = int(relinearize_skip)
         self.robust_kernel = robust_kernel
         self.kernel_width = float(kernel_width)
         self.gate_probability = gate_probability
@@ -222,6 +234,8 @@ class PoseGraph:
         self._isam_broken = False
         self.isam_recoveries = 0
         """How often an iSAM2 update failed and was replaced by a batch solve."""
+        self.factorization_fallbacks = 0
+        """Cholesky iSAM2 updates that failed and switched this graph to QR."""
         self.gate_tests = 0
         """Robust edges tested by the χ² gate."""
         self.marginal_queries = 0
@@ -237,10 +251,12 @@ class PoseGraph:
         self._sync()
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(0.01)
-        params.relinearizeSkip = 1
-        # QR, not Cholesky: a loop closure with a near-singular information matrix (as g2o
-        # graphs carry) made Cholesky report an indeterminate system mid-replay
-        params.setFactorization("QR")
+        params.relinearizeSkip = self.relinearize_skip
+        # Cholesky eliminates the normal equations (about half QR's time per update on the
+        # simulated routes) but squares their conditioning: a loop closure with a near-singular
+        # information matrix (as g2o graphs carry) can make it report an indeterminate system,
+        # after which `optimize` re-solves in batch and this graph stays on QR
+        params.setFactorization(self.factorization.upper())
         self._isam = gtsam.ISAM2(params)
         self._isam_keys = set()
         self._pending_nodes = list(range(self._n))
@@ -657,6 +673,9 @@ class PoseGraph:
                 self._pending_nodes, self._pending_edges = [], []
                 self._store(self._lm(self._inlier_graph()))
                 self.isam_recoveries += 1
+                if self.factorization != "qr":
+                    self.factorization = "qr"
+                    self.factorization_fallbacks += 1
                 try:
                     self._restart_isam()
                 except RuntimeError:
@@ -832,6 +851,8 @@ class PoseGraph:
             false_loop_extent=self.false_loop_extent,
             retest_interval=self.retest_interval,
             max_retests=self.max_retests,
+            factorization=self.factorization,
+            relinearize_skip=self.relinearize_skip,
         )
         order: list[int] = []
         for node in range(n):

@@ -45,11 +45,12 @@ def save_session(core: SlamCore, path: str | os.PathLike[str]) -> Path:
     """Write the core's graph and scans to ``path`` atomically; returns the path."""
     target = Path(path)
     nodes = core.nodes
+    poses = core.node_poses()  # first: folds in nodes still pending
     edges = core.graph.edges
     lengths = np.array([n.scan.ranges.size for n in nodes], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
     arrays: dict[str, Any] = {
-        "poses": core.graph.poses.reshape(-1, 3),
+        "poses": poses.reshape(-1, 3),
         "odom_poses": np.array([n.odom_pose for n in nodes]).reshape(-1, 3),
         "stamps_ns": np.array([n.scan.stamp_ns for n in nodes], dtype=np.int64),
         "retired": np.array([n.retired for n in nodes], dtype=bool),
