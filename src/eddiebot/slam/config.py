@@ -170,6 +170,12 @@ class SlamConfig:
     odometry_heading_quantization: float = 0.01
     """σ (rad) of the odometry heading's non-accumulating error (encoder quantisation), used by
     ``odometry_span_nodes``."""
+    odometry_span_batch: int = 1
+    """Hand the span edges of ``odometry_span_nodes`` to the graph this many at a time (every
+    node still gets its own). A span edge reaches back that many nodes, and iSAM2 re-eliminates
+    the path from that node's clique to the root (long once loops have closed); in batches, the
+    path is paid once per batch. Edges still waiting are added before any query of the node
+    poses (map updates, session saves, the final trajectory)."""
     fused_step_heading: str = "odometry"
     """Odometry heading σ of each fused sequential step (``fuse_odometry``): "odometry" = the
     noise model above; "quantization" = raised to at least √2 · ``odometry_heading_quantization``
@@ -294,6 +300,10 @@ class SlamConfig:
             value = getattr(out, name)
             if not math.isfinite(value) or value < 0:
                 raise ConfigError(f"parameter '{name}' must be a finite value >= 0, got {value}")
+        if out.odometry_span_batch < 1:
+            raise ConfigError(
+                f"parameter 'odometry_span_batch' must be >= 1, got {out.odometry_span_batch}"
+            )
         if out.odometry_span_nodes < 0:
             raise ConfigError(
                 f"parameter 'odometry_span_nodes' must be >= 0, got {out.odometry_span_nodes}"

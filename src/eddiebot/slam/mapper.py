@@ -418,6 +418,7 @@ class SlamCore:
             relinearize_skip=self.config.isam2_relinearize_skip,
         )
         self.nodes: list[NodeRecord] = []
+        self._span_queue: list[tuple[int, int]] = []
         self.loop_closures: list[LoopClosure] = []
         self._state = _State()
         self._grid = OccupancyGridBuilder(
@@ -443,14 +444,23 @@ class SlamCore:
         """Current map → odom correction (x, y, theta)."""
         return self._state.map_to_odom.copy()
 
+    def _flush_spans(self) -> None:
+        """Add the span edges `odometry_span_batch` holds back."""
+        queue, self._span_queue = self._span_queue, []
+        for j, idx in queue:
+            self._add_odometry_span(j, idx)
+
     def node_poses(self) -> FloatArray:
         """Robot (base) poses of every node in the map frame (N, 3), optimised (nodes left
-        pending by `optimize_every_n_nodes` are folded in first)."""
+        pending by `optimize_every_n_nodes` and span edges held by `odometry_span_batch` are
+        folded in first)."""
+        self._flush_spans()
         self.graph.optimize()
         return self.graph.poses
 
     def sensor_poses(self) -> FloatArray:
         """Sensor poses of every node in the map frame (N, 3), optimised as `node_poses`."""
+        self._flush_spans()
         self.graph.optimize()
         poses = self.graph.poses
         if poses.shape[0] == 0:
@@ -879,7 +889,9 @@ class SlamCore:
             st.chain_start = idx
         span = cfg.odometry_span_nodes
         if span > 0 and matched and idx - span >= st.chain_start:
-            self._add_odometry_span(idx - span, idx)
+            self._span_queue.append((idx - span, idx))
+            if len(self._span_queue) >= cfg.odometry_span_batch:
+                self._flush_spans()
         # running buffer
         st.running.append(idx)
         while len(st.running) > cfg.scan_buffer_size:
