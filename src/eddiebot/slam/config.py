@@ -267,14 +267,6 @@ class SlamConfig:
                 f"parameter 'isam2_factorization' must be one of {_FACTORIZATIONS}, "
                 f"got {out.isam2_factorization!r}"
             )
-        if out.isam2_relinearize_skip < 1:
-            raise ConfigError(
-                f"parameter 'isam2_relinearize_skip' must be >= 1, got {out.isam2_relinearize_skip}"
-            )
-        if out.optimize_every_n_nodes < 1:
-            raise ConfigError(
-                f"parameter 'optimize_every_n_nodes' must be >= 1, got {out.optimize_every_n_nodes}"
-            )
         if out.loop_robust_kernel not in _KERNELS:
             raise ConfigError(
                 f"parameter 'loop_robust_kernel' must be one of {_KERNELS}, got {out.loop_robust_kernel!r}"
@@ -300,14 +292,15 @@ class SlamConfig:
             value = getattr(out, name)
             if not math.isfinite(value) or value < 0:
                 raise ConfigError(f"parameter '{name}' must be a finite value >= 0, got {value}")
-        if out.odometry_span_batch < 1:
-            raise ConfigError(
-                f"parameter 'odometry_span_batch' must be >= 1, got {out.odometry_span_batch}"
-            )
-        if out.odometry_span_nodes < 0:
-            raise ConfigError(
-                f"parameter 'odometry_span_nodes' must be >= 0, got {out.odometry_span_nodes}"
-            )
+        for name, least in (
+            ("isam2_relinearize_skip", 1),
+            ("optimize_every_n_nodes", 1),
+            ("odometry_span_batch", 1),
+            ("odometry_span_nodes", 0),
+        ):
+            count = getattr(out, name)
+            if count < least:
+                raise ConfigError(f"parameter '{name}' must be >= {least}, got {count}")
         return out
 
     @classmethod
