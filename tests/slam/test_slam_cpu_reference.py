@@ -6,18 +6,11 @@ import math
 
 import numpy as np
 from slam_world import ROOM, SCAN_ANGLES, drifting_odometry, loop_path, raycast
+from test_mapper_speed import _poses
 
 from eddiebot.geometry import se2_compose
 from eddiebot.slam import Scan, SlamConfig, SlamCore
 from eddiebot.slam.mapper import _compose1, _compose_rows
-
-
-def _poses(rng: np.random.Generator, n: int) -> np.ndarray:
-    p = rng.normal(0.0, 20.0, (n, 3))
-    p[:, 2] = rng.uniform(-4.0, 4.0, n)
-    p[:8, 2] = [np.pi, -np.pi, 0.0, -0.0, 0.5 * np.pi, -0.5 * np.pi, 2 * np.pi, -2 * np.pi]
-    p[8:12, :2] = [[0.0, -0.0], [-0.0, 0.0], [1e-300, -1e-300], [1e12, -1e12]]
-    return p
 
 
 def test_row_compose_is_the_scalar_compose_bit_for_bit() -> None:

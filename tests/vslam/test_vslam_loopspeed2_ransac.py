@@ -5,6 +5,7 @@ the same transform and inliers either way, with its samples drawn afresh or from
 from __future__ import annotations
 
 import numpy as np
+from test_vslam_registration_score import _score_3d3d
 
 from eddiebot.vslam import registration
 from eddiebot.vslam.parameters import RtabmapParameters
@@ -98,7 +99,7 @@ def test_pruned_best_hypothesis_is_the_scores_argmax():
             valid = rng.random(iters) > 0.1
             if trial == 5:
                 valid[:] = False  # every score is -1 - error: the least error wins
-            score = registration._score_3d3d(rot, trans, valid, p, q, 0.1)
+            score = _score_3d3d(rot, trans, valid, p, q, 0.1)
             best = registration._best_3d3d(rot, trans, valid, p, q, 0.1)
             assert best == int(np.argmax(score))
             checked += 1

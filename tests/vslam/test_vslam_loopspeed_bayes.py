@@ -6,6 +6,7 @@ compactions of the table."""
 from __future__ import annotations
 
 import numpy as np
+from test_vslam_speed_bayes import link_neighbours
 
 from eddiebot.vslam.bayes import VIRTUAL_PLACE_ID, BayesFilter
 from eddiebot.vslam.parameters import RtabmapParameters
@@ -17,14 +18,7 @@ def test_kept_column_sums_give_the_same_posterior():
     links: dict[int, set[int]] = {}
 
     def neighbours(i: int, depth: int) -> dict[int, int]:
-        out: dict[int, int] = {}
-        frontier = [i]
-        for d in range(1, depth + 1):
-            nxt = [m for n in frontier for m in sorted(links.get(n, ())) if m != i and m not in out]
-            for m in nxt:
-                out.setdefault(m, d)
-            frontier = nxt
-        return out
+        return link_neighbours(links, i, depth)
 
     kept, summed = BayesFilter(lc, 0.9), BayesFilter(lc, 0.9)
     summed._col_sum_ok = False  # the pass that sums the table

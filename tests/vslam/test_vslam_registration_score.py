@@ -3,9 +3,31 @@
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.registration import _errors_3d3d, _score_3d3d, solve_3d3d
+from eddiebot.vslam.registration import _errors_3d3d, _pair_error, solve_3d3d
+
+
+@njit(cache=True)
+def _score_3d3d(rot, trans, valid, p, q, thr):  # type: ignore[no-untyped-def]
+    """Every hypothesis's full score, pair by pair with the registration's `_pair_error`: the
+    oracle of `_best_3d3d` (inliers, −1 when degenerate, less the capped error / thr·(n + 1))."""
+    iters, n = rot.shape[0], p.shape[0]
+    out = np.empty(iters)
+    for h in range(iters):
+        r = rot[h]
+        count = 0
+        total = 0.0
+        for m in range(n):
+            e = _pair_error(p, q, r, trans[h], m)
+            if e <= thr:
+                count += 1
+                total += e
+            else:
+                total += thr
+        out[h] = (count if valid[h] else -1) - total / (thr * (n + 1))
+    return out
 
 
 def _dense_scores(rot, trans, valid, p, q, thr):

@@ -17,20 +17,25 @@ class _OneByOne(BayesFilter):
         self.invalidate([node_id])
 
 
+def link_neighbours(links: Mapping[int, set[int]], i: int, depth: int) -> dict[int, int]:
+    """Breadth-first neighbours of ``i`` up to ``depth`` links, each at its first depth."""
+    out: dict[int, int] = {}
+    frontier = [i]
+    for d in range(1, depth + 1):
+        nxt = [m for n in frontier for m in sorted(links.get(n, ())) if m != i and m not in out]
+        for m in nxt:
+            out.setdefault(m, d)
+        frontier = nxt
+    return out
+
+
 def test_node_entered_in_one_append_equals_one_by_one():
     rng = np.random.default_rng(4)
     lc = RtabmapParameters().prediction_lc()
     links: dict[int, set[int]] = {}
 
     def neighbours(i: int, depth: int) -> dict[int, int]:
-        out: dict[int, int] = {}
-        frontier = [i]
-        for d in range(1, depth + 1):
-            nxt = [m for n in frontier for m in sorted(links.get(n, ())) if m != i and m not in out]
-            for m in nxt:
-                out.setdefault(m, d)
-            frontier = nxt
-        return out
+        return link_neighbours(links, i, depth)
 
     fast, slow = BayesFilter(lc, 0.9), _OneByOne(lc, 0.9)
     wm: list[int] = []

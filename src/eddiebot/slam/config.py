@@ -102,12 +102,6 @@ class SlamConfig:
     update but squares the conditioning; a graph whose update fails with it falls back to QR."""
     isam2_relinearize_skip: int = 1
     """iSAM2 checks for relinearisation every this many updates (GTSAM's default 10)."""
-    optimize_every_n_nodes: int = 1
-    """Fold new nodes into the graph's estimate every this many nodes (Cartographer's
-    ``optimize_every_n_nodes``; slam_toolbox optimises only on loop closure). A loop closure,
-    a map update, a session save and every query of the node poses optimise at once; in
-    between, a new node keeps the pose its scan match and odometry gave it."""
-    """iSAM2 checks for relinearisation every this many updates (GTSAM's default 10)."""
     loop_robust_kernel: str = "dcs"
     """Robust kernel on loop-closure edges: ``none``, ``huber``, ``cauchy`` or ``dcs``."""
     loop_robust_kernel_width: float = 1.0
@@ -294,7 +288,6 @@ class SlamConfig:
                 raise ConfigError(f"parameter '{name}' must be a finite value >= 0, got {value}")
         for name, least in (
             ("isam2_relinearize_skip", 1),
-            ("optimize_every_n_nodes", 1),
             ("odometry_span_batch", 1),
             ("odometry_span_nodes", 0),
         ):

@@ -451,9 +451,8 @@ class SlamCore:
             self._add_odometry_span(j, idx)
 
     def node_poses(self) -> FloatArray:
-        """Robot (base) poses of every node in the map frame (N, 3), optimised (nodes left
-        pending by `optimize_every_n_nodes` and span edges held by `odometry_span_batch` are
-        folded in first)."""
+        """Robot (base) poses of every node in the map frame (N, 3), optimised (span edges held
+        by `odometry_span_batch` are folded in first)."""
         self._flush_spans()
         self.graph.optimize()
         return self.graph.poses
@@ -905,9 +904,7 @@ class SlamCore:
         loop_closed = False
         if cfg.do_loop_closing and idx > 0:
             loop_closed = self._try_close_loops(idx, points, warnings, stamp)
-        every = cfg.optimize_every_n_nodes
-        if loop_closed or every <= 1 or (idx + 1) % every == 0:
-            self.graph.optimize(full=loop_closed)
+        self.graph.optimize(full=loop_closed)
         final = self.graph.pose(idx)
         if self.mode == "lifelong":
             self._retire_superseded(idx)

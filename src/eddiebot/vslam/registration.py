@@ -496,28 +496,6 @@ def _pair_error(p: F64, q: F64, r: F64, t: F64, m: int) -> float:
     return math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
 
 
-@njit(cache=True)
-def _score_3d3d(rot: F64, trans: F64, valid: NDArray[np.bool_], p: F64, q: F64,
-                thr: float) -> F64:
-    """Per hypothesis h: inliers (|p − (R_h q + t_h)| ≤ thr; −1 when the sample is degenerate)
-    less the summed capped error / (thr·(n + 1)), so ties go to the smaller error."""
-    iters, n = rot.shape[0], p.shape[0]
-    out = np.empty(iters)
-    for h in range(iters):
-        r = rot[h]
-        count = 0
-        total = 0.0
-        for m in range(n):
-            e = _pair_error(p, q, r, trans[h], m)
-            if e <= thr:
-                count += 1
-                total += e
-            else:
-                total += thr
-        out[h] = (count if valid[h] else -1) - total / (thr * (n + 1))
-    return out
-
-
 @lru_cache(maxsize=2048)
 def _ransac_samples(n: int, iters: int, k: int) -> NDArray[np.int64]:
     """The RANSAC samples of `solve_3d3d` for n pairs: k distinct pair positions per
@@ -585,10 +563,12 @@ def _smallest_sorted(draws: F64, k: int) -> NDArray[np.int64] | None:
 @njit(cache=True)
 def _best_3d3d(rot: F64, trans: F64, valid: NDArray[np.bool_], p: F64, q: F64,
                thr: float) -> int:
-    """`argmax(_score_3d3d(...))` without finishing hypotheses that cannot win: every 32
-    pairs, a hypothesis whose score could at most reach (all remaining pairs inliers at zero
-    error) stays below the best so far is dropped. The scores that are finished are
-    `_score_3d3d`'s to the bit, so the first best is the same hypothesis."""
+    """The best hypothesis h of a 3D→3D RANSAC: the first argmax of its score, the inliers
+    (|p − (R_h q + t_h)| ≤ thr; −1 when the sample is degenerate) less the summed capped error
+    / (thr·(n + 1)), so ties go to the smaller error. Hypotheses that cannot win are not
+    finished: every 32 pairs, one whose score could at most reach (all remaining pairs inliers
+    at zero error) stays below the best so far is dropped; the scores that are finished are
+    summed pair by pair as the full score is, so the first best is the same hypothesis."""
     iters, n = rot.shape[0], p.shape[0]
     denom = thr * (n + 1)
     best = -np.inf
@@ -621,7 +601,7 @@ def _best_3d3d(rot: F64, trans: F64, valid: NDArray[np.bool_], p: F64, q: F64,
 
 
 def _errors_3d3d(rot: F64, trans: F64, p: F64, q: F64) -> F64:
-    """|p − (R q + t)| per pair, the distances `_score_3d3d` tests."""
+    """|p − (R q + t)| per pair, the distances `_best_3d3d` tests."""
     moved = (q[:, 0:1] * rot[:, 0] + q[:, 1:2] * rot[:, 1]) + q[:, 2:3] * rot[:, 2] + trans
     d = p - moved
     return np.asarray(np.sqrt((d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2]))
