@@ -13,8 +13,12 @@ fixed route:
   back) — the low-feature warning and the end-point error against odometry alone;
 * ``office-demo``: the demo's own `OFFICE_ROUTE` (about 3.5 minutes), to check the demo stage.
 
-Figures: trajectory error of the SLAM nodes against ground truth (RMSE, max; the map frame
-starts at the true start pose), wheel odometry's at the same times, end-point error of
+Figures: trajectory error of the SLAM nodes against ground truth (RMSE, max) two ways: from
+the start pose (the map frame starts at the true start pose), and after the one rigid planar
+transform that best fits the SLAM poses onto the truth (``ate_aligned_*``: the ATE of the TUM
+benchmark and ``evo_ape --align``, the figure the ≤ 0.05 m target is judged on; replays also
+give evo's own figure, ``ate_aligned_evo_rmse_m``) with that transform's rotation
+(``aligned_turn_deg``: how far the whole map is turned about its start); wheel odometry's at the same times, end-point error of
 SLAM's and odometry's final pose, agreement with the scan-height ground-truth map on the
 cells both call known (strict; occupied within one cell), CPU time the SLAM core spent on
 each processed scan in the node's thread (median, p99, max; targets ≤ 10 ms / ≤ 50 ms), and
@@ -56,8 +60,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import print_table, write_results
+from _slam_metrics import evo_ape_rmse
 
-from eddiebot.demo.mapping import run_mapping
+from eddiebot.demo.mapping import aligned_position_errors, run_mapping
 from eddiebot.demo.route import OFFICE_10MIN_ROUTE, OFFICE_ROUTE, WAREHOUSE_10MIN_ROUTE
 from eddiebot.demo.vslam_stage import CORRIDOR_ROUTE
 
@@ -114,6 +119,8 @@ def run_one(name: str, out: Path, seed: int, params: Path | None,
         "distance_m": r.distance_m, "sim_s": r.sim_seconds, "wall_s": wall, "cpu_s": cpu,
         "nodes": r.nodes, "loop_closures": r.loop_closures, "collisions": r.collisions,
         "ate_rmse_m": r.ate_rmse_m, "ate_max_m": r.ate_max_m, "odom_ate_rmse_m": r.odom_ate_rmse_m,
+        "ate_aligned_rmse_m": r.ate_aligned_rmse_m, "ate_aligned_max_m": r.ate_aligned_max_m,
+        "aligned_turn_deg": r.aligned_turn_deg, "odom_ate_aligned_rmse_m": r.odom_ate_aligned_rmse_m,
         "slam_end_m": r.slam_end_error_m, "odom_end_m": r.odom_end_error_m,
         "end_ratio": r.slam_end_error_m / r.odom_end_error_m if r.odom_end_error_m > 0 else math.nan,
         "agreement": r.agreement, "agreement_tolerant": r.agreement_tolerant,
@@ -129,7 +136,7 @@ def run_one(name: str, out: Path, seed: int, params: Path | None,
     if name == "corridor":
         row["meets"] = bool(row["end_ratio"] <= TARGETS["corridor_end_ratio"])
     else:
-        row["meets"] = bool(row["ate_rmse_m"] <= TARGETS["ate_rmse_m"]
+        row["meets"] = bool(row["ate_aligned_rmse_m"] <= TARGETS["ate_rmse_m"]
                             and row["agreement"] >= TARGETS["agreement"]
                             and row["scan_cpu_median_ms"] <= TARGETS["scan_cpu_median_ms"]
                             and row["scan_cpu_p99_ms"] <= TARGETS["scan_cpu_p99_ms"])
@@ -226,6 +233,8 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
     od = se2_compose(np.broadcast_to(start, poses.shape), _interp(to, po, q))
     err = np.hypot(*(est[:, :2] - gt[:, :2]).T)
     oerr = np.hypot(*(od[:, :2] - gt[:, :2]).T)
+    aerr, turn = aligned_position_errors(est, gt)
+    oaerr, _ = aligned_position_errors(od, gt)
 
     def drift(a: np.ndarray) -> float:
         d = np.unwrap(a[:, 2]) - gt[:, 2]
@@ -239,6 +248,10 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
         "nodes": len(poses), "loop_closures": len(res.core.loop_closures),
         "ate_rmse_m": float(np.sqrt(np.mean(err**2))), "ate_max_m": float(err.max()),
         "slam_end_m": float(err[-1]), "odom_ate_rmse_m": float(np.sqrt(np.mean(oerr**2))),
+        "ate_aligned_rmse_m": float(np.sqrt(np.mean(aerr**2))), "ate_aligned_max_m": float(aerr.max()),
+        "aligned_turn_deg": float(np.degrees(turn)),
+        "ate_aligned_evo_rmse_m": evo_ape_rmse(stamps, est, gt),
+        "odom_ate_aligned_rmse_m": float(np.sqrt(np.mean(oaerr**2))),
         "odom_end_m": float(oerr[-1]), "end_ratio": float(err[-1] / oerr[-1]),
         "heading_drift_max_deg": drift(est),
         "odom_heading_drift_max_deg": drift(od),
@@ -272,13 +285,14 @@ def main_replay(args: argparse.Namespace) -> int:
             if args.ensemble > 1:
                 summary.append(_ensemble_row(members))
     print_table(rows, ["drive", "run", "perturbation", "nodes", "loop_closures", "ate_rmse_m",
-                       "ate_max_m", "slam_end_m", "odom_ate_rmse_m", "odom_end_m", "end_ratio",
+                       "ate_max_m", "ate_aligned_rmse_m", "aligned_turn_deg", "slam_end_m", "odom_ate_rmse_m", "odom_end_m", "end_ratio",
                        "heading_drift_max_deg",
                        "odom_heading_drift_max_deg", "scan_cpu_median_ms", "overrides"])
     if summary:
         print()
         print_table(summary, ["drive", "run", "members", "ate_rmse_mean_m", "ate_rmse_sd_m",
-                              "ate_rmse_min_m", "ate_rmse_max_m", "end_ratio_median",
+                              "ate_rmse_min_m", "ate_rmse_max_m", "ate_aligned_rmse_mean_m",
+                              "ate_aligned_rmse_max_m", "end_ratio_median",
                               "overrides"])
     print(f"\nwrote {write_results(args.name, rows + summary)}")
     return 0
@@ -287,10 +301,13 @@ def main_replay(args: argparse.Namespace) -> int:
 def _ensemble_row(members: list[dict[str, Any]]) -> dict[str, Any]:
     """Mean, spread and range of an ensemble's RMSE (one drive, one configuration)."""
     rmse = np.array([m["ate_rmse_m"] for m in members])
+    aligned = np.array([m["ate_aligned_rmse_m"] for m in members])
     return {"drive": members[0]["drive"], "run": members[0]["run"], "summary": "ensemble",
             "members": len(members), "overrides": members[0]["overrides"],
             "ate_rmse_mean_m": float(rmse.mean()), "ate_rmse_sd_m": float(rmse.std(ddof=1)),
             "ate_rmse_min_m": float(rmse.min()), "ate_rmse_max_m": float(rmse.max()),
+            "ate_aligned_rmse_mean_m": float(aligned.mean()),
+            "ate_aligned_rmse_max_m": float(aligned.max()),
             "end_ratio_median": float(np.median([m["end_ratio"] for m in members])),
             "loop_closures_mean": float(np.mean([m["loop_closures"] for m in members]))}
 
@@ -342,8 +359,8 @@ def main() -> int:
                                           for k, v in row.items() if k not in ("run",)), flush=True)
     print()
     print_table(rows, ["run", "finished", "distance_m", "sim_s", "nodes", "loop_closures",
-                       "ate_rmse_m", "ate_max_m", "odom_ate_rmse_m", "slam_end_m", "odom_end_m",
-                       "agreement", "scan_cpu_median_ms", "scan_cpu_p99_ms",
+                       "ate_rmse_m", "ate_max_m", "ate_aligned_rmse_m", "aligned_turn_deg",
+                       "odom_ate_rmse_m", "slam_end_m", "odom_end_m", "agreement", "scan_cpu_median_ms", "scan_cpu_p99_ms",
                        "low_feature_episodes", "meets"])
     path = write_results(args.name, rows)
     print(f"\nwrote {path}")

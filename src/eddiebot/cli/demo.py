@@ -78,7 +78,9 @@ def _stage_mapping(out: Path, report: Report, seed: int) -> bool:
           f"{r.loop_closures} loop closures, {r.collisions} collisions")
     print(f"wheel odometry drift against ground truth: {r.odom_end_error_m:.3f} m after {r.distance_m:.1f} m "
           f"({100 * r.odom_end_error_m / max(r.distance_m, 1e-9):.2f} % of distance)")
-    print(f"SLAM trajectory error: RMSE {r.ate_rmse_m:.3f} m, max {r.ate_max_m:.3f} m; "
+    print(f"SLAM trajectory error: RMSE {r.ate_rmse_m:.3f} m, max {r.ate_max_m:.3f} m from the start "
+          f"pose; {r.ate_aligned_rmse_m:.3f} m, max {r.ate_aligned_max_m:.3f} m after the rigid "
+          f"alignment (the map turned {r.aligned_turn_deg:+.2f}°); "
           f"end point: SLAM {r.slam_end_error_m:.3f} m, wheel odometry {r.odom_end_error_m:.3f} m")
     print(f"map agreement with the ground truth (cells both call known): {100 * r.agreement:.1f} % "
           f"({100 * r.agreement_tolerant:.1f} % within one cell); saved {r.map_yaml}")
@@ -106,8 +108,10 @@ def _stage_mapping(out: Path, report: Report, seed: int) -> bool:
                    ("graph nodes", r.nodes),
                    ("loop closures", r.loop_closures),
                    ("collisions", r.collisions),
-                   ("SLAM trajectory RMSE (m)", r.ate_rmse_m),
+                   ("SLAM trajectory RMSE from the start pose (m)", r.ate_rmse_m),
                    ("SLAM trajectory max error (m)", r.ate_max_m),
+                   ("SLAM trajectory RMSE after a rigid alignment (m; TUM/evo ATE)", r.ate_aligned_rmse_m),
+                   ("turn of the whole SLAM map against the world (°)", r.aligned_turn_deg),
                    ("end-point error, SLAM (m)", r.slam_end_error_m),
                    ("end-point error, wheel odometry alone (m)", r.odom_end_error_m),
                    ("map agreement, cells both call known", r.agreement),

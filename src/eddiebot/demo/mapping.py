@@ -28,7 +28,7 @@ from eddiebot.maps import OccupancyMap, save_map
 from eddiebot.msgs.nav_msgs import Odometry
 from eddiebot.registry import NODES
 
-__all__ = ["MappingResult", "map_agreement", "run_mapping"]
+__all__ = ["MappingResult", "aligned_position_errors", "map_agreement", "run_mapping"]
 
 
 @dataclass
@@ -64,6 +64,14 @@ class MappingResult:
     """Scan matches whose variance along their weakest direction exceeded the threshold."""
     odom_ate_rmse_m: float = math.nan
     """Wheel odometry's position RMSE at the SLAM nodes' times (the same start alignment)."""
+    ate_aligned_rmse_m: float = math.nan
+    """Position RMSE after the one rigid planar transform that best fits the SLAM poses onto the
+    truth (the TUM benchmark's and ``evo_ape --align``'s ATE): the map's shape, without the
+    turn of the whole map about its start that the first nodes' heading error leaves."""
+    ate_aligned_max_m: float = math.nan
+    aligned_turn_deg: float = math.nan
+    """The rotation of that fit: how far the whole SLAM map is turned against the world."""
+    odom_ate_aligned_rmse_m: float = math.nan
 
 
 def map_agreement(slam: OccupancyMap, truth: OccupancyMap, world_from_map: np.ndarray,
@@ -102,6 +110,26 @@ def map_agreement(slam: OccupancyMap, truth: OccupancyMap, world_from_map: np.nd
     ok = np.where(slam_occ, near, ~truth_occ)
     tolerant = float(np.mean(ok[known])) if known.any() else math.nan
     return strict, tolerant
+
+
+def aligned_position_errors(est: np.ndarray, truth: np.ndarray) -> tuple[np.ndarray, float]:
+    """Planar position errors of ``est`` (N, ≥2) against ``truth`` after the least-squares
+    rigid 2D fit of the one onto the other (Kabsch/Horn, no scale), and the fit's rotation (rad).
+
+    This is the absolute trajectory error of the TUM RGB-D benchmark and of ``evo_ape --align``;
+    the errors measured against the start pose alone also hold any turn of the whole path.
+    """
+    from eddiebot.vslam.transforms import fit_rigid
+
+    e = np.zeros((len(est), 3))
+    g = np.zeros((len(truth), 3))
+    e[:, :2] = np.asarray(est, dtype=float)[:, :2]
+    g[:, :2] = np.asarray(truth, dtype=float)[:, :2]
+    if len(e) < 2:
+        return np.hypot(*(e[:, :2] - g[:, :2]).T), 0.0
+    t = fit_rigid(g, e, np.ones(len(e)), three_dof=True)  # truth ≈ t · est
+    moved = e[:, :2] @ t[:2, :2].T + t[:2, 3]
+    return np.hypot(*(moved - g[:, :2]).T), math.atan2(t[1, 0], t[0, 0])
 
 
 def _pose_of(msg: Any) -> tuple[float, float, float]:
@@ -203,6 +231,10 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
         err = np.hypot(est[:, 0] - gt[:, 0], est[:, 1] - gt[:, 1])
         result.ate_rmse_m = float(np.sqrt(np.mean(err**2)))
         result.ate_max_m = float(err.max())
+        aligned, turn = aligned_position_errors(est, gt)
+        result.ate_aligned_rmse_m = float(np.sqrt(np.mean(aligned**2)))
+        result.ate_aligned_max_m = float(aligned.max())
+        result.aligned_turn_deg = math.degrees(turn)
         result.slam_world, result.truth = est, truth_p
         if odom:
             odom_t = np.array([t for t, _ in odom], dtype=np.int64)
@@ -211,6 +243,8 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
                                 np.array([odom[k][1] for k in at]))
             o_err = np.hypot(o_est[:, 0] - gt[:, 0], o_est[:, 1] - gt[:, 1])
             result.odom_ate_rmse_m = float(np.sqrt(np.mean(o_err**2)))
+            o_aligned, _ = aligned_position_errors(o_est, gt)
+            result.odom_ate_aligned_rmse_m = float(np.sqrt(np.mean(o_aligned**2)))
         # end-point errors: wheel odometry alone vs SLAM
         final_truth = truth_p[-1]
         if odom:
