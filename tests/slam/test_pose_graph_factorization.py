@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_pose_graph import _chained, _incremental, _two_laps
+from test_pose_graph import LOOP_COV, ODO_COV, _chained, _incremental, _two_laps
 
-from eddiebot.geometry import se2_compose
+from eddiebot.geometry import se2_between, se2_compose
 from eddiebot.slam import EdgeKind, PoseGraph
 from eddiebot.slam.config import SlamConfig
 from eddiebot.slam.errors import ConfigError
@@ -152,3 +152,73 @@ def test_span_edges_in_batches_end_in_the_same_graph(tmp_path) -> None:
 def test_odometry_span_batch_is_checked() -> None:
     with pytest.raises(ConfigError, match="odometry_span_batch"):
         SlamConfig(odometry_span_batch=0).validated()
+
+
+def _with_spans(edges: list, truth: np.ndarray, span: int) -> list:
+    """``edges`` plus an odometry edge from every node to the node ``span`` back (the chained
+    noisy steps between them, with their summed covariance), as `odometry_span_nodes` adds."""
+    odo = {e[1]: e for e in edges if not e[4] and e[1] == e[0] + 1}
+    out = list(edges)
+    for k in range(span, len(truth)):
+        z = np.zeros(3)
+        for m in range(k - span + 1, k + 1):
+            z = se2_compose(z, odo[m][2])
+        out.append((k - span, k, z, span * odo[k][3], False))
+    out.sort(key=lambda e: max(e[0], e[1]))
+    return out
+
+
+def _incremental_spans(edges: list, truth: np.ndarray, **kwargs: object) -> PoseGraph:
+    graph = PoseGraph(**kwargs)  # type: ignore[arg-type]
+    by_last: dict[int, list] = {}
+    for e in edges:
+        by_last.setdefault(max(e[0], e[1]), []).append(e)
+    graph.add_node(truth[0])
+    for k in range(1, len(truth)):
+        step = next(e for e in by_last[k] if not e[4] and e[0] == k - 1)
+        graph.add_node(se2_compose(graph.pose(k - 1), step[2]))
+        for i, j, z, cov, robust in by_last[k]:
+            graph.add_edge(i, j, z, cov, kind=EdgeKind.LOOP if robust else EdgeKind.ODOMETRY,
+                           robust=robust)
+        graph.optimize()
+    return graph
+
+
+def _long_laps(per_lap: int = 200, laps: int = 2, every: int = 25, seed: int = 1) -> tuple:
+    """Laps of a 6 m square, ``per_lap`` nodes each, noisy odometry; every ``every``-th node
+    after the first lap closes onto the first (sparse loops, as a building's revisits)."""
+    rng = np.random.default_rng(seed)
+    side = per_lap // 4
+    corners = [(0.0, 0.0), (6.0, 0.0), (6.0, 6.0), (0.0, 6.0)]
+    lap = np.array([
+        (cx + 6.0 * i / side * np.cos(s * np.pi / 2), cy + 6.0 * i / side * np.sin(s * np.pi / 2),
+         s * np.pi / 2)
+        for s, (cx, cy) in enumerate(corners) for i in range(side)
+    ])
+    truth = np.concatenate([lap] * laps)
+    edges = [(k - 1, k, se2_between(truth[k - 1], truth[k]) + rng.normal(0.0, [0.02, 0.02, 0.01]),
+              ODO_COV, False) for k in range(1, len(truth))]
+    edges += [(k % per_lap, k, se2_between(truth[k % per_lap], truth[k]), LOOP_COV, True)
+              for k in range(per_lap, len(truth), every)]
+    edges.sort(key=lambda e: max(e[0], e[1]))
+    return truth, edges
+
+
+def test_recent_nodes_last_keeps_the_optimum_and_re_eliminates_less() -> None:
+    truth, edges = _long_laps()
+    edges = _with_spans(edges, truth, 10)
+    plain = _incremental_spans(edges, truth, factorization="cholesky")
+    recent = _incremental_spans(edges, truth, factorization="cholesky", recent_last=11)
+    assert sorted(recent.rejected) == sorted(plain.rejected)
+    assert float(np.max(np.abs(recent.poses - plain.poses))) < 1e-4
+    # the span edges' far ends stay at the root: about half the variables re-eliminated
+    assert recent.variables_reeliminated < 0.6 * plain.variables_reeliminated
+    with pytest.raises(ValueError, match="recent_last"):
+        PoseGraph(recent_last=-1)
+
+
+def test_recent_nodes_last_is_a_checked_config_parameter() -> None:
+    core = SlamCore(SlamConfig(isam2_recent_nodes_last=11).validated())
+    assert core.graph.recent_last == 11
+    with pytest.raises(ConfigError, match="isam2_recent_nodes_last"):
+        SlamConfig(isam2_recent_nodes_last=-1).validated()

@@ -416,6 +416,7 @@ class SlamCore:
             kernel_width=self.config.loop_robust_kernel_width,
             factorization=self.config.isam2_factorization,
             relinearize_skip=self.config.isam2_relinearize_skip,
+            recent_last=self.config.isam2_recent_nodes_last,
         )
         self.nodes: list[NodeRecord] = []
         self._span_queue: list[tuple[int, int]] = []
