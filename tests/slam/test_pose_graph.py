@@ -195,7 +195,7 @@ def _incremental(edges: list, truth: np.ndarray, **kwargs: object) -> PoseGraph:
         by_last.setdefault(max(e[0], e[1]), []).append(e)
     graph.add_node(truth[0])
     for k in range(1, len(truth)):
-        odo = next(e for e in by_last[k] if not e[4])
+        odo = next(e for e in by_last[k] if not e[4] and e[0] == k - 1)
         graph.add_node(se2_compose(graph.pose(k - 1), odo[2]))
         for i, j, z, cov, robust in by_last[k]:
             kind = EdgeKind.LOOP if robust else EdgeKind.ODOMETRY

@@ -168,22 +168,6 @@ def _with_spans(edges: list, truth: np.ndarray, span: int) -> list:
     return out
 
 
-def _incremental_spans(edges: list, truth: np.ndarray, **kwargs: object) -> PoseGraph:
-    graph = PoseGraph(**kwargs)  # type: ignore[arg-type]
-    by_last: dict[int, list] = {}
-    for e in edges:
-        by_last.setdefault(max(e[0], e[1]), []).append(e)
-    graph.add_node(truth[0])
-    for k in range(1, len(truth)):
-        step = next(e for e in by_last[k] if not e[4] and e[0] == k - 1)
-        graph.add_node(se2_compose(graph.pose(k - 1), step[2]))
-        for i, j, z, cov, robust in by_last[k]:
-            graph.add_edge(i, j, z, cov, kind=EdgeKind.LOOP if robust else EdgeKind.ODOMETRY,
-                           robust=robust)
-        graph.optimize()
-    return graph
-
-
 def _long_laps(per_lap: int = 200, laps: int = 2, every: int = 25, seed: int = 1) -> tuple:
     """Laps of a 6 m square, ``per_lap`` nodes each, noisy odometry; every ``every``-th node
     after the first lap closes onto the first (sparse loops, as a building's revisits)."""
@@ -207,8 +191,8 @@ def _long_laps(per_lap: int = 200, laps: int = 2, every: int = 25, seed: int = 1
 def test_recent_nodes_last_keeps_the_optimum_and_re_eliminates_less() -> None:
     truth, edges = _long_laps()
     edges = _with_spans(edges, truth, 10)
-    plain = _incremental_spans(edges, truth, factorization="cholesky")
-    recent = _incremental_spans(edges, truth, factorization="cholesky", recent_last=11)
+    plain = _incremental(edges, truth, factorization="cholesky")
+    recent = _incremental(edges, truth, factorization="cholesky", recent_last=11)
     assert sorted(recent.rejected) == sorted(plain.rejected)
     assert float(np.max(np.abs(recent.poses - plain.poses))) < 1e-4
     # the span edges' far ends stay at the root: about half the variables re-eliminated
