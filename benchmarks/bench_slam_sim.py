@@ -18,11 +18,11 @@ the start pose (the map frame starts at the true start pose), and after the one 
 transform that best fits the SLAM poses onto the truth (``ate_aligned_*``: the ATE of the TUM
 benchmark and ``evo_ape --align``, the figure the ≤ 0.05 m target is judged on; replays also
 give evo's own figure, ``ate_aligned_evo_rmse_m``) with that transform's rotation
-(``aligned_turn_deg``: how far the whole map is turned about its start); wheel odometry's at the same times, end-point error of
-SLAM's and odometry's final pose, agreement with the scan-height ground-truth map on the
-cells both call known (strict; occupied within one cell), CPU time the SLAM core spent on
-each processed scan in the node's thread (median, p99, max; targets ≤ 10 ms / ≤ 50 ms), and
-the low-feature warnings (episodes logged, matches over the threshold). Prints a table and
+(``aligned_turn_deg``: how far the whole map is turned about its start); wheel odometry's at
+the same times, end-point error of SLAM's and odometry's final pose, agreement with the
+scan-height ground-truth map on the cells both call known (strict; occupied within one cell),
+CPU time the SLAM core spent on each processed scan in the node's thread (median, p99, max;
+targets ≤ 10 ms / ≤ 50 ms), and the low-feature warnings (episodes logged, matches over the threshold). Prints a table and
 writes ``benchmarks/results/slam_sim.json``.
 
     .venv/bin/python benchmarks/bench_slam_sim.py [--worlds office warehouse corridor office-demo]
@@ -285,7 +285,8 @@ def main_replay(args: argparse.Namespace) -> int:
             if args.ensemble > 1:
                 summary.append(_ensemble_row(members))
     print_table(rows, ["drive", "run", "perturbation", "nodes", "loop_closures", "ate_rmse_m",
-                       "ate_max_m", "ate_aligned_rmse_m", "aligned_turn_deg", "slam_end_m", "odom_ate_rmse_m", "odom_end_m", "end_ratio",
+                       "ate_max_m", "ate_aligned_rmse_m", "aligned_turn_deg", "slam_end_m",
+                       "odom_ate_rmse_m", "odom_end_m", "end_ratio",
                        "heading_drift_max_deg",
                        "odom_heading_drift_max_deg", "scan_cpu_median_ms", "overrides"])
     if summary:
@@ -360,7 +361,8 @@ def main() -> int:
     print()
     print_table(rows, ["run", "finished", "distance_m", "sim_s", "nodes", "loop_closures",
                        "ate_rmse_m", "ate_max_m", "ate_aligned_rmse_m", "aligned_turn_deg",
-                       "odom_ate_rmse_m", "slam_end_m", "odom_end_m", "agreement", "scan_cpu_median_ms", "scan_cpu_p99_ms",
+                       "odom_ate_rmse_m", "slam_end_m", "odom_end_m", "agreement",
+                       "scan_cpu_median_ms", "scan_cpu_p99_ms",
                        "low_feature_episodes", "meets"])
     path = write_results(args.name, rows)
     print(f"\nwrote {path}")

@@ -42,6 +42,7 @@ import platform
 import tempfile
 from pathlib import Path
 
+from eddiebot.demo.mapping import aligned_position_errors
 from eddiebot.demo.route import OFFICE_LONG_ROUTE, OFFICE_ROUTE
 from eddiebot.demo.vslam_stage import (
     CORRIDOR_LONG_ROUTE,
@@ -202,19 +203,6 @@ def vo_ideal_route(world_name: str, route_name: str, overrides: dict[str, str],
             "cpu_s": cpu}
 
 
-def _aligned_errors(est: object, gt: object) -> object:
-    """Planar errors after the rigid 2D alignment (rotation + translation, no scale) of the
-    estimate onto ground truth that minimises them (Horn/Umeyama, as the TUM and evo ATE):
-    separates a turn of the whole path about its start from errors in its shape."""
-    import numpy as np
-
-    e, g = np.asarray(est, dtype=float), np.asarray(gt, dtype=float)
-    a, b = e - e.mean(axis=0), g - g.mean(axis=0)
-    th = np.arctan2(float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])), float(np.sum(a * b)))
-    rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
-    return np.hypot(*(a @ rot.T - b).T)
-
-
 def replay_session(folder: Path, overrides: dict[str, str], verbose: bool = False,
                    odom_variance: tuple[float, float] | None = None,
                    lsh_seed: int | None = None) -> dict[str, object]:
@@ -300,7 +288,7 @@ def replay_session(folder: Path, overrides: dict[str, str], verbose: bool = Fals
     est = se2_compose(np.broadcast_to(start, xyt.shape), xyt)
     gt = np.array([gt_by_stamp[stamps[i]] for i in ids])
     err = np.hypot(*(est[:, :2] - gt[:, :2]).T)
-    aligned = _aligned_errors(est[:, :2], gt[:, :2])
+    aligned, _ = aligned_position_errors(est, gt)
     gt_of = dict(zip(ids, gt))
     closures = []
     for lk in links:

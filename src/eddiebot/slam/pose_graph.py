@@ -737,7 +737,7 @@ class PoseGraph:
                 if self._edges[k].kind is EdgeKind.LOOP:
                     self._note_closure(k)
         new = [n for n in self._pending_nodes if n not in self._isam_keys]
-        self._isam_update(graph, self._values(new), new)
+        self._isam_update(graph, self._values(new))
         self._isam_keys.update(new)
         self._stale = True
 
@@ -770,10 +770,8 @@ class PoseGraph:
                 if surprised:
                     self._relinearize()
 
-    def _isam_update(
-        self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, new: Sequence[int] = ()
-    ) -> None:
-        """One iSAM2 update with these factors and new variables (``new``: their keys).
+    def _isam_update(self, graph: gtsam.NonlinearFactorGraph, values: gtsam.Values) -> None:
+        """One iSAM2 update with these factors and new variables.
 
         With ``recent_last`` the newest nodes are ordered last among the variables the update
         re-eliminates. GTSAM's default orders the keys of the new factors last: an odometry
@@ -785,10 +783,9 @@ class PoseGraph:
         if self.recent_last <= 0 or self._n == 0:
             result = self._isam.update(graph, values)
         else:
-            fresh = set(new)
             groups = gtsam.KeyGroupMap()
             for k in range(max(0, self._n - self.recent_last), self._n):
-                if k in self._isam_keys or k in fresh:
+                if k in self._isam_keys or values.exists(k):
                     groups.insert2(k, 1)
             params = gtsam.ISAM2UpdateParams()
             params.constrainedKeys = groups
