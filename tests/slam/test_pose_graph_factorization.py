@@ -206,3 +206,24 @@ def test_recent_nodes_last_is_a_checked_config_parameter() -> None:
     assert core.graph.recent_last == 11
     with pytest.raises(ConfigError, match="isam2_recent_nodes_last"):
         SlamConfig(isam2_recent_nodes_last=-1).validated()
+
+
+def test_wildfire_threshold_reaches_isam2_and_keeps_the_optimum() -> None:
+    truth, edges = _long_laps(per_lap=120, every=15)
+    batch = _chained(truth, edges, optimizer="levenberg_marquardt")
+    batch.optimize()
+    default = _incremental(edges, truth, factorization="cholesky")
+    exact = _incremental(edges, truth, factorization="cholesky", wildfire_threshold=0.0)
+    assert "wildfireThreshold: 0.001" in repr(default._isam.params())
+    assert "wildfireThreshold: 0\n" in repr(exact._isam.params())
+    assert sorted(exact.rejected) == sorted(default.rejected) == sorted(batch.rejected)
+    # both at the batch optimum, well inside iSAM2's relinearisation threshold (0.01)
+    for graph in (default, exact):
+        assert float(np.max(np.abs(graph.poses - batch.poses))) < 1e-3
+    with pytest.raises(ValueError, match="wildfire_threshold"):
+        PoseGraph(wildfire_threshold=-0.1)
+    core = SlamCore(SlamConfig(isam2_wildfire_threshold=0.0).validated())
+    assert core.graph.wildfire_threshold == 0.0
+    assert "wildfireThreshold: 0\n" in repr(core.graph._isam.params())
+    with pytest.raises(ConfigError, match="isam2_wildfire_threshold"):
+        SlamConfig(isam2_wildfire_threshold=float("nan")).validated()

@@ -108,6 +108,9 @@ class SlamConfig:
     ``odometry_span_nodes`` N, N + 1 keeps a span edge's far end and everything after it at
     the root, so an update re-eliminates ~15 variables instead of the path from that node
     (70-100 once loops have closed). The solution is the same; its rounding is not."""
+    isam2_wildfire_threshold: float = 0.001
+    """iSAM2's back-substitution skips the cliques below one whose solution moved less than
+    this (GTSAM's default); 0 computes every variable's solution on each update."""
     loop_robust_kernel: str = "dcs"
     """Robust kernel on loop-closure edges: ``none``, ``huber``, ``cauchy`` or ``dcs``."""
     loop_robust_kernel_width: float = 1.0
@@ -288,6 +291,7 @@ class SlamConfig:
             "map_max_laser_range",
             "odometry_heading_quantization",
             "loop_match_range_bias_quadratic",
+            "isam2_wildfire_threshold",
         ):
             value = getattr(out, name)
             if not math.isfinite(value) or value < 0:

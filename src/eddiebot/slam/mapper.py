@@ -417,6 +417,7 @@ class SlamCore:
             factorization=self.config.isam2_factorization,
             relinearize_skip=self.config.isam2_relinearize_skip,
             recent_last=self.config.isam2_recent_nodes_last,
+            wildfire_threshold=self.config.isam2_wildfire_threshold,
         )
         self.nodes: list[NodeRecord] = []
         self._span_queue: list[tuple[int, int]] = []

@@ -172,6 +172,7 @@ class PoseGraph:
         factorization: str = "qr",
         relinearize_skip: int = 1,
         recent_last: int = 0,
+        wildfire_threshold: float = 0.001,
     ) -> None:
         if optimizer not in ("isam2", "levenberg_marquardt"):
             raise ValueError(
@@ -187,6 +188,8 @@ class PoseGraph:
             raise ValueError(f"relinearize_skip must be >= 1, got {relinearize_skip}")
         if int(recent_last) < 0:
             raise ValueError(f"recent_last must be >= 0, got {recent_last}")
+        if not (math.isfinite(wildfire_threshold) and wildfire_threshold >= 0.0):
+            raise ValueError(f"wildfire_threshold must be a finite value >= 0, got {wildfire_threshold}")
         self.optimizer = optimizer
         self.factorization = factorization
         """iSAM2's elimination: ``qr`` or ``cholesky`` (falls back to ``qr`` for good when an
@@ -195,6 +198,9 @@ class PoseGraph:
         self.recent_last = int(recent_last)
         """iSAM2 orders the newest ``recent_last`` nodes last in every update, so they stay at
         the root of the Bayes tree (0: GTSAM's default, the keys of the new factors last)."""
+        self.wildfire_threshold = float(wildfire_threshold)
+        """iSAM2's back-substitution stops below a clique whose solution moved less than this
+        (GTSAM's default 0.001); 0 solves every variable on each update."""
         self.robust_kernel = robust_kernel
         self.kernel_width = float(kernel_width)
         self.gate_probability = gate_probability
@@ -260,6 +266,7 @@ class PoseGraph:
         params = gtsam.ISAM2Params()
         params.setRelinearizeThreshold(0.01)
         params.relinearizeSkip = self.relinearize_skip
+        params.setOptimizationParams(gtsam.ISAM2GaussNewtonParams(self.wildfire_threshold))
         # Cholesky eliminates the normal equations (about half QR's time per update on the
         # simulated routes) but squares their conditioning: a loop closure with a near-singular
         # information matrix (as g2o graphs carry) can make it report an indeterminate system,
@@ -883,6 +890,7 @@ class PoseGraph:
             max_retests=self.max_retests,
             factorization=self.factorization,
             relinearize_skip=self.relinearize_skip,
+            wildfire_threshold=self.wildfire_threshold,
         )
         order: list[int] = []
         for node in range(n):
