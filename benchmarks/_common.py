@@ -6,11 +6,40 @@ import datetime as _dt
 import json
 import os
 import platform
+import time
 from pathlib import Path
 from typing import Any
 
 RESULTS = Path(__file__).resolve().parent / "results"
 DATASETS = Path(os.environ.get("EDDIE_DATASETS", Path(__file__).resolve().parents[1].parent / "shared" / "datasets"))
+
+
+def cpu_reference_ms(repeats: int = 7) -> float:
+    """CPU time (ms, the median of ``repeats``) of a fixed single-threaded workload: Python
+    loops over small numpy arrays, as the SLAM and navigation code runs. A shared or throttled
+    host runs it slower, and every CPU figure of the same run with it: results files carry it
+    (``machine.cpu_reference_ms``) so that runs made at different times can be compared."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    points = rng.normal(size=(300, 2))
+    mats = rng.normal(size=(64, 3, 3)) + 4.0 * np.eye(3)
+    times = []
+    for _ in range(repeats + 1):  # the first run warms numpy up and is dropped
+        t = time.process_time()
+        acc = 0.0
+        for k in range(400):
+            c, s = np.cos(0.01 * k), np.sin(0.01 * k)
+            moved = points @ np.array([[c, s], [-s, c]]) + 0.001 * k
+            cells = np.floor(moved / 0.05).astype(np.int64)
+            acc += float(np.unique(cells[:, 0] * 1000 + cells[:, 1]).size)
+            acc += float(np.linalg.solve(mats[k % 64], moved[:3, :1].repeat(3, 1))[0, 0])
+        total = 0
+        for i in range(60000):
+            total += (i * i) % 7
+        times.append(time.process_time() - t)
+        del acc, total
+    return 1e3 * float(np.median(times[1:]))
 
 
 def machine() -> dict[str, Any]:
@@ -20,6 +49,7 @@ def machine() -> dict[str, Any]:
         "processor": platform.processor() or platform.machine(),
         "cpus": os.cpu_count(),
         "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "cpu_reference_ms": round(cpu_reference_ms(), 2),
     }
 
 

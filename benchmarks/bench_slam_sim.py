@@ -41,6 +41,10 @@ odometry pose moved by seeded N(0, 1e-9) noise: the SLAM result is chaotic at th
 floating-point rounding (a loop accepted or not near a threshold changes everything after it),
 so one run of a drive is one sample; the ensemble's mean and spread are the figure to compare.
 
+``--optimum-every N`` (with ``--replay``) compares, every N nodes, iSAM2's estimate with the
+batch optimum of the factors it holds (``isam_gap_*``: ½χ² above the optimum, largest position
+difference).
+
 ``--profile DIR`` (with ``--replay``) writes a cProfile of each drive's ``SlamCore.process``
 calls to ``DIR/<drive>_<run>_<member>.prof`` (``python -m pstats FILE``); the profiler inflates the CPU
 figures of that run.
@@ -173,10 +177,12 @@ PERTURBATION_SIGMA = 1e-9
 
 def replay_one(name: str, bag: Path, overrides: dict[str, Any],
                node_time_gate: bool = False, perturbation: int = 0,
-               profile: Path | None = None) -> dict[str, Any]:
+               profile: Path | None = None, optimum_every: int = 0) -> dict[str, Any]:
     """Replay a recorded run's bag and score it against its ground truth (``node_time_gate``:
     the node's ``minimum_time_interval`` gate too, as in the live run; ``perturbation`` > 0:
-    every odometry pose gets seeded N(0, `PERTURBATION_SIGMA`) noise, one ensemble member)."""
+    every odometry pose gets seeded N(0, `PERTURBATION_SIGMA`) noise, one ensemble member;
+    ``optimum_every`` N > 0: every N nodes, how far iSAM2's estimate is from the batch optimum
+    of the factors it holds, `_isam_gap`)."""
     from eddiebot.cli.slam import _default_params
     from eddiebot.geometry import se2_compose
     from eddiebot.sim.worlds import load_world
@@ -199,7 +205,8 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
     if perturbation:
         rng = np.random.default_rng(perturbation)
         odometry = [o + rng.normal(0.0, PERTURBATION_SIGMA, 3) for o in odometry]
-    if profile is None:
+    gaps: list[tuple[float, float]] = []
+    if profile is None and not optimum_every:
         res = replay_scans(log.scans, odometry, config, sensor_offset=log.sensor_offset,
                            source=str(bag), node_time_gate=node_time_gate)
     else:
@@ -207,25 +214,32 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
 
         import eddiebot.slam.replay as replay_module
 
-        prof = cProfile.Profile()
+        prof = cProfile.Profile() if profile is not None else None
         plain = replay_module.SlamCore
 
-        class _Profiled(plain):  # type: ignore[misc, valid-type]
+        class _Hooked(plain):  # type: ignore[misc, valid-type]
             def process(self, *a: Any, **k: Any) -> Any:
-                prof.enable()
+                if prof is not None:
+                    prof.enable()
                 try:
                     return super().process(*a, **k)
                 finally:
-                    prof.disable()
+                    if prof is not None:
+                        prof.disable()
+                    if optimum_every:
+                        gap = _isam_gap(self.graph, optimum_every)
+                        if gap is not None:
+                            gaps.append(gap)
 
-        replay_module.SlamCore = _Profiled  # type: ignore[misc]
+        replay_module.SlamCore = _Hooked  # type: ignore[misc]
         try:
             res = replay_scans(log.scans, odometry, config, sensor_offset=log.sensor_offset,
                                source=str(bag), node_time_gate=node_time_gate)
         finally:
             replay_module.SlamCore = plain  # type: ignore[misc]
-        profile.parent.mkdir(parents=True, exist_ok=True)
-        prof.dump_stats(str(profile))
+        if profile is not None and prof is not None:
+            profile.parent.mkdir(parents=True, exist_ok=True)
+            prof.dump_stats(str(profile))
     stamps, poses = res.trajectory()
     q = np.round(stamps * 1e9).astype(np.int64)
     est = se2_compose(np.broadcast_to(start, poses.shape), poses)
@@ -256,7 +270,41 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
         "heading_drift_max_deg": drift(est),
         "odom_heading_drift_max_deg": drift(od),
         "scan_cpu_median_ms": float(np.median(cpu)), "scan_cpu_p99_ms": float(np.percentile(cpu, 99)),
+        **({} if not gaps else {
+            "isam_gap_checks": len(gaps),
+            "isam_gap_half_chi2_median": float(np.median([g[0] for g in gaps])),
+            "isam_gap_half_chi2_max": float(max(g[0] for g in gaps)),
+            "isam_gap_position_max_m": float(max(g[1] for g in gaps)),
+        }),
     }
+
+
+def _isam_gap(graph: Any, every: int) -> tuple[float, float] | None:
+    """After every ``every``-th node: the ½χ² by which iSAM2's current estimate exceeds the
+    batch (Levenberg–Marquardt) optimum of exactly the factors iSAM2 holds, and the largest
+    position difference between the two (m). iSAM2 stops short of that optimum by design: it
+    relinearises a variable only once its update exceeds the relinearisation threshold, and
+    back-substitutes only below cliques whose solution moved more than the wildfire threshold.
+    Reads the estimate as the next scan's pose query would (no extra update), so the run is the
+    same as without the check."""
+    import gtsam
+
+    isam = getattr(graph, "_isam", None)
+    n = len(graph)
+    if isam is None or n == 0 or n % every or getattr(graph, "_gap_checked", -1) == n:
+        return None
+    graph._gap_checked = n
+    factors = gtsam.NonlinearFactorGraph()
+    held = isam.getFactorsUnsafe()
+    for i in range(held.size()):
+        if held.exists(i):
+            factors.push_back(held.at(i))
+    estimate = isam.calculateEstimate()
+    optimum = gtsam.LevenbergMarquardtOptimizer(factors, estimate).optimize()
+    a = gtsam.utilities.extractPose2(estimate)
+    b = gtsam.utilities.extractPose2(optimum)
+    return (float(factors.error(estimate) - factors.error(optimum)),
+            float(np.max(np.hypot(*(a[:, :2] - b[:, :2]).T))))
 
 
 def main_replay(args: argparse.Namespace) -> int:
@@ -279,7 +327,8 @@ def main_replay(args: argparse.Namespace) -> int:
                 members.append({"drive": folder.name, "node_time_gate": args.node_time_gate,
                                 **replay_one(name, bag, overrides, args.node_time_gate, k,
                                              None if args.profile is None else
-                                             args.profile / f"{folder.name}_{name}_{k}.prof")})
+                                             args.profile / f"{folder.name}_{name}_{k}.prof",
+                                             args.optimum_every)})
                 print(members[-1], flush=True)
             rows += members
             if args.ensemble > 1:
@@ -340,6 +389,9 @@ def main() -> int:
     ap.add_argument("--profile", type=Path, default=None, metavar="DIR",
                     help="with --replay: cProfile each drive's SlamCore.process calls into "
                     "DIR/<drive>_<run>_<member>.prof (inflates that run's CPU figures)")
+    ap.add_argument("--optimum-every", type=int, default=0, metavar="N",
+                    help="with --replay: every N nodes, iSAM2's distance from the batch optimum "
+                         "of its own factors (isam_gap_* fields)")
     ap.add_argument("--noise-correlation-px", type=float, default=None,
                     help="the simulator's noise_correlation_px (Kinect depth-noise correlation "
                     "window, native pixels; default: the node's default)")

@@ -392,3 +392,41 @@ def test_range_bias_correction_keeps_a_corridor_end_wall_in_place(correct: bool)
         assert np.abs(err[:, :2]).max() < 0.01
     else:
         assert err[-1, 0] < -0.03
+
+
+@pytest.mark.parametrize("cap", [0, 1])
+def test_loop_match_maximum_chains_bounds_the_verifications_per_scan(
+    cap: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import eddiebot.slam.mapper as mapper_module
+
+    per_scan: list[int] = []
+    plain = mapper_module.verify_loop
+
+    def counting(*args: object, **kwargs: object) -> None:
+        # every candidate fails: each scan tries all it is allowed
+        per_scan[-1] += 1
+        plain(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(mapper_module, "verify_loop", counting)
+    truth = loop_path()
+    odom = drifting_odometry(truth)
+    core = SlamCore(
+        SlamConfig(minimum_travel_distance=0.5, loop_match_minimum_chain_size=2,
+                   loop_match_maximum_chains=cap)
+    )
+    for k, (p, o) in enumerate(zip(truth, odom)):
+        per_scan.append(0)
+        core.process(_scan(p, k * 100_000_000), o)
+    assert not core.loop_closures
+    if cap == 0:
+        assert max(per_scan) >= 2  # several candidate chains at once on the second lap
+    else:
+        assert max(per_scan) == cap
+
+
+def test_loop_match_maximum_chains_is_checked() -> None:
+    from eddiebot.slam.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="loop_match_maximum_chains"):
+        SlamConfig(loop_match_maximum_chains=-1).validated()

@@ -1045,6 +1045,8 @@ class SlamCore:
             icp_cov = cfg.use_icp_refinement and cfg.match_covariance == "icp"
             bias = cfg.loop_match_range_bias_quadratic
             query = points if bias <= 0.0 else unbiased_points(points, bias)
+            if cfg.loop_match_maximum_chains > 0:
+                chains = chains[: cfg.loop_match_maximum_chains]
             for chain in chains:
                 if bias > 0.0:
                     ref = np.concatenate([self._unbiased_world_points(i, poses[i], bias)
