@@ -430,3 +430,48 @@ def test_loop_match_maximum_chains_is_checked() -> None:
 
     with pytest.raises(ConfigError, match="loop_match_maximum_chains"):
         SlamConfig(loop_match_maximum_chains=-1).validated()
+
+
+def _out_and_back_with_spins() -> np.ndarray:
+    """Spin in place, drive 8 m down the room, spin, drive back, spin at the start again."""
+    def spin(x: float, y: float, th0: float, n: int = 14) -> list[list[float]]:
+        return [[x, y, th0 + 0.3 * k] for k in range(n)]
+
+    out = [[1.5 + 0.25 * k, 4.0, 0.0] for k in range(1, 33)]
+    back = [[9.5 - 0.25 * k, 4.0, math.pi] for k in range(1, 33)]
+    truth = np.array(spin(1.5, 4.0, -14 * 0.3) + out + spin(9.5, 4.0, 0.0)[1:] + back
+                     + spin(1.5, 4.0, math.pi)[1:])
+    truth[:, 2] = np.arctan2(np.sin(truth[:, 2]), np.cos(truth[:, 2]))
+    return truth
+
+
+@pytest.mark.parametrize("distance", [1.5, 0.0])
+def test_near_chains_tie_a_revisit_to_the_first_pass(distance: float) -> None:
+    from eddiebot.geometry import se2_between
+    from eddiebot.slam import EdgeKind
+
+    truth = _out_and_back_with_spins()
+    odom = drifting_odometry(truth, heading_bias=0.004)
+    core = SlamCore(SlamConfig(minimum_travel_distance=0.5, loop_match_minimum_chain_size=6,
+                               link_scan_maximum_distance=distance))
+    results = [core.process(_scan(p, k * 100_000_000), o)
+               for k, (p, o) in enumerate(zip(truth, odom))]
+    added = [k for k, r in enumerate(results) if r.status is ProcessStatus.ADDED]
+    links = [e for e in core.graph.edges if e.robust and e.kind is EdgeKind.SCAN_MATCH]
+    assert core.near_chain_links == len(links)
+    if distance == 0.0:
+        assert not links  # Karto's near-chain linking off
+        return
+    # Karto's LinkNearChains: once the graph ties a revisit to an earlier pass, the scans
+    # there are matched against that pass and linked to it (the final spin to the first)
+    first_spin = {n for n, k in enumerate(added) if k < 14}
+    final_spin = {n for n, k in enumerate(added) if k >= len(truth) - 13}
+    assert sum(e.i in first_spin and e.j in final_spin for e in links) >= 5
+    for e in links:
+        assert e.i < e.j - core.config.loop_match_minimum_chain_size
+        true = se2_between(truth[added[e.i]], truth[added[e.j]])
+        err = e.measurement - true
+        assert math.hypot(err[0], err[1]) < 0.03
+        assert abs(math.remainder(err[2], 2 * math.pi)) < math.radians(1.0)
+    err = np.hypot(*(core.node_poses()[:, :2] - truth[added, :2]).T)
+    assert err.max() < 0.01

@@ -422,6 +422,8 @@ class SlamCore:
         self.nodes: list[NodeRecord] = []
         self._span_queue: list[tuple[int, int]] = []
         self.loop_closures: list[LoopClosure] = []
+        self.near_chain_links = 0
+        """Edges `_link_near_chains` added (Karto's near-chain links)."""
         self._state = _State()
         self._grid = OccupancyGridBuilder(
             self.config.resolution,
@@ -903,6 +905,8 @@ class SlamCore:
             if d <= cfg.scan_buffer_maximum_scan_distance:
                 break
             st.running.popleft()
+        if matched and idx > 0:
+            self._link_near_chains(idx, points)
         loop_closed = False
         if cfg.do_loop_closing and idx > 0:
             loop_closed = self._try_close_loops(idx, points, warnings, stamp)
@@ -1020,6 +1024,83 @@ class SlamCore:
         cov_map = _rotate_covariance(cov, -th)
         m2 = float(jump @ np.linalg.solve(cov_map, jump))
         return m2 > gate * gate
+
+    def _near_chains(
+        self, idx: int, positions: FloatArray, sensors: FloatArray
+    ) -> list[tuple[int, ...]]:
+        """Karto's ``FindNearChains``: runs of consecutive nodes whose sensor positions
+        (``sensors``) lie within ``link_scan_maximum_distance`` of node ``idx``'s, each grown
+        from a node the graph links to ``idx`` through nodes whose reference positions
+        (``positions``) stay that near (`near_linked_nodes`), leaving out the run that reaches
+        ``idx`` itself (its own running chain) and retired nodes."""
+        dist = self.config.link_scan_maximum_distance
+        near = near_linked_nodes(idx, positions, self.graph.adjacent, dist)
+        near.discard(idx)
+        if not near:
+            return []
+        origin = sensors[idx]
+        d = sensors[: idx + 1, :2] - origin[:2]
+        within = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= dist * dist + 1e-12).tolist()
+        active = self._active_nodes()
+        processed: set[int] = set()
+        chains: list[tuple[int, ...]] = []
+        for n in sorted(near):
+            if n in processed:
+                continue
+            lo = n
+            while lo > 0 and within[lo - 1]:
+                lo -= 1
+            hi = n
+            while hi < idx and within[hi + 1]:
+                hi += 1
+            processed.update(range(lo, hi + 1))
+            if hi >= idx:
+                continue
+            chain = tuple(i for i in range(lo, hi + 1) if active[i])
+            if chain:
+                chains.append(chain)
+        return chains
+
+    def _link_near_chains(self, idx: int, points: FloatArray) -> int:
+        """Karto's ``LinkNearChains``: match node ``idx``'s scan against each near chain of at
+        least ``loop_match_minimum_chain_size`` nodes (`_near_chains`) with the sequential
+        matcher around its current estimate, and link it to the chain's node nearest to it when
+        the response reaches ``link_match_minimum_response_fine``. Once a loop closure has tied
+        a revisit to an earlier pass, these links keep every later scan there tied to it.
+        The edges are robust: gated against the estimate like loop closures, under the loop
+        kernel. Returns the number of links added."""
+        cfg = self.config
+        if cfg.link_scan_maximum_distance <= 0.0:
+            return 0
+        positions = self._positions()
+        sensors = _compose_rows(self.graph.poses, self.sensor_offset)
+        chains = [
+            c for c in self._near_chains(idx, positions, sensors)
+            if len(c) >= cfg.loop_match_minimum_chain_size
+        ]
+        if not chains:
+            return 0
+        pose = self.graph.pose(idx)
+        sensor = _compose1(pose, self.sensor_offset)
+        added = 0
+        for chain in chains:
+            match = self._match_against(list(chain), points, sensor, self._seq_params)
+            if match.response < cfg.link_match_minimum_response_fine:
+                continue
+            if cfg.loop_match_range_covariance:
+                match = self._with_range_error(match, points, idx)
+            # Karto's GetClosestScanToPose: the chain node whose reference position is nearest
+            here = positions[idx]
+            near = chain[int(np.argmin(np.hypot(positions[list(chain), 0] - here[0],
+                                                positions[list(chain), 1] - here[1])))]
+            near_pose = self.graph.pose(near)
+            base = _compose1(match.pose, _inverse1(self.sensor_offset))
+            cov = _rotate_covariance(match.covariance, float(near_pose[2]))
+            self.graph.add_edge(near, idx, _between1(near_pose, base), cov,
+                                kind=EdgeKind.SCAN_MATCH, robust=True)
+            added += 1
+        self.near_chain_links += added
+        return added
 
     def _try_close_loops(
         self, idx: int, points: FloatArray, warnings: list[SlamWarning], stamp: int
