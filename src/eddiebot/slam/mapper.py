@@ -1025,21 +1025,20 @@ class SlamCore:
         m2 = float(jump @ np.linalg.solve(cov_map, jump))
         return m2 > gate * gate
 
-    def _near_chains(
-        self, idx: int, positions: FloatArray, sensors: FloatArray
-    ) -> list[tuple[int, ...]]:
-        """Karto's ``FindNearChains``: runs of consecutive nodes whose sensor positions
-        (``sensors``) lie within ``link_scan_maximum_distance`` of node ``idx``'s, each grown
-        from a node the graph links to ``idx`` through nodes whose reference positions
-        (``positions``) stay that near (`near_linked_nodes`), leaving out the run that reaches
-        ``idx`` itself (its own running chain) and retired nodes."""
+    def _near_chains(self, idx: int, positions: FloatArray) -> list[tuple[int, ...]]:
+        """Karto's ``FindNearChains``: runs of consecutive nodes whose sensor positions lie
+        within ``link_scan_maximum_distance`` of node ``idx``'s, each grown from a node the
+        graph links to ``idx`` through nodes whose reference positions (``positions``) stay
+        that near (`near_linked_nodes`), leaving out the run that reaches ``idx`` itself (its
+        own running chain) and retired nodes."""
         dist = self.config.link_scan_maximum_distance
         near = near_linked_nodes(idx, positions, self.graph.adjacent, dist)
         near.discard(idx)
         if not near:
             return []
-        origin = sensors[idx]
-        d = sensors[: idx + 1, :2] - origin[:2]
+        # sensor positions only once a linked node is near (most scans stop above)
+        sensors = _compose_rows(self.graph.poses[: idx + 1], self.sensor_offset)
+        d = sensors[:, :2] - sensors[idx, :2]
         within = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= dist * dist + 1e-12).tolist()
         active = self._active_nodes()
         processed: set[int] = set()
@@ -1073,9 +1072,8 @@ class SlamCore:
         if cfg.link_scan_maximum_distance <= 0.0:
             return 0
         positions = self._positions()
-        sensors = _compose_rows(self.graph.poses, self.sensor_offset)
         chains = [
-            c for c in self._near_chains(idx, positions, sensors)
+            c for c in self._near_chains(idx, positions)
             if len(c) >= cfg.loop_match_minimum_chain_size
         ]
         if not chains:
