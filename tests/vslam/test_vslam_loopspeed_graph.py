@@ -5,6 +5,7 @@ on a graph that grows, changes links and root between calls."""
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from eddiebot.vslam.memory import Link, LinkType
 from eddiebot.vslam.rtabmap import ODOM_FRAME_ID_OFFSET, OdometryFrames, odometry_frame_graph
@@ -56,14 +57,15 @@ def test_cached_frame_links_equal_the_fresh_ones():
     assert checked > 15_000
 
 
-def _ratios_reference(d, trace, info):
-    """`graph._ratios` as written before (row reductions with `.min/.max(axis=1)`)."""
+def _ratios_reference(d, rot, info):
+    """`graph._ratios` as written before (row reductions with `.min/.max(axis=1)`), with the
+    rotation angle from scipy."""
     lin_info = np.where(info[:, :3] > 1e-4, info[:, :3], np.inf)
     ang_info = np.where(info[:, 3:] > 1e-4, info[:, 3:], np.inf)
     lin_sigma = np.sqrt(np.maximum(1.0 / lin_info.min(axis=1), 1e-6))
     ang_sigma = np.sqrt(np.maximum(1.0 / ang_info.min(axis=1), 1e-6))
     lin = np.where(np.isfinite(lin_info), d, 0.0).max(axis=1)
-    ang = np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0))
+    ang = Rotation.from_matrix(rot).magnitude()
     with np.errstate(divide="ignore", invalid="ignore"):
         return (np.where(lin_sigma > 0, lin / lin_sigma, 0.0),
                 np.where(ang_sigma > 0, ang / ang_sigma, 0.0))
@@ -78,7 +80,13 @@ def test_link_error_ratios_equal_the_row_reduction_form():
     info[rng.random((n, 6)) < 0.2] = 1e-5  # ignored terms (planar z, roll, pitch)
     info[rng.random(n) < 0.05, :3] = 0.0  # no usable linear term
     d = np.abs(rng.normal(0, 0.1, (n, 3)))
-    trace = rng.uniform(-1.2, 3.2, n)
-    got, want = _ratios(d, trace, info), _ratios_reference(d, trace, info)
-    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+    # rotation errors from 1e-12 rad (where arccos of the trace reads 0 or 2e-8) to π
+    angles = np.concatenate([10.0 ** rng.uniform(-12, -6, n // 2),
+                             rng.uniform(0.0, np.pi, n - n // 2)])
+    axes = rng.normal(size=(n, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    rot = Rotation.from_rotvec(axes * angles[:, None]).as_matrix()
+    got, want = _ratios(d, rot, info), _ratios_reference(d, rot, info)
+    assert np.array_equal(got[0], want[0])
+    assert np.allclose(got[1], want[1], rtol=1e-9, atol=1e-15)
     assert np.count_nonzero(got[0]) > 4000 and np.count_nonzero(got[0] == 0.0) > 100

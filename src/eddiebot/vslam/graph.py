@@ -383,9 +383,10 @@ class IncrementalPose2Graph:
         t = np.stack([ca * dx + sa * dy, -sa * dx + ca * dy, self._z[to] - self._z[fr]], axis=1)
         phi = xb[:, 2] - xa[:, 2]
         c, s = np.cos(phi), np.sin(phi)
-        # trace(Mᵀ Rz(φ))
-        trace = c * (m[:, 0, 0] + m[:, 1, 1]) + s * (m[:, 1, 0] - m[:, 0, 1]) + m[:, 2, 2]
-        lin, ang = _ratios(np.abs(t - m[:, :3, 3]), trace, self._lk_info[:n])
+        rz = np.zeros((n, 3, 3))
+        rz[:, 0, 0], rz[:, 0, 1], rz[:, 1, 0], rz[:, 1, 1], rz[:, 2, 2] = c, -s, s, c, 1.0
+        rot = np.einsum("nji,njk->nik", m[:, :3, :3], rz)  # Mᵀ Rz(φ)
+        lin, ang = _ratios(np.abs(t - m[:, :3, 3]), rot, self._lk_info[:n])
         ids = np.asarray(self._ids, np.int64)
         return ids[self._lk_slots[:n]], lin, ang
 
@@ -637,13 +638,13 @@ def _error_ratios(a: F64, b: F64, m: F64, info: F64) -> tuple[F64, F64]:
     # T = inv(A) B
     t_rot = np.einsum("nji,njk->nik", ra, b[:, :3, :3])
     t_tr = np.einsum("nji,nj->ni", ra, b[:, :3, 3] - a[:, :3, 3])
-    trace = np.einsum("nji,nji->n", m[:, :3, :3], t_rot)  # trace(Mᵀ T)
-    return _ratios(np.abs(t_tr - m[:, :3, 3]), trace, info)
+    rot = np.einsum("nji,njk->nik", m[:, :3, :3], t_rot)  # Mᵀ T
+    return _ratios(np.abs(t_tr - m[:, :3, 3]), rot, info)
 
 
-def _ratios(d: F64, trace: F64, info: F64) -> tuple[F64, F64]:
-    """Ratios from per-axis translation deviations `d` (L, 3), trace(Mᵀ T) of the rotations
-    and information diagonals (L, 6)."""
+def _ratios(d: F64, rot: F64, info: F64) -> tuple[F64, F64]:
+    """Ratios from per-axis translation deviations `d` (L, 3), the rotation errors Mᵀ T
+    (L, 3, 3) and information diagonals (L, 6)."""
     lin_info = np.where(info[:, :3] > _INFO_IGNORED, info[:, :3], np.inf)
     ang_info = np.where(info[:, 3:] > _INFO_IGNORED, info[:, 3:], np.inf)
     # σ floored as the incremental graph floors link variances, so the check judges the
@@ -653,8 +654,12 @@ def _ratios(d: F64, trace: F64, info: F64) -> tuple[F64, F64]:
     ang_sigma = np.sqrt(np.maximum(1.0 / _min3(ang_info), _MIN_VARIANCE))
     lin_d = np.where(np.isfinite(lin_info), d, 0.0)
     lin = np.maximum(np.maximum(lin_d[:, 0], lin_d[:, 1]), lin_d[:, 2])
-    c = np.clip((trace - 1.0) / 2.0, -1.0, 1.0)
-    ang = np.arccos(c)
+    # the rotation angle as atan2(2 sin θ, 2 cos θ) from the skew and trace parts: arccos of
+    # the trace alone cannot resolve angles below ~2e-8 rad, so two exact formulas disagreed
+    skew = np.stack([rot[:, 2, 1] - rot[:, 1, 2], rot[:, 0, 2] - rot[:, 2, 0],
+                     rot[:, 1, 0] - rot[:, 0, 1]], axis=1)
+    trace = rot[:, 0, 0] + rot[:, 1, 1] + rot[:, 2, 2]
+    ang = np.arctan2(np.sqrt(np.einsum("ni,ni->n", skew, skew)), trace - 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         lin_ratio = np.where(lin_sigma > 0, lin / lin_sigma, 0.0)
         ang_ratio = np.where(ang_sigma > 0, ang / ang_sigma, 0.0)
