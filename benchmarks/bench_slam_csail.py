@@ -12,11 +12,12 @@ carried forward by odometry from the latest node; one SE(2) aligns it to the cor
 relative pose errors for pairs 1 s, 5 s and 30 s apart, and evo's APE. The same errors are
 also given over the corrected scans that are SLAM nodes themselves (no odometry in between).
 
-    python benchmarks/bench_slam_csail.py [--no-cold]
+    python benchmarks/bench_slam_csail.py [--no-cold] [--name slam_csail]
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
@@ -76,6 +77,11 @@ def cold_run() -> dict[str, float]:
 
 
 def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--no-cold", action="store_true",
+                        help="skip the cold and cached runs in fresh processes")
+    parser.add_argument("--name", default="slam_csail", help="results file name (benchmarks/results/)")
+    args = parser.parse_args()
     if not RAW.exists():
         print(f"missing {RAW}")
         return 0
@@ -95,7 +101,7 @@ def main() -> int:
         "warm_realtime_factor": result.duration_s / result.cpu_s,
         "cartographer_realtime_factor": 12.0,
     }
-    if "--no-cold" not in sys.argv:
+    if not args.no_cold:
         row.update(cold_run())
         row["cold_realtime_factor"] = result.duration_s / float(row["cold_process_cpu_s"])  # type: ignore[arg-type]
         row["cached_realtime_factor"] = result.duration_s / float(row["cached_process_cpu_s"])  # type: ignore[arg-type]
@@ -178,7 +184,7 @@ def main() -> int:
             "node_rpe_30s_rot_mean_deg",
         ],
     )
-    print(write_results("slam_csail", [row]))
+    print(write_results(args.name, [row]))
     return 0
 
 

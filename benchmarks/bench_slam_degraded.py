@@ -18,11 +18,12 @@ Two further figures say how far the reference itself can be trusted at this scal
   SLAM, reference and odometry trajectories: mean distance from each scan's end points to the
   nearest end point of the ten scans before it.
 
-    python benchmarks/bench_slam_degraded.py [intel] [aces]
+    python benchmarks/bench_slam_degraded.py [intel] [aces] [--name slam_degraded]
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 from pathlib import Path
@@ -124,7 +125,15 @@ def run_one(name: str, seed: int = 1) -> dict[str, object]:
 
 
 def main() -> int:
-    names = [a for a in sys.argv[1:] if a in LOGS] or list(LOGS)
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("logs", nargs="*", metavar="LOG",
+                        help=f"logs to run: {', '.join(LOGS)} (default: all)")
+    parser.add_argument("--name", default="slam_degraded", help="results file name (benchmarks/results/)")
+    args = parser.parse_args()
+    unknown = [n for n in args.logs if n not in LOGS]
+    if unknown:
+        parser.error(f"unknown log {', '.join(unknown)} (choose from {', '.join(LOGS)})")
+    names = args.logs or list(LOGS)
     rows = [run_one(n) for n in names if LOGS[n].exists()]
     print_table(
         rows,
@@ -145,7 +154,7 @@ def main() -> int:
             "cpu_s",
         ],
     )
-    print(write_results("slam_degraded", rows))
+    print(write_results(args.name, rows))
     return 0
 
 
