@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -475,3 +476,58 @@ def test_near_chains_tie_a_revisit_to_the_first_pass(distance: float) -> None:
         assert abs(math.remainder(err[2], 2 * math.pi)) < math.radians(1.0)
     err = np.hypot(*(core.node_poses()[:, :2] - truth[added, :2]).T)
     assert err.max() < 0.01
+
+
+def _slipping_drive(config: SlamConfig) -> tuple[SlamCore, np.ndarray, list[int], list, int]:
+    """The loop drive with exact odometry that jumps 0.6 m forward (a wheel slip, beyond the
+    ±0.25 m sequential window) at the 30th pose; counts the wide re-searches."""
+    truth = loop_path()
+    odom = truth.copy()
+    odom[30:, 0] += 0.6
+    seen: list = []
+    core = SlamCore(config, on_warning=seen.append)
+    wide = 0
+    plain = core._match_against
+
+    def counting(nodes, points, prior, params, **kwargs):  # type: ignore[no-untyped-def]
+        nonlocal wide
+        wide += params is core._slip_params
+        return plain(nodes, points, prior, params, **kwargs)
+
+    core._match_against = counting  # type: ignore[method-assign]
+    added = [
+        k
+        for k, (p, o) in enumerate(zip(truth, odom))
+        if core.process(_scan(p, k * 100_000_000), o).processed
+    ]
+    return core, truth, added, seen, wide
+
+
+def test_a_wheel_slip_beyond_the_window_is_found_by_the_wide_search() -> None:
+    core, truth, added, seen, wide = _slipping_drive(CONFIG)
+    slips = [w for w in seen if w.kind == "slip"]
+    assert len(slips) == 1 and "odometry off by 0.6" in slips[0].message
+    err = np.hypot(*(core.node_poses()[:, :2] - truth[added, :2]).T)
+    assert err.max() < 0.03
+    assert 1 <= wide < len(added) // 2
+    core_off, _, added_off, seen_off, _ = _slipping_drive(
+        dataclasses.replace(CONFIG, slip_search_dimension=0.0)
+    )
+    err_off = np.hypot(*(core_off.node_poses()[:, :2] - truth[added_off, :2]).T)
+    # without it, part of the jump stays in the map even after the loop closes (0.11 m here)
+    assert not any(w.kind == "slip" for w in seen_off)
+    assert err_off.max() > 0.08 and err_off.max() > 4 * err.max()
+
+
+def test_slip_search_minimum_response_decouples_the_re_search_from_loop_acceptance() -> None:
+    # a strict loop threshold alone makes every sequential match "weak" and re-searched
+    # widely; slip_search_minimum_response keeps the re-search for weak matches only
+    _, _, added, _, wide_default = _slipping_drive(CONFIG)
+    strict = dataclasses.replace(CONFIG, loop_match_minimum_response_fine=0.999)
+    _, _, _, _, wide_coupled = _slipping_drive(strict)
+    _, truth, added_dec, seen, wide_decoupled = _slipping_drive(
+        dataclasses.replace(strict, slip_search_minimum_response=0.45)
+    )
+    assert wide_coupled > len(added) // 2 > wide_default
+    assert wide_decoupled == wide_default
+    assert sum(w.kind == "slip" for w in seen) == 1

@@ -131,6 +131,10 @@ class SlamConfig:
     """σ (rad) added in quadrature to an ICP match covariance's heading."""
     slip_search_dimension: float = 2.0
     """Side (m) of the wide re-search after a weak or window-edge sequential match; 0 = off."""
+    slip_search_minimum_response: float = 0.0
+    """A sequential match scoring below this response is weak: mapping re-searches it over
+    ``slip_search_dimension`` (a wheel slip), localization over the loop-closure window (a lost
+    pose). 0 = ``loop_match_minimum_response_fine``, a response good enough to close a loop."""
     slip_search_maximum_sigmas: float = 0.0
     """Reject a wide re-search result farther than this many odometry σ (Mahalanobis, under
     the odometry noise model below) from the odometry prediction, or not well constrained in
@@ -295,6 +299,7 @@ class SlamConfig:
             "map_max_laser_range",
             "odometry_heading_quantization",
             "loop_match_range_bias_quadratic",
+            "slip_search_minimum_response",
             "isam2_wildfire_threshold",
         ):
             value = getattr(out, name)

@@ -405,6 +405,11 @@ class SlamCore:
         self._slip_params = dataclasses.replace(
             self._loop_coarse, search_dimension=self.config.slip_search_dimension
         )
+        # a sequential match below this is re-searched wider (slip, lost localization)
+        self._weak_response = (
+            self.config.slip_search_minimum_response
+            or self.config.loop_match_minimum_response_fine
+        )
         self.clear()
 
     # ------------------------------------------------------------------ state
@@ -982,7 +987,7 @@ class SlamCore:
         at_edge = bool(
             np.any(np.abs(offset) >= half - 2.0 * cfg.correlation_search_space_resolution)
         )
-        if match.response >= cfg.loop_match_minimum_response_fine and not at_edge:
+        if match.response >= self._weak_response and not at_edge:
             return match
         wide = self._match_against(nodes, points, prior_sensor, self._slip_params)
         # (a response at or below the bar below is discarded: no need to finish such a match)
@@ -1227,7 +1232,7 @@ class SlamCore:
         covariance = None
         if ref_nodes:
             match = self._match_against(ref_nodes, points, prior_sensor, self._seq_params)
-            if match.response < cfg.loop_match_minimum_response_fine:
+            if match.response < self._weak_response:
                 wide = self._match_against(ref_nodes, points, prior_sensor, self._loop_coarse)
                 if wide.response > match.response:
                     match = self._match_against(ref_nodes, points, wide.pose, self._loop_fine)
