@@ -83,10 +83,14 @@ def test_link_error_ratios_equal_the_row_reduction_form():
     # rotation errors from 1e-12 rad (where arccos of the trace reads 0 or 2e-8) to π
     angles = np.concatenate([10.0 ** rng.uniform(-12, -6, n // 2),
                              rng.uniform(0.0, np.pi, n - n // 2)])
-    axes = rng.normal(size=(n, 3))
-    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-    rot = Rotation.from_rotvec(axes * angles[:, None]).as_matrix()
-    got, want = _ratios(d, rot, info), _ratios_reference(d, rot, info)
+    dirs = rng.normal(size=(n, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    rot = Rotation.from_rotvec(dirs * angles[:, None]).as_matrix()
+    axis = np.stack([rot[:, 2, 1] - rot[:, 1, 2], rot[:, 0, 2] - rot[:, 2, 0],
+                     rot[:, 1, 0] - rot[:, 0, 1]], axis=1)
+    two_sin = np.linalg.norm(axis, axis=1)
+    trace = np.trace(rot, axis1=1, axis2=2)
+    got, want = _ratios(d, two_sin, trace, info), _ratios_reference(d, rot, info)
     assert np.array_equal(got[0], want[0])
     assert np.allclose(got[1], want[1], rtol=1e-9, atol=1e-15)
     assert np.count_nonzero(got[0]) > 4000 and np.count_nonzero(got[0] == 0.0) > 100

@@ -383,10 +383,13 @@ class IncrementalPose2Graph:
         t = np.stack([ca * dx + sa * dy, -sa * dx + ca * dy, self._z[to] - self._z[fr]], axis=1)
         phi = xb[:, 2] - xa[:, 2]
         c, s = np.cos(phi), np.sin(phi)
-        rz = np.zeros((n, 3, 3))
-        rz[:, 0, 0], rz[:, 0, 1], rz[:, 1, 0], rz[:, 1, 1], rz[:, 2, 2] = c, -s, s, c, 1.0
-        rot = np.einsum("nji,njk->nik", m[:, :3, :3], rz)  # Mᵀ Rz(φ)
-        lin, ang = _ratios(np.abs(t - m[:, :3, 3]), rot, self._lk_info[:n])
+        # R = Mᵀ Rz(φ): its trace and the axis vector of R − Rᵀ (2 sin θ along the axis)
+        trace = c * (m[:, 0, 0] + m[:, 1, 1]) + s * (m[:, 1, 0] - m[:, 0, 1]) + m[:, 2, 2]
+        v0 = c * m[:, 1, 2] - s * m[:, 0, 2] - m[:, 2, 1]
+        v1 = m[:, 2, 0] - c * m[:, 0, 2] - s * m[:, 1, 2]
+        v2 = c * (m[:, 0, 1] - m[:, 1, 0]) + s * (m[:, 0, 0] + m[:, 1, 1])
+        two_sin = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        lin, ang = _ratios(np.abs(t - m[:, :3, 3]), two_sin, trace, self._lk_info[:n])
         ids = np.asarray(self._ids, np.int64)
         return ids[self._lk_slots[:n]], lin, ang
 
@@ -639,12 +642,17 @@ def _error_ratios(a: F64, b: F64, m: F64, info: F64) -> tuple[F64, F64]:
     t_rot = np.einsum("nji,njk->nik", ra, b[:, :3, :3])
     t_tr = np.einsum("nji,nj->ni", ra, b[:, :3, 3] - a[:, :3, 3])
     rot = np.einsum("nji,njk->nik", m[:, :3, :3], t_rot)  # Mᵀ T
-    return _ratios(np.abs(t_tr - m[:, :3, 3]), rot, info)
+    axis = np.stack([rot[:, 2, 1] - rot[:, 1, 2], rot[:, 0, 2] - rot[:, 2, 0],
+                     rot[:, 1, 0] - rot[:, 0, 1]], axis=1)
+    two_sin = np.sqrt(np.einsum("ni,ni->n", axis, axis))
+    trace = rot[:, 0, 0] + rot[:, 1, 1] + rot[:, 2, 2]
+    return _ratios(np.abs(t_tr - m[:, :3, 3]), two_sin, trace, info)
 
 
-def _ratios(d: F64, rot: F64, info: F64) -> tuple[F64, F64]:
-    """Ratios from per-axis translation deviations `d` (L, 3), the rotation errors Mᵀ T
-    (L, 3, 3) and information diagonals (L, 6)."""
+def _ratios(d: F64, two_sin: F64, trace: F64, info: F64) -> tuple[F64, F64]:
+    """Ratios from per-axis translation deviations `d` (L, 3), the rotation errors R = Mᵀ T
+    as 2 sin θ (the norm of R − Rᵀ's axis vector) and trace(R) = 1 + 2 cos θ, and information
+    diagonals (L, 6)."""
     lin_info = np.where(info[:, :3] > _INFO_IGNORED, info[:, :3], np.inf)
     ang_info = np.where(info[:, 3:] > _INFO_IGNORED, info[:, 3:], np.inf)
     # σ floored as the incremental graph floors link variances, so the check judges the
@@ -654,12 +662,9 @@ def _ratios(d: F64, rot: F64, info: F64) -> tuple[F64, F64]:
     ang_sigma = np.sqrt(np.maximum(1.0 / _min3(ang_info), _MIN_VARIANCE))
     lin_d = np.where(np.isfinite(lin_info), d, 0.0)
     lin = np.maximum(np.maximum(lin_d[:, 0], lin_d[:, 1]), lin_d[:, 2])
-    # the rotation angle as atan2(2 sin θ, 2 cos θ) from the skew and trace parts: arccos of
-    # the trace alone cannot resolve angles below ~2e-8 rad, so two exact formulas disagreed
-    skew = np.stack([rot[:, 2, 1] - rot[:, 1, 2], rot[:, 0, 2] - rot[:, 2, 0],
-                     rot[:, 1, 0] - rot[:, 0, 1]], axis=1)
-    trace = rot[:, 0, 0] + rot[:, 1, 1] + rot[:, 2, 2]
-    ang = np.arctan2(np.sqrt(np.einsum("ni,ni->n", skew, skew)), trace - 1.0)
+    # θ = atan2(2 sin θ, 2 cos θ): arccos of the trace alone cannot resolve angles below
+    # ~2e-8 rad, so two exact formulas for the same link disagreed
+    ang = np.arctan2(two_sin, trace - 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
         lin_ratio = np.where(lin_sigma > 0, lin / lin_sigma, 0.0)
         ang_ratio = np.where(ang_sigma > 0, ang / ang_sigma, 0.0)
