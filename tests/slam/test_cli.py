@@ -19,7 +19,7 @@ def _parse(module, argv: list[str]) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def test_slam_replay_writes_map_trajectory_report(tmp_path: Path) -> None:
+def test_slam_replay_writes_map_trajectory_report(tmp_path: Path, capsys) -> None:
     truth = loop_path(0.5)[:24]
     odom = drifting_odometry(truth, seed=3)
     angles = carmen_beam_angles(181)
@@ -44,17 +44,12 @@ def test_slam_replay_writes_map_trajectory_report(tmp_path: Path) -> None:
             "--no-progress",
             "--set",
             "minimum_travel_distance:=0.5",
-            # this odometry drifts 0.01 rad a step, far beyond Eddie's noise model
-            "--set",
-            "odometry_rotation_sigma:=0.05",
-            "--set",
-            "odometry_translation_sigma:=0.05",
-            # and its heading error accumulates: no span edges built for quantised encoders
-            "--set",
-            "odometry_span_nodes:=0",
         ],
     )
     assert slam_cli.run(args) == 0
+    # a lidar log gets slam_toolbox's sample values, not Eddie's Kinect and encoder tuning
+    assert "parameters: " in capsys.readouterr().err
+    assert slam_cli.replay_params(log).name == "slam_defaults.yaml"
     for name in ("map.pgm", "map.yaml", "map.png", "trajectory.tum", "report.md"):
         assert (out / name).is_file(), name
     stamps, poses = read_tum(out / "trajectory.tum")
@@ -64,6 +59,15 @@ def test_slam_replay_writes_map_trajectory_report(tmp_path: Path) -> None:
     report = (out / "report.md").read_text()
     assert "bad_line: 1" in report
     assert np.hypot(*(poses[-1, :2] - truth[int(stamps[-1] - 100.0), :2])) < 0.1
+
+
+def test_replay_parameters_follow_the_input(tmp_path: Path) -> None:
+    bag = tmp_path / "run1"
+    bag.mkdir()
+    assert slam_cli.replay_params(bag).name == "slam.yaml"  # Eddie's own recordings
+    assert slam_cli.replay_params(tmp_path / "run1.mcap").name == "slam.yaml"
+    for log in ("csail.clf", "intel.log", "intel.log.gz"):
+        assert slam_cli.replay_params(tmp_path / log).name == "slam_defaults.yaml"
 
 
 def test_posegraph_optimize_prints_chi2(tmp_path: Path, capsys) -> None:

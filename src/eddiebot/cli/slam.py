@@ -8,8 +8,10 @@ Without a sub-command it runs the simulator, Eddie's base stack, depthimage_to_l
 the SLAM node (slam_toolbox's parameters from ``config/slam.yaml``), ready for ``eddie
 teleop`` in another terminal; ``eddie map save NAME`` saves the map.
 
-``replay`` runs the SLAM core over a CARMEN log (``.clf``, ``.log``, ``.log.gz``) or a
-rosbag2 (a bag directory, MCAP or sqlite3, or a bare ``.mcap`` / ``.db3`` file) and writes
+``replay`` runs the SLAM core over a CARMEN log (``.clf``, ``.log``, ``.log.gz``; with
+slam_toolbox's sample parameters, ``config/slam_defaults.yaml``, unless ``--params`` names
+others) or a rosbag2 (a bag directory, MCAP or sqlite3, or a bare ``.mcap`` / ``.db3`` file;
+with Eddie's ``config/slam.yaml``) and writes
 the map (nav2 ``.pgm`` + ``.yaml`` and a ``.png`` with the trajectory), the trajectory (TUM,
 one line per processed scan, stamped with the scan's time) and ``report.md``. From a bag it
 reads ``sensor_msgs/LaserScan`` on ``--scan-topic`` (default ``/scan``) and odometry from
@@ -69,7 +71,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--params",
         type=Path,
         default=None,
-        help="ROS 2 parameter file with a slam_toolbox section (default config/slam.yaml values)",
+        help="ROS 2 parameter file with a slam_toolbox section (default: config/slam.yaml, "
+        "Eddie's, for a rosbag2; config/slam_defaults.yaml, slam_toolbox's sample values, "
+        "for a CARMEN lidar log)",
     )
     rep.add_argument(
         "--set",
@@ -108,13 +112,21 @@ def _overrides(items: list[str]) -> dict[str, object]:
     return out
 
 
-def _default_params() -> Path | None:
+def _default_params(name: str = "slam.yaml") -> Path | None:
     here = Path(__file__).resolve()
     for parent in here.parents:
-        candidate = parent / "config" / "slam.yaml"
+        candidate = parent / "config" / name
         if candidate.is_file():
             return candidate
     return None
+
+
+def replay_params(log: Path) -> Path | None:
+    """The parameter file `eddie slam replay` uses without ``--params``: Eddie's
+    (``config/slam.yaml``, tuned for the Kinect-made 57° scan and Eddie's encoders) for a
+    rosbag2, slam_toolbox's sample values (``config/slam_defaults.yaml``, tuned for 180–360°
+    lidars) for a CARMEN log."""
+    return _default_params("slam.yaml" if is_bag(log) else "slam_defaults.yaml")
 
 
 def is_bag(path: Path) -> bool:
@@ -186,8 +198,9 @@ def _replay(args: argparse.Namespace) -> int:
     from eddiebot.slam.replay import replay_log, write_outputs
 
     try:
-        params = args.params or _default_params()
+        params = args.params or replay_params(args.file)
         config = load_slam_config(params, overrides=_overrides(args.set))
+        print(f"parameters: {params}", file=sys.stderr)
     except (SlamError, ValueError) as exc:
         print(f"eddie slam replay: {exc}", file=sys.stderr)
         return 2
