@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -531,3 +533,50 @@ def test_slip_search_minimum_response_decouples_the_re_search_from_loop_acceptan
     assert wide_coupled > len(added) // 2 > wide_default
     assert wide_decoupled == wide_default
     assert sum(w.kind == "slip" for w in seen) == 1
+
+
+def test_warm_up_compiles_what_a_mapping_run_needs() -> None:
+    # a fresh process with an empty numba cache: the warm-up compiles the kernels, and a
+    # mapping run afterwards compiles nothing more (its first scans take milliseconds)
+    import subprocess
+    import sys
+    import tempfile
+    import textwrap
+
+    code = textwrap.dedent(
+        """
+        import time, numpy as np
+        from slam_world import ROOM, SCAN_ANGLES, loop_path, raycast
+        from eddiebot.slam import Scan, SlamConfig, SlamCore
+        from eddiebot.slam.mapper import warm_up
+        config = SlamConfig(minimum_travel_distance=0.5, loop_match_minimum_chain_size=6)
+        took = warm_up(config)
+        core = SlamCore(config)
+        worst = 0.0
+        for k, p in enumerate(loop_path()):
+            scan = Scan(raycast(ROOM, p, SCAN_ANGLES, 12.0), SCAN_ANGLES.copy(), 0.05, 12.0,
+                        k * 100_000_000)
+            t0 = time.perf_counter()
+            core.process(scan, p)
+            worst = max(worst, time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        core.update_map()
+        worst = max(worst, time.perf_counter() - t0)
+        print(took, worst, len(core.loop_closures))
+        """
+    )
+    here = Path(__file__).resolve().parent
+    with tempfile.TemporaryDirectory() as cache:
+        out = subprocess.run(
+            [sys.executable, "-c", code],
+            cwd=here,
+            env={**os.environ, "NUMBA_CACHE_DIR": cache, "PYTHONPATH": str(here)},
+            capture_output=True,
+            text=True,
+            timeout=600,
+            check=True,
+        ).stdout.split()
+    took, worst, loops = float(out[0]), float(out[1]), int(out[2])
+    assert took > 1.0  # it compiled (an empty cache)
+    assert loops >= 1  # the run closed a loop, so the loop matcher ran too
+    assert worst < 0.5  # nothing left to compile: a compile costs seconds

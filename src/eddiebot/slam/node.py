@@ -56,7 +56,7 @@ from eddiebot.msgs.slam_toolbox import (
 )
 from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
 from eddiebot.slam.config import SlamConfig
-from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning
+from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning, warm_up
 from eddiebot.slam.scan import Scan
 from eddiebot.slam.session import load_session, save_session
 
@@ -96,6 +96,13 @@ class SlamNode(Node):
             self.core.on_warning = self._on_warning
         else:
             self.core = SlamCore(self.config, on_warning=self._on_warning)
+        # numba compiles the kernels on their first call: now, not on the first real scan
+        seconds = warm_up(self.config)
+        if seconds > 2.0:
+            self.get_logger().info(
+                f"compiled the scan-matching kernels in {seconds:.1f} s "
+                "(once after an install; numba caches them)"
+            )
         self.paused = False
         self._sensor_offset: tuple[str, np.ndarray] | None = None
         self._scan_queue: deque[Any] = deque(maxlen=max(1, self.config.scan_buffer_size))
