@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+import time
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -1094,9 +1095,8 @@ class SlamCore:
             if cfg.loop_match_range_covariance:
                 match = self._with_range_error(match, points, idx)
             # Karto's GetClosestScanToPose: the chain node whose reference position is nearest
-            here = positions[idx]
-            near = chain[int(np.argmin(np.hypot(positions[list(chain), 0] - here[0],
-                                                positions[list(chain), 1] - here[1])))]
+            offsets = positions[list(chain)] - positions[idx]
+            near = chain[int(np.argmin(np.hypot(offsets[:, 0], offsets[:, 1])))]
             near_pose = self.graph.pose(near)
             base = _compose1(match.pose, _inverse1(self.sensor_offset))
             cov = _rotate_covariance(match.covariance, float(near_pose[2]))
@@ -1362,21 +1362,19 @@ def warm_up(config: SlamConfig | None = None) -> float:
     (first run after an install, ~10 s) or loads them from its cache (~0.3 s) now rather than
     on the first real scan; returns the seconds it took. Nothing is kept.
 
-    A short drive through a 6 m × 4 m box exercises sequential matching (correlative search,
+    A short drive along a box 4 m wide exercises sequential matching (correlative search,
     sub-cell refinement, ICP polish, covariance), the occupancy grid's ray casting and a
     loop-closure verification (multi-resolution coarse search, then fine).
     """
-    import time
-
     t0 = time.perf_counter()
     cfg = dataclasses.replace(
         config or SlamConfig(), mode="mapping", minimum_time_interval=0.0, map_file_name=""
     )
     core = SlamCore(cfg)
     angles = np.linspace(-0.5, 0.5, 160)  # a 57° scan; the kernels do not depend on the width
-    size = (6.0, 4.0)
     range_max = min(cfg.max_laser_range, 12.0)
-    step = max(cfg.minimum_travel_distance, 0.1) + 0.05
+    step = max(cfg.minimum_travel_distance, 0.1) + 0.05  # every pose becomes a node
+    size = (2.0 + 3 * step + 3.0, 4.0)  # the last pose still 3 m short of the end wall
     for k in range(4):
         pose = np.array([1.0 + step * k, 1.5 + 0.02 * k, 0.05 * k])
         scan = Scan(_box_ranges(pose, angles, size), angles, 0.05, range_max, (k + 1) * 10**9)
