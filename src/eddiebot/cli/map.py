@@ -22,8 +22,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     save.add_argument("name", help="output path without extension")
     save.add_argument("--format", default="pgm", choices=("pgm", "png", "bmp"))
     save.add_argument("--mode", default="trinary", choices=("trinary", "scale", "raw"))
-    save.add_argument("--free", type=float, default=0.25, help="free threshold (0.25)")
-    save.add_argument("--occupied", type=float, default=0.65, help="occupied threshold (0.65)")
+    # None: the thresholds of eddiebot.maps (0.196 / 0.65), so grey 205 reloads as unknown
+    save.add_argument("--free", type=float, default=None, help="free threshold (0.196)")
+    save.add_argument("--occupied", type=float, default=None, help="occupied threshold (0.65)")
     save.add_argument("--topic", default="map")
     save.add_argument("--timeout", type=float, default=10.0)
 
@@ -31,7 +32,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from eddiebot.cli._common import cli_session
     from eddiebot.core import SingleThreadedExecutor
+    from eddiebot.maps import DEFAULT_FREE_THRESH, DEFAULT_OCCUPIED_THRESH
 
+    free = DEFAULT_FREE_THRESH if args.free is None else args.free
+    occupied = DEFAULT_OCCUPIED_THRESH if args.occupied is None else args.occupied
     url = str(Path(args.name).expanduser().resolve())
     with cli_session("map") as s:
         ex = SingleThreadedExecutor(context=s.context)
@@ -46,7 +50,7 @@ def run(args: argparse.Namespace) -> int:
         if nav.service_is_ready():
             req = nav2_msgs.SaveMap.Request(map_topic=args.topic, map_url=url,
                                             image_format=args.format, map_mode=args.mode,
-                                            free_thresh=args.free, occupied_thresh=args.occupied)
+                                            free_thresh=free, occupied_thresh=occupied)
             future = nav.call_async(req)
             via = "/map_saver/save_map"
         elif slam.service_is_ready():

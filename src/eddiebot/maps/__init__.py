@@ -4,11 +4,13 @@
 y as in ``nav_msgs/OccupancyGrid``). `load_map` and `save_map` read and write the nav2
 map_server format (``.pgm``/``.png`` image + ``.yaml``) in its trinary, scale and raw modes
 with the same thresholds, negate flag and pixel rules as ``nav2_map_server``; writes are
-atomic (temporary file, then rename). `map_to_msg` / `map_from_msg` convert to and from
+atomic (temporary file, then rename). Maps are saved with ``free_thresh`` 0.196 so that
+unknown cells (grey 205) reload as unknown; files an older eddiebot wrote with 0.25 load
+with their unknown cells kept and a `LegacyMapWarning`. `map_to_msg` / `map_from_msg` convert to and from
 ``nav_msgs/OccupancyGrid``; `world_to_map` / `map_to_world` convert coordinates.
 """
 
-from eddiebot.maps.errors import MapError, MapFormatError, MapWriteError
+from eddiebot.maps.errors import LegacyMapWarning, MapError, MapFormatError, MapWriteError
 from eddiebot.maps.grid import (
     FREE,
     OCCUPIED,
@@ -21,6 +23,8 @@ from eddiebot.maps.grid import (
     world_to_map,
 )
 from eddiebot.maps.io import (
+    DEFAULT_FREE_THRESH,
+    DEFAULT_OCCUPIED_THRESH,
     MapMode,
     MapYaml,
     image_to_map,
@@ -32,9 +36,12 @@ from eddiebot.maps.io import (
 )
 
 __all__ = [
+    "DEFAULT_FREE_THRESH",
+    "DEFAULT_OCCUPIED_THRESH",
     "FREE",
     "OCCUPIED",
     "UNKNOWN",
+    "LegacyMapWarning",
     "MapError",
     "MapFormatError",
     "MapMode",

@@ -1,8 +1,8 @@
-"""Typed failures of the map io package."""
+"""Typed failures (and the one warning) of the map io package."""
 
 from __future__ import annotations
 
-__all__ = ["MapError", "MapFormatError", "MapWriteError"]
+__all__ = ["LegacyMapWarning", "MapError", "MapFormatError", "MapWriteError"]
 
 
 class MapError(Exception):
@@ -18,3 +18,8 @@ class MapFormatError(MapError, ValueError):
 
 class MapWriteError(MapError, OSError):
     """A map could not be written; any previous map at the target path is intact."""
+
+
+class LegacyMapWarning(UserWarning):
+    """A map file written by an older eddiebot (``free_thresh`` 0.25: unknown cells would
+    read as free) was loaded with its unknown cells kept unknown; saving it again fixes it."""

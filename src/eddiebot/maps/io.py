@@ -16,9 +16,13 @@ Pixel rules follow ``nav2_map_server/src/map_io.cpp``:
 
 Image row 0 is the top of the map (highest y); `OccupancyMap` row 0 is the lowest y.
 
-Upstream quirk kept on purpose: unknown cells are written as grey 205 (occ 0.196), which a
-``free_thresh`` of 0.25 — nav2's default — reads back as *free* (ROS 1 wrote 0.196 for this
-reason; slam_toolbox issue #587). Save with ``free_thresh=0.196`` to keep unknown cells.
+Unknown stays unknown: unknown cells are written as grey 205 (occ 0.19608), so files are
+saved with ``free_thresh`` 0.196 (as ROS 1's map_saver did and Nav2 does again since
+navigation2 #5278): 205 then reloads as unknown. nav2's older default of 0.25 read 205 back
+as *free* (slam_toolbox issue #587). Files that eddiebot wrote with that default (trinary,
+thresholds 0.25 / 0.65, only the pixels 0 / 205 / 254) load with 205 as unknown and one
+`LegacyMapWarning` asking to save them again; every other file loads exactly as
+map_server reads it.
 """
 
 from __future__ import annotations
@@ -38,10 +42,12 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
-from eddiebot.maps.errors import MapFormatError, MapWriteError
+from eddiebot.maps.errors import LegacyMapWarning, MapFormatError, MapWriteError
 from eddiebot.maps.grid import OccupancyMap
 
 __all__ = [
+    "DEFAULT_FREE_THRESH",
+    "DEFAULT_OCCUPIED_THRESH",
     "MapMode",
     "MapYaml",
     "image_to_map",
@@ -52,8 +58,14 @@ __all__ = [
     "write_image",
 ]
 
+#: Thresholds every eddiebot writer uses (DESIGN §9): grey 205 (occ 0.19608) reloads as unknown.
 DEFAULT_OCCUPIED_THRESH = 0.65
-DEFAULT_FREE_THRESH = 0.25
+DEFAULT_FREE_THRESH = 0.196
+
+#: What eddiebot wrote before: 205 reloads as free with these (see `_legacy_unknown_pixel`).
+_LEGACY_FREE_THRESH = 0.25
+#: Thresholds that came through a float32 service field (SaveMap) differ by ~1e-8.
+_THRESH_TOLERANCE = 1e-6
 
 
 class MapMode(str, enum.Enum):
@@ -329,15 +341,50 @@ def save_map(
         f"resolution: {grid.resolution!r}\n"
         f"origin: [{x!r}, {y!r}, {yaw!r}]\n"
         f"negate: {int(negate)}\n"
-        f"occupied_thresh: {occupied_thresh!r}\n"
-        f"free_thresh: {free_thresh!r}\n"
+        f"occupied_thresh: {_threshold_text(occupied_thresh)}\n"
+        f"free_thresh: {_threshold_text(free_thresh)}\n"
     )
     _atomic_write_bytes(yaml_path, text.encode("utf-8"))
     return yaml_path
 
 
+def _threshold_text(value: float) -> str:
+    """A threshold as the YAML shows it: 6 significant digits, so that a value that came
+    through a float32 service field (``0.19599999487``) is written as given (``0.196``)."""
+    return repr(float(f"{value:.6g}"))
+
+
+def _legacy_unknown_pixel(meta: MapYaml, image: npt.NDArray[np.uint8]) -> int | None:
+    """The grey that stands for unknown in a file eddiebot wrote with ``free_thresh`` 0.25,
+    else None.
+
+    Recognised by what that writer produced: trinary mode, thresholds 0.25 / 0.65 (as
+    written, or through a float32 service field), a single-channel image holding only the
+    three trinary greys (0 / 205 / 254, inverted with ``negate``) and some unknown (205)
+    among them. Such a file from nav2's map_saver (same default, same pixels) has the same
+    flaw and is read the same way; a file with other greys is read as map_server reads it.
+    """
+    if (
+        meta.mode is not MapMode.TRINARY
+        or abs(meta.free_thresh - _LEGACY_FREE_THRESH) > _THRESH_TOLERANCE
+        or abs(meta.occupied_thresh - DEFAULT_OCCUPIED_THRESH) > _THRESH_TOLERANCE
+        or image.ndim != 2
+    ):
+        return None
+    free, unknown, occupied = (1, 50, 255) if meta.negate else (254, 205, 0)
+    counts = np.bincount(image.ravel(), minlength=256)
+    if counts[unknown] == 0 or counts.sum() != counts[[free, unknown, occupied]].sum():
+        return None
+    return unknown
+
+
 def load_map(yaml_path: str | os.PathLike[str]) -> OccupancyMap:
-    """Read a nav2 map_server map (YAML + image) into an `OccupancyMap`."""
+    """Read a nav2 map_server map (YAML + image) into an `OccupancyMap`.
+
+    Cells follow map_server's rules for the file's mode and thresholds, except in a file
+    eddiebot wrote with the old ``free_thresh`` 0.25 (see `_legacy_unknown_pixel`): there
+    grey 205 is unknown, not free, and a `LegacyMapWarning` asks to save the map again.
+    """
     meta = read_map_yaml(yaml_path)
     if not meta.image.is_file():
         raise MapFormatError(f"{yaml_path}: key 'image': file {meta.image} not found")
@@ -350,6 +397,18 @@ def load_map(yaml_path: str | os.PathLike[str]) -> OccupancyMap:
         if decoded.dtype == np.uint16
         else decoded.astype(np.uint8)
     )
+    free_thresh = meta.free_thresh
+    if _legacy_unknown_pixel(meta, image) is not None:
+        # Only the greys 0 / 205 / 254 are present: with the current threshold 205 is unknown
+        # and the other two read as before.
+        free_thresh = DEFAULT_FREE_THRESH
+        warnings.warn(
+            f"{yaml_path}: written by an older eddiebot with free_thresh 0.25, which makes "
+            "map_server read unexplored space (grey 205) as free; loaded with it as unknown. "
+            "Save the map again (eddie map save) to fix the file",
+            LegacyMapWarning,
+            stacklevel=2,
+        )
     try:
         return image_to_map(
             image,
@@ -358,7 +417,7 @@ def load_map(yaml_path: str | os.PathLike[str]) -> OccupancyMap:
             mode=meta.mode,
             negate=meta.negate,
             occupied_thresh=meta.occupied_thresh,
-            free_thresh=meta.free_thresh,
+            free_thresh=free_thresh,
         )
     except MapFormatError as exc:
         raise MapFormatError(f"{meta.image}: {exc}") from exc
