@@ -4,14 +4,15 @@ original stack's ``Distances``/``Voltages`` topics.
 One table (``eddiebot.robot.constants``) says which sensor is which: IR left/center/right
 are ADC indices 0/1/2 (frames ``ir_*_link``), PING left/right are pins 1/2 reported lowest
 pin first (frames ``ping_*_link``), the battery is ADC index 7 through the 3.21 divider.
-PING 0 (no echo) is ``+inf`` as REP-117 says; an IR voltage below the curve's far end is
-``+inf`` too; a malformed or empty message is skipped with one warning (the original read
-out of bounds here).
+Out-of-range readings follow REP-117: PING 0 (no echo) and an IR voltage below the curve's
+far end (nothing within 80 cm) are ``+inf``; an IR voltage above its 10 cm end (closer than
+the sensor can measure) is ``-inf``, which the safety veto treats as the most urgent reading.
+A malformed or empty message is skipped with one warning (the original read out of bounds
+here).
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -89,6 +90,6 @@ class RangeNode(Node):
         volts = [adc_counts_to_volts(int(v)) for v in values]
         self.voltages_pub.publish(Voltages(value=np.asarray(volts[:3], dtype=np.float64)))
         for s in IR_SENSORS:
-            d = sharp_voltage_to_distance(volts[s.index])
-            self.ir_pubs[s.name].publish(self._range(s, d if math.isfinite(d) else math.inf, Range.INFRARED))
+            d = sharp_voltage_to_distance(volts[s.index])  # ±inf as REP-117, never NaN here
+            self.ir_pubs[s.name].publish(self._range(s, d, Range.INFRARED))
         self.battery_pub.publish(BatteryLevel(value=battery_volts_from_counts(int(values[BATTERY_ADC_INDEX]))))
