@@ -5,6 +5,11 @@ reference §3, §5); the wheel joints are placed from ``TRACK_M`` and ``WHEEL_RA
 odometry, the board node, the simulator and the description agree (the original URDF put
 the wheels 0.381 m apart while its code used 0.39 m). Range sensors come from the sensor
 table (``IR_SENSORS``, ``PING_SENSORS``) with frames ``<name>_link``.
+
+Every body link carries an ``<inertial>`` estimated from its parts (:func:`link_inertials`,
+≈ 11.4 kg in all against the 11.5 kg the platform guide gives); the pure coordinate frames
+(:data:`FRAME_LINKS`: the root ``base_footprint`` and the Kinect's optical frames) have none —
+KDL refuses an inertia on the root link, and a mass on a frame would be fiction.
 """
 
 from __future__ import annotations
@@ -19,16 +24,20 @@ from eddiebot.robot.constants import (
     PING_SENSORS,
     TRACK_M,
     WHEEL_RADIUS_M,
+    SensorKind,
 )
 
 __all__ = [
     "BASE_RADIUS_M",
     "CAMERA_DEPTH_OPTICAL_FRAME",
     "CAMERA_RGB_OPTICAL_FRAME",
+    "FRAME_LINKS",
     "WHEEL_JOINTS",
     "FixedJoint",
+    "Inertial",
     "eddie_urdf",
     "fixed_joints",
+    "link_inertials",
 ]
 
 BASE_RADIUS_M = 0.2245
@@ -104,28 +113,129 @@ _VISUALS = {
 }
 
 
+FRAME_LINKS = frozenset({
+    "base_footprint", "camera_rgb_frame", "camera_depth_frame",
+    CAMERA_RGB_OPTICAL_FRAME, CAMERA_DEPTH_OPTICAL_FRAME,
+})
+"""Links that are coordinate frames only, without mass."""
+
+
+@dataclass(frozen=True)
+class Inertial:
+    """Mass (kg) and principal moments (kg·m²) about the centre of mass ``xyz`` (m, link
+    frame); every part is modelled as a box, cylinder or sphere aligned with its link's
+    axes, so the products of inertia are zero."""
+
+    mass: float
+    ixx: float
+    iyy: float
+    izz: float
+    xyz: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+def _box(mass: float, x: float, y: float, z: float) -> Inertial:
+    """Solid box of edges x, y, z: I_xx = m (y² + z²) / 12, and so on."""
+    return Inertial(mass, mass * (y * y + z * z) / 12, mass * (x * x + z * z) / 12,
+                    mass * (x * x + y * y) / 12)
+
+
+def _cylinder(mass: float, radius: float, length: float, axis: str = "z") -> Inertial:
+    """Solid cylinder: m r² / 2 about its axis, m (3 r² + h²) / 12 across it."""
+    along, across = mass * radius * radius / 2, mass * (3 * radius * radius + length * length) / 12
+    ixx, iyy, izz = (along if a == axis else across for a in "xyz")
+    return Inertial(mass, ixx, iyy, izz)
+
+
+def _sphere(mass: float, radius: float) -> Inertial:
+    """Solid sphere: 2 m r² / 5 about every axis."""
+    i = 2 * mass * radius * radius / 5
+    return Inertial(mass, i, i, i)
+
+
+#: Eddie's decks: 17.8 in (r 0.2245 m) discs of 3/8 in (9.5 mm) plastic; at HDPE's
+#: 950 kg/m³ that is π·0.2245²·0.0095·950 ≈ 1.43 kg each
+_DECK_KG = 1.43
+
+
+def link_inertials(wheel_radius: float = WHEEL_RADIUS_M) -> dict[str, Inertial]:
+    """Estimated mass and inertia of every body link (``FRAME_LINKS`` have none).
+
+    Masses are estimates from the parts (PLAT, WK36, the sensors' datasheets), chosen so
+    the robot with its Kinect adds up to ≈ 11.4 kg against PLAT's 11.5 kg."""
+    out = {
+        # lower deck plus the control board, wiring, fuse and switch (≈ 0.3 kg, spread
+        # over the deck): a thin cylinder of the deck's size
+        "base_link": _cylinder(_DECK_KG + 0.3, BASE_RADIUS_M, 0.0095),
+        # two 12 V 7 Ah sealed lead-acid batteries (≈ 2.1 kg each) and their tray: a
+        # solid box of the battery box's size
+        "battery_box": _box(4.5, 0.1778, 0.3366, 0.0762),
+        # #27971 motor, gearbox, mount and Position Controller (≈ 0.85 kg): a cylinder
+        # along the axle, 3 cm radius, 10 cm long
+        "left_axle_link": _cylinder(0.85, 0.03, 0.10, axis="y"),
+        "right_axle_link": _cylinder(0.85, 0.03, 0.10, axis="y"),
+        # 6 in pneumatic wheel with hub (≈ 0.45 kg): a solid cylinder along the axle (a
+        # tyre's rim-heavy mass puts the true I_yy between m r²/2 and m r²)
+        "left_wheel_link": _cylinder(0.45, wheel_radius, 0.0254, axis="y"),
+        "right_wheel_link": _cylinder(0.45, wheel_radius, 0.0254, axis="y"),
+        # caster wheel and swivel (≈ 0.1 kg) within the 5 cm collision sphere
+        "front_caster": _sphere(0.10, 0.05),
+        "rear_caster": _sphere(0.10, 0.05),
+        # upper deck, bare: the same disc
+        "plate_0_link": _cylinder(_DECK_KG, BASE_RADIUS_M, 0.0095),
+        # Kinect mounting bracket (≈ 0.1 kg): a 6 × 20 × 1 cm plate
+        "camera_mount_link": _box(0.10, 0.06, 0.20, 0.01),
+        # Kinect v1 without its tilt base (≈ 0.5 kg): a box of its 7 × 28 × 7 cm visual
+        "camera_link": _box(0.50, 0.07, 0.28, 0.07),
+    }
+    for i in range(4):
+        # 5 in (0.127 m) aluminium hex standoff, 3/8 in across flats: ≈ 0.03 kg, as a
+        # cylinder of 5 mm radius
+        out[f"standoff_5in_{i}_link"] = _cylinder(0.03, 0.005, 0.127)
+    for i in range(2):
+        # the 30 cm standoffs that carry the Kinect: ≈ 0.06 kg each
+        out[f"standoff_30cm_{i}_link"] = _cylinder(0.06, 0.005, 0.30)
+    for s in (*IR_SENSORS, *PING_SENSORS):
+        if s.kind == SensorKind.IR:
+            # GP2Y0A21 (3.5 g, 13.5 × 44.5 × 19 mm) with bracket and cable: 10 g
+            out[f"{s.name}_link"] = _box(0.01, 0.0135, 0.0445, 0.019)
+        else:
+            # PING))) (9 g, 16 × 46 × 21 mm with its transducers) with bracket: 20 g
+            out[f"{s.name}_link"] = _box(0.02, 0.016, 0.046, 0.021)
+    return out
+
+
+def _inertial_xml(i: Inertial) -> str:
+    return (f'<inertial><origin xyz="{_f(i.xyz)}" rpy="0 0 0"/><mass value="{i.mass:.6g}"/>'
+            f'<inertia ixx="{i.ixx:.6g}" ixy="0" ixz="0" iyy="{i.iyy:.6g}" iyz="0" '
+            f'izz="{i.izz:.6g}"/></inertial>')
+
+
 def _f(values: tuple[float, ...]) -> str:
     return " ".join(f"{v:.6g}" for v in values)
 
 
 def eddie_urdf(track: float = TRACK_M, wheel_radius: float = WHEEL_RADIUS_M) -> str:
-    """The URDF text of Eddie with a Kinect v1 (links, joints, simple visuals)."""
+    """The URDF text of Eddie with a Kinect v1 (links, joints, simple visuals, inertials)."""
     joints = fixed_joints(track, wheel_radius)
     links = ["base_footprint"] + [j.child for j in joints]
+    inertials = link_inertials(wheel_radius)
     lines = ['<?xml version="1.0"?>', '<robot name="eddiebot">']
     wheel_geom = f'<cylinder radius="{wheel_radius:.6g}" length="0.0254"/>'
     for name in links:
         geom = _VISUALS.get(name, "")
+        inertial = _inertial_xml(inertials[name]) if name in inertials else ""
         if name.endswith("_wheel_link"):
             lines.append(
                 f'  <link name={quoteattr(name)}><visual><origin rpy="{math.pi / 2:.6g} 0 0"/>'
                 f"<geometry>{wheel_geom}</geometry></visual>"
                 f"<collision><origin rpy=\"{math.pi / 2:.6g} 0 0\"/><geometry>{wheel_geom}</geometry>"
-                "</collision></link>"
+                f"</collision>{inertial}</link>"
             )
         elif geom:
             lines.append(f"  <link name={quoteattr(name)}><visual><geometry>{geom}</geometry></visual>"
-                         f"<collision><geometry>{geom}</geometry></collision></link>")
+                         f"<collision><geometry>{geom}</geometry></collision>{inertial}</link>")
+        elif inertial:
+            lines.append(f"  <link name={quoteattr(name)}>{inertial}</link>")
         else:
             lines.append(f"  <link name={quoteattr(name)}/>")
     for j in joints:
