@@ -55,8 +55,23 @@ def test_case_separators_backspace_and_ignored_characters(emu: FirmwareEmulator)
     assert ask(emu, "gospd\t a  \tb") == ""
     assert ask(emu, "VEX\x08R") == "0070"
     assert ask(emu, "\x08\x08VER") == "0070"
-    assert ask(emu, "V\x01E\nR\x7f\xff\x1b") == "0070"
-    assert emu.feed(b"\n\x0b\x0c") == b""
+    e13 = FirmwareEmulator(FIRMWARE_1_3)
+    assert ask(e13, "V\x01E\nR\x7f\xff\x1b") == "000D"  # FW 1.3 drops control bytes
+    assert e13.feed(b"\n\x0b\x0c") == b""
+    assert ask(e13, "GOSPD 10\n 10\n") == ""
+
+
+def test_firmware_1_1_keeps_control_bytes_in_the_line(emu: FirmwareEmulator) -> None:
+    # The FW 1.1 source stores every byte before its (empty) case for control characters.
+    assert ask(emu, "V\x01E\nR\x7f\xff\x1b") == "ERROR - Invalid command"
+    assert ask(emu, "VER\n") == "ERROR - Invalid command"  # a stray LF (CR LF line ends)
+    assert ask(emu, "\nVER") == "ERROR - Invalid command"  # the LF left over from "...\r\n"
+    assert ask(emu, "GOSPD 10 10\n") == "ERROR - Invalid parameter"  # not a blank: in "10\n"
+    assert ask(emu, "DIST \n") == "ERROR - Too many parameters"
+    assert ask(emu, "VER\n\x08") == "0070"  # BS deletes the kept byte
+    assert emu.feed(b"\n\x0b\x0c") == b""  # no CR yet: no reply, but they stay ...
+    assert ask(emu, "VER") == "ERROR - Invalid command"  # ... and spoil the next line
+    assert FirmwareEmulator().feed(b"VER\r\n") == b"0070\r"  # LF alone waits for a CR
 
 
 def test_eight_hex_digits_accepted_nine_refused(emu: FirmwareEmulator) -> None:
@@ -180,6 +195,27 @@ def test_acc_is_range_checked_per_profile() -> None:
     assert e13.feed(b"TRVL 10 80\r") == b"\r"
 
 
+def test_acc_0_on_firmware_1_1_freezes_gospd() -> None:
+    e = FirmwareEmulator(FIRMWARE_1_1)
+    e.feed(b"GOSPD 20 20\r")
+    e.step(2.0)
+    assert e.plant.wheel_velocities == pytest.approx((32.0, 32.0))
+    assert e.feed(b"ACC 0\r") == b"\r"  # accepted ...
+    e.feed(b"GOSPD 0 0\r")
+    e.step(3.0)
+    assert e.plant.wheel_velocities == pytest.approx((32.0, 32.0))  # ... but cannot slow down
+    before = protocol.decode_dist(e.feed(b"DIST\r")[:-1].decode())
+    e.feed(b"TRVL 10 10\r")  # 16 positions: the reference never starts moving ...
+    e.step(2.0)
+    after = protocol.decode_dist(e.feed(b"DIST\r")[:-1].decode())
+    assert after[0] - before[0] <= 1  # ... so the wheels halt where they are
+    assert e.plant.wheel_velocities == pytest.approx((0.0, 0.0))
+    e.feed(b"ACC C8\r")  # a new rate unfreezes the ramp
+    e.feed(b"TRVL 10 10\r")
+    e.step(3.0)
+    assert protocol.decode_dist(e.feed(b"DIST\r")[:-1].decode())[0] == after[0] + 16
+
+
 def test_go_power_and_stop_zero_ramp(emu: FirmwareEmulator) -> None:
     ask(emu, "GO 7F 7F")
     emu.step(1.0)
@@ -241,8 +277,14 @@ def test_gpio_commands(emu: FirmwareEmulator) -> None:
     assert ask(emu, "LOW 1000") == ""
     assert ask(emu, "LOWS") == "00003000"
     assert ask(emu, "BLNK 5 A") == ""
-    assert ask(emu, "BLINK 5 0") == ""
-    assert ask(FirmwareEmulator(FIRMWARE_1_3), "BLNK 5 A") == "ERROR"
+    assert ask(emu, "BLNK 5 0") == ""
+
+
+def test_each_firmware_knows_one_blink_spelling(emu: FirmwareEmulator) -> None:
+    assert ask(emu, "BLINK 5 A") == "ERROR - Invalid command"  # FW 1.1 source: only BLNK
+    e13 = FirmwareEmulator(FIRMWARE_1_3)
+    assert ask(e13, "BLINK 5 A") == ""  # CS12 (FW 1.3) spells it BLINK
+    assert ask(e13, "BLNK 5 A") == "ERROR"
 
 
 def test_encoder_error() -> None:
@@ -280,6 +322,55 @@ def test_watchdog_on_firmware_1_3_stops_motors_after_1s_of_silence() -> None:
     e.feed(b"GOSPD 20 20\r")
     e.step(10.0)
     assert e.plant.wheel_velocities == pytest.approx((32.0, 32.0))
+
+
+# --- reset ------------------------------------------------------------------------------------
+
+
+def test_reboot_zeroes_counters_stops_motors_and_restores_power_on_state() -> None:
+    e = FirmwareEmulator(FIRMWARE_1_1)
+    for line in (b"VERB 1\r", b"SPNG 6\r", b"ACC 64\r", b"GOSPD 20 20\r"):
+        assert e.feed(line) == b"\r"
+    e.step(2.0)
+    assert protocol.decode_dist(e.feed(b"DIST\r")[:-1].decode())[0] > 40
+    e.feed(b"VE")  # half a line in the buffer when the reset comes
+    e.reboot(round(2.5e9), boot_s=1.5)
+    assert e.time_ns == round(2.5e9)
+    pose = e.plant.true_pose
+    assert pose[0] > 0.9  # driven 2.5 s at 32 positions/s before the reset
+    assert e.booting and e.boot_done_ns == round(4.0e9)
+    assert e.plant.wheel_velocities == (0.0, 0.0)  # the PWM stops with the Propeller
+    assert e.feed(b"VER\r") == b""  # lost: the firmware is not running yet
+    e.step(1.49)
+    assert e.booting and e.feed(b"VER\r") == b""
+    e.step(0.02)
+    assert not e.booting
+    assert e.feed(b"R\r") == b"ERROR\r"  # "VE" is gone, and VERB is back to 0
+    assert e.feed(b"DIST\r") == b"00000000 00000000\r"
+    assert e.feed(b"HEAD\r") == b"000\r"
+    assert e.feed(b"PING\r").count(b" ") == 4  # power-on mask: pins 0-3
+    assert e.ping_mask == FIRMWARE_1_1.power_on_ping_mask
+    assert e.plant.acceleration == 200 and e.control_mode.name == "POWER"
+    assert e.plant.true_pose == pose  # the robot itself stays where it stopped
+    e.step(3.0)
+    assert e.feed(b"DIST\r") == b"00000000 00000000\r"
+
+
+def test_reboot_rearms_the_firmware_1_3_watchdog_and_clears_a_latched_stop() -> None:
+    e = FirmwareEmulator(FIRMWARE_1_3)
+    assert e.feed(b"WATCH 0\r") == b"\r"
+    e.encoder_running = False
+    e.feed(b"STOP 0\r")
+    assert e.motors_latched_off and not e.watch_enabled
+    e.encoder_running = True
+    e.reboot(0, boot_s=0.0)
+    assert not e.booting
+    assert e.watch_enabled and not e.motors_latched_off
+    e.feed(b"GOSPD 20 20\r")
+    e.step(0.9)
+    assert e.plant.wheel_velocities[0] > 0
+    e.step(0.2)  # 1 s without serial data after the last command
+    assert e.watchdog_tripped and e.plant.wheel_velocities == (0.0, 0.0)
 
 
 def test_same_inputs_on_sim_clock_give_identical_outputs() -> None:

@@ -66,9 +66,20 @@ def test_range_errors(call: object, parameter: str) -> None:
 def test_profile_ranges_differ() -> None:
     assert protocol.encode_trvl(1, 0xFF, FIRMWARE_1_3) == "TRVL 1 FF"
     assert protocol.encode_acc(0x7FF, FIRMWARE_1_3) == "ACC 7FF"
-    assert protocol.encode_acc(0, FIRMWARE_1_1) == "ACC 0"
+    assert protocol.encode_acc(1, FIRMWARE_1_1) == "ACC 1"
+    assert protocol.encode_acc(0x1FF, FIRMWARE_1_1) == "ACC 1FF"
     with pytest.raises(errors.UnsupportedCommandError):
         protocol.encode_watch(1, FIRMWARE_1_1)
+
+
+def test_acc_0_refused_on_firmware_1_1_where_it_freezes_gospd() -> None:
+    # FW 1.1 accepts ACC 0 (0..511), but then the speed ramp never moves again.
+    with pytest.raises(errors.ParameterRangeError) as info:
+        protocol.encode_acc(0, FIRMWARE_1_1)
+    err = info.value
+    assert (err.command, err.parameter, err.value, err.low, err.high) == ("ACC", "rate", 0, 1,
+                                                                           0x1FF)
+    assert "ACC 0 freezes GOSPD on FW 1.1" in str(err)
 
 
 def test_decoders() -> None:

@@ -18,11 +18,14 @@ from eddiebot.robot.board import Board, BoardEvent
 from eddiebot.robot.constants import FIRMWARE_1_3
 from eddiebot.robot.emulator import FirmwareEmulator, PtyServer
 from eddiebot.robot.links import SerialLink
+from eddiebot.robot.timing import NO_TIMING
 
 
 @pytest.fixture
 def pty_server() -> Iterator[PtyServer]:
-    server = PtyServer(FirmwareEmulator(), poll_s=0.005)
+    # Instant boot and no link delays: these tests are about the driver and the CLI; the
+    # link model and the reboot on open are tested in test_robot_timing.py.
+    server = PtyServer(FirmwareEmulator(), poll_s=0.005, timing=NO_TIMING)
     thread = threading.Thread(target=server.serve_forever, daemon=True)
     thread.start()
     yield server
@@ -182,9 +185,17 @@ def test_emulator_command_prints_path_first_and_stops_on_sigterm() -> None:
         path = proc.stdout.readline().strip()
         assert path.startswith("/dev/")
         link = SerialLink(path)
-        core_board = Board(link, timeout_s=2.0)
+        core_board = Board(link, timeout_s=0.5, resync_quiet_s=0.05)
         try:
-            assert core_board.start().name == "1.3"
+            # Opening the port reboots the board (DTR): it ignores input for 1.5 s.
+            for _ in range(10):
+                try:
+                    assert core_board.start().name == "1.3"
+                    break
+                except errors.BoardTimeout:
+                    continue
+            else:
+                pytest.fail("the emulated board never answered after its boot")
         finally:
             core_board.close()
         proc.send_signal(signal.SIGTERM)

@@ -306,6 +306,15 @@ class FirmwareProfile:
     default_acceleration: int = 200
     """``MaxPosAccel`` at power-on (FW ``MaxPosAccel long 200``)."""
     watchdog_timeout_s: float = 1.0
+    ignores_control_bytes: bool = True
+    """Whether control characters (0x01-0x07, 0x0A-0x0C, 0x0E-0x1F) and bytes ≥ 0x7F are
+    dropped, as the command-set documents say.  The FW 1.1 source's ``case`` for them is
+    empty *after* the byte was stored, so there they stay in the line: a stray LF makes the
+    command (or its last parameter) invalid."""
+    acc_zero_freezes: bool = False
+    """Whether ``ACC 0`` is accepted but freezes the speed ramp: with ``MaxPosAccel`` 0 the
+    FW 1.1 loop clamps every step of ``MidVelocity`` to 0, so after it ``GOSPD`` never
+    changes the wheels' speed and ``TRVL``/``TURN`` do not move, until another ``ACC``."""
 
 
 FIRMWARE_1_1 = FirmwareProfile(
@@ -317,9 +326,11 @@ FIRMWARE_1_1 = FirmwareProfile(
     acc_max=0x1FF,
     has_watch=False,
     watch_default_on=False,
-    blink_names=("BLNK", "BLINK"),
+    blink_names=("BLNK",),
     power_on_ping_mask=0xF,
     no_load_rev_per_s=2.5,
+    ignores_control_bytes=False,
+    acc_zero_freezes=True,
 )
 """Firmware 1.1 for Position Controllers (the FW source; ranges as the source enforces them)."""
 

@@ -86,7 +86,7 @@ COMMANDS: tuple[str, ...] = (
     "LOWS", "HIGHS", "READ", "SPNG", "SGP", "PING", "ADC", "GO", "GOSPD", "STOP", "TRVL",
     "TURN", "ACC", "SPD", "HEAD", "DIST", "RST",
 )
-"""Every command of the command set (CS11, CS12).  FW 1.1 spells BLINK as ``BLNK``."""
+"""Every command of the command set (CS11, CS12).  FW 1.1 knows BLINK only as ``BLNK``."""
 
 _INT16 = (-0x8000, 0x7FFF)
 _UINT16 = (0, 0xFFFF)
@@ -264,8 +264,17 @@ def encode_turn(angle_deg: int, speed: int, profile: FirmwareProfile = FIRMWARE_
 
 
 def encode_acc(rate: int, profile: FirmwareProfile = FIRMWARE_1_1) -> str:
-    """``ACC rate``: speed-change limit in positions/s² for GOSPD/TRVL/TURN."""
+    """``ACC rate``: speed-change limit in positions/s² for GOSPD/TRVL/TURN.
+
+    ``ACC 0`` is refused where the firmware accepts it but then freezes the speed ramp
+    (FW 1.1: ``GOSPD`` no longer changes speed, ``TRVL``/``TURN`` do not move).
+    """
     _check("ACC", "rate", rate, profile.acc_min, profile.acc_max, profile)
+    if rate == 0 and profile.acc_zero_freezes:
+        error = ParameterRangeError("ACC", "rate", rate, 1, profile.acc_max, profile.name)
+        error.args = (f"{error.args[0]}; ACC 0 freezes GOSPD on FW {profile.name} "
+                      "(the speed ramp never moves)",)
+        raise error
     return f"ACC {format_hex(rate, 16)}"
 
 
