@@ -43,3 +43,43 @@ def test_perfect_robot_and_bad_input():
     assert r.eb == pytest.approx(1.0, abs=1e-6) and r.ed == pytest.approx(1.0, abs=1e-6)
     with pytest.raises(ValueError, match="at least one"):
         umbmark([], ccw, side, 0.39)
+
+
+def test_calibrate_refines_the_existing_file_for_odometry_and_driver(tmp_path):
+    import argparse
+
+    import yaml
+
+    from eddiebot.cli import calibrate
+
+    errors = tmp_path / "errors.yaml"
+    errors.write_text("cw: [[0.05, -0.08]]\nccw: [[0.04, 0.06]]\n")
+    out = tmp_path / "calibration.yaml"
+    out.write_text(yaml.safe_dump({"eddie_odom": {"ros__parameters": {
+        "wheel_separation_multiplier": 1.02, "left_wheel_radius_multiplier": 0.99,
+        "right_wheel_radius_multiplier": 1.01}}}))
+    args = argparse.Namespace(errors=errors, side=2.0, output=out, port="/dev/null")
+    assert calibrate.run(args) == 0
+    first = yaml.safe_load(out.read_text())
+    fresh = tmp_path / "fresh.yaml"
+    args.output = fresh
+    assert calibrate.run(args) == 0
+    alone = yaml.safe_load(fresh.read_text())["eddie_odom"]["ros__parameters"]
+    refined = first["eddie_odom"]["ros__parameters"]
+    assert first["eddie"] == first["eddie_odom"]  # the driver gets the same factors
+    assert refined["wheel_separation_multiplier"] == pytest.approx(
+        1.02 * alone["wheel_separation_multiplier"], rel=1e-5)
+    assert refined["left_wheel_radius_multiplier"] == pytest.approx(
+        0.99 * alone["left_wheel_radius_multiplier"], rel=1e-5)
+
+
+def test_calibrate_names_a_missing_port_before_asking_anything(tmp_path, capsys):
+    import argparse
+
+    from eddiebot.cli import calibrate
+
+    args = argparse.Namespace(errors=None, side=2.0, output=tmp_path / "c.yaml",
+                              port=str(tmp_path / "ttyUSB9"), runs=1, speed=0.2)
+    assert calibrate.run(args) == 2
+    err = capsys.readouterr().err
+    assert "ttyUSB9" in err and "Traceback" not in err

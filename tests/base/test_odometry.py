@@ -110,21 +110,25 @@ def test_kinematics_saturates_keeping_curvature():
 def test_veto_sees_the_path_not_the_door_jambs():
     import math as _m
 
-    from eddiebot.base.safety import SafetyConfig, VetoState, forward_veto
+    from eddiebot.base.safety import SafetyConfig, VetoState, limit_twist
     from eddiebot.robot.constants import IR_SENSORS, PING_SENSORS
 
     mounts = {s.name: (s.x_m, s.y_m, s.yaw_rad) for s in (*IR_SENSORS, *PING_SENSORS)}
-    cfg = SafetyConfig(veto_distance=0.25)
+    cfg = SafetyConfig(veto_distance=0.25, slowdown_distance=0.0)
+
+    def forward(state: VetoState, linear: float) -> float:
+        return limit_twist(linear, 0.0, state, cfg, 0)[0]
+
     jambs = VetoState(mounts=mounts)
-    jambs.update({"ir_left": 0.2, "ir_right": 0.2, "ir_center": _m.inf})  # a door frame beside
-    assert forward_veto(0.3, jambs, cfg) == 0.3
+    jambs.update({"ir_left": 0.2, "ir_right": 0.2, "ir_center": _m.inf}, 0)  # a door frame beside
+    assert forward(jambs, 0.3) == 0.3
     wall = VetoState(mounts=mounts)
-    wall.update({"ir_center": 0.2})  # a wall 0.2 m ahead of the front sensor
-    assert forward_veto(0.3, wall, cfg) == 0.0
-    assert forward_veto(-0.2, wall, cfg) == -0.2  # backing away is allowed
+    wall.update({"ir_center": 0.2}, 0)  # a wall 0.2 m ahead of the front sensor
+    assert forward(wall, 0.3) == 0.0
+    assert forward(wall, -0.05) == -0.05  # backing away is allowed
     too_close = VetoState(mounts=mounts)
-    too_close.update({"ping_left": -_m.inf})  # REP-117: closer than measurable
-    assert forward_veto(0.3, too_close, cfg) == 0.0
+    too_close.update({"ping_left": -_m.inf}, 0)  # REP-117: closer than measurable
+    assert forward(too_close, 0.3) == 0.0
     far = VetoState(mounts=mounts)
-    far.update({"ping_left": 1.0, "ping_right": _m.nan})
-    assert forward_veto(0.3, far, cfg) == 0.3
+    far.update({"ping_left": 1.0, "ping_right": _m.nan}, 0)
+    assert forward(far, 0.3) == 0.3

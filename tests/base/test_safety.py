@@ -15,7 +15,6 @@ from eddiebot.base.safety import (
     SafetyNode,
     VetoState,
     forward_factor,
-    forward_veto,
     limit_twist,
 )
 from eddiebot.core import Context, Node, SingleThreadedExecutor
@@ -241,19 +240,6 @@ def test_non_finite_commands_stop():
     state = _wall(math.inf)
     assert limit_twist(math.nan, 0.0, state, cfg, NOW) == (0.0, 0.0)
     assert limit_twist(0.0, math.inf, state, cfg, NOW) == (0.0, 0.0)
-
-
-def test_old_untimed_callers_keep_working():
-    cfg = SafetyConfig()
-    state = VetoState(mounts={s.name: (s.x_m, s.y_m, s.yaw_rad) for s in PING_SENSORS})
-    assert not state.vetoed  # as before: no reading is no veto for the old board node
-    assert forward_veto(0.3, state, cfg) == 0.3
-    state.update({"ping_left": 0.15})
-    assert state.vetoed
-    assert forward_veto(0.3, state, cfg) == 0.0
-    assert forward_veto(-0.3, state, cfg) == -0.3  # no reverse cap on the old path
-    state.update({"ping_left": 2.0})
-    assert forward_veto(0.3, state, cfg) == 0.3
 
 
 # -- emergency_status ---------------------------------------------------------------------------

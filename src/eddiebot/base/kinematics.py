@@ -20,15 +20,19 @@ def twist_to_wheel_positions(
     max_positions_per_s: float,
     track: float = TRACK_M,
     metres_per_position: float = METRES_PER_POSITION,
+    radius_multipliers: tuple[float, float] = (1.0, 1.0),
 ) -> tuple[int, int]:
     """(v, ω) → (left, right) positions/s, rounded; scaled down together to the limit.
 
-    Non-finite inputs give (0, 0): a NaN must never reach the motors.
+    ``radius_multipliers`` (left, right) are the calibrated wheel radii over the nominal one
+    (``eddie calibrate``'s ``*_wheel_radius_multiplier``): a larger wheel needs fewer
+    positions for the same speed. Non-finite inputs give (0, 0): a NaN must never reach the
+    motors.
     """
     if not (math.isfinite(linear) and math.isfinite(angular)):
         return 0, 0
-    left = (linear - angular * track / 2.0) / metres_per_position
-    right = (linear + angular * track / 2.0) / metres_per_position
+    left = (linear - angular * track / 2.0) / (metres_per_position * radius_multipliers[0])
+    right = (linear + angular * track / 2.0) / (metres_per_position * radius_multipliers[1])
     biggest = max(abs(left), abs(right))
     if biggest > max_positions_per_s > 0:
         scale = max_positions_per_s / biggest

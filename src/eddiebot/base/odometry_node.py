@@ -1,6 +1,6 @@
 """Odometry node: ``/joint_states`` wheel angles → ``/odom`` and TF ``odom → base_footprint``.
 
-The board node stamps ``/joint_states`` with the time the DIST reply arrived (Encoders has
+The board node stamps ``/joint_states`` with the time the board sampled its counters (Encoders has
 no header), so the pose is integrated on the sample times, not on callback times.
 Parameters carry diff_drive_controller's names.
 """
@@ -13,6 +13,7 @@ import numpy as np
 
 from eddiebot.base.odometry import DiffDriveOdometry, OdometryConfig, OdometryState
 from eddiebot.core.node import Node
+from eddiebot.core.parameters import ParameterDescriptor
 from eddiebot.core.time import ns_to_stamp, stamp_to_ns
 from eddiebot.geometry import yaw_to_quaternion
 from eddiebot.msgs.geometry_msgs import TransformStamped
@@ -21,6 +22,9 @@ from eddiebot.msgs.sensor_msgs import JointState
 from eddiebot.msgs.tf2_msgs import TFMessage
 
 __all__ = ["OdometryNode", "odometry_to_msg"]
+
+#: read once at start; `param set` is refused rather than silently ignored
+_RO = ParameterDescriptor(read_only=True)
 
 #: variance reported for the unobserved dimensions (z, roll, pitch), as REP-105 users expect
 _UNOBSERVED = 1e6
@@ -58,20 +62,20 @@ class OdometryNode(Node):
     def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         cfg = OdometryConfig()
-        self.left_names = self.declare_parameter("left_wheel_names", ["left_wheel_joint"]).value
-        self.right_names = self.declare_parameter("right_wheel_names", ["right_wheel_joint"]).value
-        self.odom_frame = self.declare_parameter("odom_frame_id", "odom").value
-        self.base_frame = self.declare_parameter("base_frame_id", "base_footprint").value
-        self.enable_tf = self.declare_parameter("enable_odom_tf", True).value
+        self.left_names = self.declare_parameter("left_wheel_names", ["left_wheel_joint"], _RO).value
+        self.right_names = self.declare_parameter("right_wheel_names", ["right_wheel_joint"], _RO).value
+        self.odom_frame = self.declare_parameter("odom_frame_id", "odom", _RO).value
+        self.base_frame = self.declare_parameter("base_frame_id", "base_footprint", _RO).value
+        self.enable_tf = self.declare_parameter("enable_odom_tf", True, _RO).value
         config = OdometryConfig(
-            wheel_separation=self.declare_parameter("wheel_separation", cfg.wheel_separation).value,
-            wheel_radius=self.declare_parameter("wheel_radius", cfg.wheel_radius).value,
-            counts_per_rev=self.declare_parameter("counts_per_rev", cfg.counts_per_rev).value,
-            wheel_separation_multiplier=self.declare_parameter("wheel_separation_multiplier", 1.0).value,
-            left_wheel_radius_multiplier=self.declare_parameter("left_wheel_radius_multiplier", 1.0).value,
-            right_wheel_radius_multiplier=self.declare_parameter("right_wheel_radius_multiplier", 1.0).value,
+            wheel_separation=self.declare_parameter("wheel_separation", cfg.wheel_separation, _RO).value,
+            wheel_radius=self.declare_parameter("wheel_radius", cfg.wheel_radius, _RO).value,
+            counts_per_rev=self.declare_parameter("counts_per_rev", cfg.counts_per_rev, _RO).value,
+            wheel_separation_multiplier=self.declare_parameter("wheel_separation_multiplier", 1.0, _RO).value,
+            left_wheel_radius_multiplier=self.declare_parameter("left_wheel_radius_multiplier", 1.0, _RO).value,
+            right_wheel_radius_multiplier=self.declare_parameter("right_wheel_radius_multiplier", 1.0, _RO).value,
             velocity_rolling_window_size=self.declare_parameter(
-                "velocity_rolling_window_size", cfg.velocity_rolling_window_size
+                "velocity_rolling_window_size", cfg.velocity_rolling_window_size, _RO
             ).value,
         )
         self.odometry = DiffDriveOdometry(config)

@@ -12,15 +12,20 @@ from typing import Any
 import numpy as np
 
 from eddiebot.core.node import Node
+from eddiebot.core.parameters import ParameterDescriptor
 from eddiebot.core.qos import DurabilityPolicy, QoSProfile, qos_profile_latched
 from eddiebot.geometry import quaternion_to_matrix, se3_to_tq
 from eddiebot.msgs.geometry_msgs import TransformStamped
 from eddiebot.msgs.sensor_msgs import JointState
 from eddiebot.msgs.std_msgs import String
 from eddiebot.msgs.tf2_msgs import TFMessage
+from eddiebot.robot.constants import TRACK_M, WHEEL_RADIUS_M
 from eddiebot.robot.urdf import eddie_urdf
 
 __all__ = ["RobotStatePublisher", "parse_urdf_joints"]
+
+#: read once at start; `param set` is refused rather than silently ignored
+_RO = ParameterDescriptor(read_only=True)
 
 
 def _axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -61,7 +66,10 @@ class RobotStatePublisher(Node):
 
     def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        text = self.declare_parameter("robot_description", "").value or eddie_urdf()
+        track = float(self.declare_parameter("track", TRACK_M, _RO).value)
+        wheel_radius = float(self.declare_parameter("wheel_radius", WHEEL_RADIUS_M, _RO).value)
+        text = self.declare_parameter("robot_description", "", _RO).value or eddie_urdf(
+            track=track, wheel_radius=wheel_radius)
         self.joints = parse_urdf_joints(text)
         self.moving = {j["name"]: j for j in self.joints if j["type"] in ("continuous", "revolute", "prismatic")}
         self.create_publisher(String, "robot_description", qos_profile_latched).publish(String(data=text))

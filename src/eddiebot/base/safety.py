@@ -45,7 +45,6 @@ __all__ = [
     "VetoState",
     "declare_safety_parameters",
     "forward_factor",
-    "forward_veto",
     "limit_twist",
 ]
 
@@ -227,13 +226,6 @@ class VetoState:
         """Whether forward motion is refused at ``now_ns``."""
         return bool(self.too_close(now_ns))
 
-    @property
-    def vetoed(self) -> bool:
-        """Old callers' test: a sensor too close at the time of the latest update; unlike
-        :meth:`vetoed_at`, no reading at all does not count (as before)."""
-        now = self.last_update_ns or 0
-        return any(name != NO_READING_YET for name in self.too_close(now))
-
 
 def forward_factor(state: VetoState, config: SafetyConfig, now_ns: int) -> float:
     """Share of a forward command the motors may get: 0 within ``veto_distance`` (or when
@@ -274,20 +266,6 @@ def limit_twist(
     if factor == 0.0:
         return 0.0, 0.0
     return linear * factor, angular * factor
-
-
-def forward_veto(
-    linear: float, state: VetoState, config: SafetyConfig, now_ns: int | None = None
-) -> float:
-    """``linear`` with forward motion removed while :meth:`VetoState.too_close` names a
-    sensor — the old behaviour: no slowdown, no reverse cap, and no veto before the first
-    reading. Kept for the current board node; new code calls :func:`limit_twist`.
-    ``now_ns`` defaults to the state's latest update."""
-    if not config.enabled or linear <= 0.0:
-        return linear
-    now = now_ns if now_ns is not None else (state.last_update_ns or 0)
-    blocking = [n for n in state.too_close(now, config.veto_distance) if n != NO_READING_YET]
-    return 0.0 if blocking else linear
 
 
 @dataclass

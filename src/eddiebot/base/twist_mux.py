@@ -21,10 +21,14 @@ from dataclasses import dataclass
 from typing import Any
 
 from eddiebot.core.node import Node
+from eddiebot.core.parameters import ParameterDescriptor
 from eddiebot.msgs.geometry_msgs import Twist
 from eddiebot.msgs.std_msgs import Bool
 
 __all__ = ["MuxInput", "TwistMux", "TwistMuxNode"]
+
+#: read once at start; `param set` is refused rather than silently ignored
+_RO = ParameterDescriptor(read_only=True)
 
 DEFAULT_TOPICS = {
     "navigation": ("cmd_vel_safe", 0.5, 10),
@@ -85,7 +89,7 @@ class TwistMuxNode(Node):
             self.create_subscription(Twist, src.topic, self._make_cb(src), 10)
         for lock in locks:
             self.create_subscription(Bool, lock.topic, self._make_lock_cb(lock), 10)
-        period = float(self.declare_parameter("check_period", 0.05).value)
+        period = float(self.declare_parameter("check_period", 0.05, _RO).value)
         self.create_timer(period, self._check)
 
     def _inputs(self, group: str, defaults: dict[str, tuple[str, float, int]]) -> list[MuxInput]:
@@ -94,9 +98,9 @@ class TwistMuxNode(Node):
         table = {n: defaults.get(n, ("", 0.5, 0)) for n in names} if names else defaults
         out = []
         for name, (topic, timeout, priority) in table.items():
-            t = self.declare_parameter(f"{group}.{name}.topic", topic).value
-            to = float(self.declare_parameter(f"{group}.{name}.timeout", float(timeout)).value)
-            pr = int(self.declare_parameter(f"{group}.{name}.priority", int(priority)).value)
+            t = self.declare_parameter(f"{group}.{name}.topic", topic, _RO).value
+            to = float(self.declare_parameter(f"{group}.{name}.timeout", float(timeout), _RO).value)
+            pr = int(self.declare_parameter(f"{group}.{name}.priority", int(priority), _RO).value)
             if not t:
                 raise ValueError(f"{self.fully_qualified_name}: {group}.{name}.topic is required")
             out.append(MuxInput(name, t, round(to * 1e9), pr))

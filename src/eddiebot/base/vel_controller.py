@@ -11,6 +11,7 @@ import math
 from typing import Any
 
 from eddiebot.core.node import Node
+from eddiebot.core.parameters import Parameter, SetParametersResult
 from eddiebot.msgs.eddiebot_msgs import Velocity
 from eddiebot.msgs.geometry_msgs import Twist
 
@@ -36,6 +37,15 @@ class VelocityControllerNode(Node):
         self.max_angular = float(self.declare_parameter("max_angular_velocity", 2.0).value)
         self.pub = self.create_publisher(Velocity, "/eddie/simple_velocity", 5)
         self.create_subscription(Twist, "cmd_vel", self._on_twist, 5)
+        self.add_on_set_parameters_callback(self._on_set_limits)
+
+    def _on_set_limits(self, params: list[Parameter]) -> SetParametersResult:
+        for prm in params:
+            if prm.name == "max_linear_velocity":
+                self.max_linear = float(prm.value)
+            elif prm.name == "max_angular_velocity":
+                self.max_angular = float(prm.value)
+        return SetParametersResult(True)
 
     def _on_twist(self, msg: Any) -> None:
         v, w = clamp_twist(msg.linear.x, msg.angular.z, self.max_linear, self.max_angular)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 
 from eddiebot.robot.board import ProtocolCore
 from eddiebot.robot.errors import BoardTimeout, LinkLost
@@ -26,6 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(default /dev/ttyUSB0)")
     parser.add_argument("--timeout", type=float, default=0.5,
                         help="reply timeout in seconds (default 0.5)")
+    parser.add_argument("--boot-wait", type=float, default=3.0,
+                        help="opening the port reboots the board (DTR): wait up to this long "
+                             "for it to answer before sending (default 3 s)")
     parser.add_argument("-v", "--verbose-errors", action="store_true",
                         help="send VERB 1 first so ERROR replies carry a reason")
 
@@ -41,6 +45,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     core = ProtocolCore(link, timeout_s=args.timeout)
     try:
+        _wait_for_boot(core, args.boot_wait)
         if args.verbose_errors:
             core.raw("VERB 1")
         reply = core.raw(line)
@@ -51,6 +56,19 @@ def run(args: argparse.Namespace) -> int:
         link.close()
     print(reply)
     return 1 if reply.startswith("ERROR") else 0
+
+
+def _wait_for_boot(core: ProtocolCore, wait_s: float) -> None:
+    """Ask ``VER`` until the board answers: the Propeller is deaf for ~1.5 s after the DTR
+    reset that opening the port causes."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        try:
+            core.raw("VER", timeout_s=0.2)
+            return
+        except BoardTimeout:
+            if time.monotonic() >= deadline:
+                raise
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -14,6 +14,7 @@ from types import FrameType
 
 from eddiebot.robot.constants import FIRMWARE_PROFILES
 from eddiebot.robot.emulator import FirmwareEmulator, FixedSensors, PtyServer
+from eddiebot.robot.timing import NO_TIMING
 
 __all__ = ["add_arguments", "main", "run"]
 
@@ -22,6 +23,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Options of ``eddie emulator``."""
     parser.add_argument("--firmware", choices=sorted(FIRMWARE_PROFILES), default="1.1",
                         help="firmware to emulate (default 1.1: Position Controllers)")
+    parser.add_argument("--no-timing", action="store_true",
+                        help="answer at once and do not reboot on open (the real board takes "
+                             "115,200 baud, the FTDI latency and PING's 25 ms, and reboots "
+                             "when the port is opened)")
     parser.add_argument("--counts-per-rev", type=int, default=36,
                         help="encoder positions per wheel revolution (default 36)")
     parser.add_argument("--battery", type=float, default=12.6,
@@ -37,7 +42,8 @@ def run(args: argparse.Namespace) -> int:
                            battery_v=args.battery)
     emulator = FirmwareEmulator(FIRMWARE_PROFILES[args.firmware],
                                 counts_per_rev=args.counts_per_rev, sensors=sensors)
-    server = PtyServer(emulator)
+    server = (PtyServer(emulator, timing=NO_TIMING, reboot_on_open=False) if args.no_timing
+              else PtyServer(emulator))
 
     def _stop(signum: int, frame: FrameType | None) -> None:
         server.stop()

@@ -32,6 +32,7 @@ from eddiebot.core.lifecycle import LifecycleNode, TransitionCallbackReturn
 from eddiebot.core.node import (
     CallbackGroup,
     Client,
+    GuardCondition,
     MutuallyExclusiveCallbackGroup,
     Node,
     Publisher,
@@ -79,6 +80,7 @@ __all__ = [
     "Executor",
     "Future",
     "GoalResponse",
+    "GuardCondition",
     "HistoryPolicy",
     "InvalidParameterTypeError",
     "InvalidParameterValueError",

@@ -74,6 +74,30 @@ class Context:
         self.resources: dict[str, Any] = {}
         #: Called with (node, level, text) for every log line (``/rosout``; see clock_node).
         self.rosout_hook: Callable[[Any, int, str], None] | None = None
+        self._safety_stops: list[Callable[[str, bool], None]] = []
+
+    # -- safety -------------------------------------------------------------------------
+    def add_safety_stop(self, stop: Callable[[str, bool], None]) -> None:
+        """Register ``stop(reason, from_signal)``: something that can stop motors.
+
+        :meth:`safety_stop` calls it when a callback of any node raises, and the launcher
+        calls it on every terminating signal before anything unwinds. With ``from_signal``
+        it runs inside a signal handler: it must only do thread-safe work."""
+        with self._lock:
+            self._safety_stops.append(stop)
+
+    def remove_safety_stop(self, stop: Callable[[str, bool], None]) -> None:
+        with self._lock:
+            if stop in self._safety_stops:
+                self._safety_stops.remove(stop)
+
+    def safety_stop(self, reason: str, *, from_signal: bool = False) -> None:
+        """Ask every registered safety stop to stop its motors now (never raises)."""
+        for stop in list(self._safety_stops):
+            try:
+                stop(reason, from_signal)
+            except Exception:  # a stop hook must never take the caller down
+                pass
 
     # -- life ---------------------------------------------------------------------------
     def ok(self) -> bool:

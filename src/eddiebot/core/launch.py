@@ -28,6 +28,7 @@ from __future__ import annotations
 import importlib
 import os
 import re
+import signal
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from importlib import resources
@@ -314,6 +315,12 @@ def build_nodes(
     return nodes
 
 
+TERMINATING_SIGNALS = tuple(
+    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP", "SIGQUIT")
+    if hasattr(signal, name))
+"""The signals after which the launcher stops the motors and shuts down."""
+
+
 def parse_cli_args(items: list[str]) -> dict[str, str]:
     """``name:=value`` pairs from a command line."""
     out = {}
@@ -350,7 +357,6 @@ def spin_nodes(
     On sim time, the process that runs the simulator owns the clock (drives it and publishes
     ``/clock``); any other follows ``/clock`` from the transport.
     """
-    import signal
     import threading
 
     from eddiebot.core.clock_node import ClockFollower, ClockPublisher
@@ -378,18 +384,24 @@ def spin_nodes(
     stop = threading.Event()
 
     def on_signal(signum: int, _frame: Any) -> None:
+        # motors first: a stopping command goes on the wire before anything unwinds
+        context.safety_stop(f"signal {signal.Signals(signum).name}", from_signal=True)
         stop.set()
         executor.shutdown()
 
     old = {}
     if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
+        # SIGHUP: the ssh session dropped or the terminal closed; SIGQUIT: Ctrl-\
+        for sig in TERMINATING_SIGNALS:
             old[sig] = signal.signal(sig, on_signal)
     try:
         if duration_s is not None:
             executor.spin_for(duration_s)
         else:
             executor.spin()
+    except BaseException:
+        context.safety_stop("the launcher is failing")
+        raise
     finally:
         for sig, handler in old.items():
             signal.signal(sig, handler)

@@ -46,6 +46,7 @@ if TYPE_CHECKING:
 __all__ = [
     "CallbackGroup",
     "Client",
+    "GuardCondition",
     "MutuallyExclusiveCallbackGroup",
     "Node",
     "Publisher",
@@ -245,6 +246,39 @@ class Timer(Entity):
             self._destroyed = True
             self.canceled = True
             self.node._remove_timer(self)
+
+
+class GuardCondition(Entity):
+    """Wakes the executor from any thread: :meth:`trigger` queues one call of ``callback``
+    on the node's executor (rclpy's guard condition). Triggers that arrive before the
+    callback ran are folded into one call."""
+
+    def __init__(self, node: Node, callback: Callable[[], Any], group: CallbackGroup) -> None:
+        self.node = node
+        self.callback = callback
+        self.callback_group = group
+        self._lock = threading.Lock()
+        self._triggered = False
+        self._destroyed = False
+
+    def trigger(self) -> None:
+        """Thread-safe: run the callback once on the executor."""
+        with self._lock:
+            if self._triggered or self._destroyed:
+                return
+            self._triggered = True
+        self._notify()
+
+    def execute(self) -> None:
+        with self._lock:
+            if not self._triggered:
+                return
+            self._triggered = False
+        self.node._run_callback(self.callback, (), "guard condition")
+
+    def destroy(self) -> None:
+        with self._lock:
+            self._destroyed = True
 
 
 class Service(Entity):
@@ -606,6 +640,13 @@ class Node:
         self.services.append(srv)
         return srv
 
+    def create_guard_condition(
+        self, callback: Callable[[], Any], callback_group: CallbackGroup | None = None
+    ) -> GuardCondition:
+        """A guard condition whose :meth:`~GuardCondition.trigger` (from any thread) runs
+        ``callback`` on this node's executor."""
+        return GuardCondition(self, callback, callback_group or self._default_group)
+
     def create_client(
         self, srv_type: ServiceType, srv_name: str, *, callback_group: CallbackGroup | None = None
     ) -> Client:
@@ -697,6 +738,8 @@ class Node:
                 self.executor.create_task(result)
         except Exception as exc:
             self._logger.error(f"callback for {what} raised {type(exc).__name__}: {exc}")
+            # a node that fails may leave the robot driving blind: stop the motors first
+            self.context.safety_stop(f"{self.get_name()}: callback for {what} raised")
             if self.executor is not None and self.executor.stop_on_callback_error:
                 raise
 
@@ -800,7 +843,9 @@ class Node:
                 return SetParametersResult(False, f"parameter {p.name!r} is not declared")
             desc = self._descriptors.get(p.name, ParameterDescriptor())
             if desc.read_only:
-                return SetParametersResult(False, f"parameter {p.name!r} is read-only")
+                return SetParametersResult(
+                    False, f"parameter {p.name!r} is read-only: the node reads it once at start "
+                    f"(set it in a params file or with -p)")
             try:
                 if current is not None and not desc.dynamic_typing and p.value is not None:
                     value = coerce(p.value, current.type, name=p.name, where=where)

@@ -35,6 +35,7 @@ from typing import TypeVar
 from eddiebot.robot import protocol
 from eddiebot.robot.constants import FIRMWARE_1_1, PING_MASK, FirmwareProfile, profile_for_version
 from eddiebot.robot.errors import (
+    BoardInterrupted,
     BoardTimeout,
     FirmwareError,
     LinkLost,
@@ -122,8 +123,19 @@ class ProtocolCore:
         self._dirty = False
         self._generation_seen = link.generation
         self._reconnected = False
+        self._interrupt = threading.Event()
 
     # --- state -----------------------------------------------------------------------------
+
+    def interrupt(self) -> None:
+        """Abandon the request in flight (thread-safe; no lock taken): it raises
+        :class:`BoardInterrupted` within one read slice (``poll_s``). The flag stays set
+        until the next :meth:`request` with ``urgent=True`` or :meth:`clear_interrupt`."""
+        self._interrupt.set()
+
+    def clear_interrupt(self) -> None:
+        """Forget an :meth:`interrupt` that found nothing to abandon."""
+        self._interrupt.clear()
 
     def mark_dirty(self) -> None:
         """Force a resynchronisation before the next request."""
@@ -163,12 +175,18 @@ class ProtocolCore:
         return self.request(line, lambda reply: reply, timeout_s=timeout_s)
 
     def request(self, line: str, parse: Callable[[str], T], *,
-                timeout_s: float | None = None) -> T:
+                timeout_s: float | None = None, urgent: bool = False) -> T:
         """Send ``line`` (no CR), wait for one CR-terminated reply and ``parse`` it.
 
         Raises :class:`BoardTimeout`, :class:`LinkLost`, :class:`ReplyFormatError` (garbled
-        reply; the core resynchronises before the next request) or whatever ``parse`` raises
-        (typically a :class:`FirmwareError`).
+        reply; the core resynchronises before the next request), :class:`BoardInterrupted`
+        (see :meth:`interrupt`) or whatever ``parse`` raises (typically a
+        :class:`FirmwareError`).
+
+        ``urgent`` (stops): no resynchronisation quiet window first. The line goes out at
+        once behind a CR that ends any partial line on the board, and replies that ``parse``
+        rejects — a late reply to an abandoned request, an ``ERROR`` for the partial line —
+        are skipped until one it accepts arrives or the timeout passes.
         """
         if "\r" in line or "\x00" in line:
             raise ValueError("a request line must not contain CR or NUL")
@@ -176,6 +194,9 @@ class ProtocolCore:
         command = _command_name(line)
         with self._lock:
             self._check_generation()
+            if urgent:
+                self._interrupt.clear()
+                return self._urgent(line, command, parse, timeout)
             try:
                 if self._dirty:
                     self._resync()
@@ -192,9 +213,10 @@ class ProtocolCore:
                 self._dirty = True
                 self._episodes.fault("timeout", BoardEvent.TIMEOUT, str(exc))
                 raise
-            except ReplyFormatError as exc:
+            except (ReplyFormatError, BoardInterrupted) as exc:
                 self._dirty = True
-                self._episodes.fault("garbled", BoardEvent.GARBLED, str(exc))
+                if isinstance(exc, ReplyFormatError):
+                    self._episodes.fault("garbled", BoardEvent.GARBLED, str(exc))
                 raise
             self._episodes.recovered("link", "timeout")
             try:
@@ -211,6 +233,43 @@ class ProtocolCore:
             self._episodes.recovered("garbled", f"firmware {command}")
             return result
 
+    def _urgent(self, line: str, command: str, parse: Callable[[str], T], timeout_s: float) -> T:
+        was_dirty = self._dirty
+        self._dirty = True  # until a reply proves the line is in step again
+        self._rx.clear()
+        try:
+            self.link.discard_input()
+            self.link.write(b"\r" + line.encode("ascii") + b"\r")
+            deadline = self.clock() + round(timeout_s * 1e9)
+            rejected: Exception | None = None
+            while True:
+                remaining = (deadline - self.clock()) / 1e9
+                try:
+                    frame = self._read_reply(command, max(remaining, 0.0), interruptible=False)
+                except BoardTimeout:
+                    if isinstance(rejected, FirmwareError):
+                        raise rejected from None
+                    raise
+                try:
+                    result = parse(frame)
+                except (ReplyFormatError, FirmwareError) as exc:
+                    rejected = exc  # a late reply, or the board's answer to a partial line
+                    if self.link.synchronous and not self._rx:
+                        raise
+                    continue
+                if not self._rx:
+                    self._dirty = False
+                elif not was_dirty:
+                    self._dirty = True
+                self._episodes.recovered("link", "timeout", "garbled")
+                return result
+        except LinkLost as exc:
+            self._episodes.fault("link", BoardEvent.LINK_LOST, f"board link lost: {exc}")
+            raise
+        except BoardTimeout as exc:
+            self._episodes.fault("timeout", BoardEvent.TIMEOUT, str(exc))
+            raise
+
     def _take_frame(self, command: str) -> str | None:
         end = self._rx.find(b"\r")
         if end < 0:
@@ -218,10 +277,10 @@ class ProtocolCore:
         frame = bytes(self._rx[:end])
         if len(self._rx) > end + 1:
             self._dirty = True  # more than one reply: resync before the next request
-        self._rx.clear()
+        del self._rx[:end + 1]
         return self._decode_frame(command, frame)
 
-    def _read_reply(self, command: str, timeout_s: float) -> str:
+    def _read_reply(self, command: str, timeout_s: float, *, interruptible: bool = True) -> str:
         if self.link.synchronous:
             # The reply (if any) was produced inside the write.
             self._rx += self.link.read(0.0)
@@ -237,6 +296,8 @@ class ProtocolCore:
             frame = self._take_frame(command)
             if frame is not None:
                 return frame
+            if interruptible and self._interrupt.is_set():
+                raise BoardInterrupted(command)
             now = self.clock()
             if now >= deadline:
                 raise BoardTimeout(command, timeout_s)
@@ -271,6 +332,8 @@ class ProtocolCore:
         discarded = 0
         stalled = 0
         while not self.link.synchronous:
+            if self._interrupt.is_set():
+                raise BoardInterrupted("resync")
             now = self.clock()
             if now >= quiet_until or now >= give_up:
                 break
@@ -319,6 +382,10 @@ class Board:
         self._acceleration: int | None = None
         self._lock = threading.RLock()
         self._in_handshake = False
+        #: profile to use whatever ``VER`` answers (a board with a custom version word)
+        self.forced_profile: FirmwareProfile | None = None
+        #: send ``WATCH 1`` in the handshake on firmware that has it
+        self.watchdog = True
 
     # --- lifecycle -------------------------------------------------------------------------
 
@@ -348,13 +415,17 @@ class Board:
             version = self.core.request(protocol.encode_ver(),
                                         lambda r: protocol.decode_word("VER", r))
             self.firmware_version = version
-            self.profile = profile_for_version(version)
+            self.profile = self.forced_profile or profile_for_version(version)
             if self._verbose_errors:
                 self.core.request(protocol.encode_verb(1),
                                   lambda r: protocol.decode_empty("VERB", r))
             if self._ping_mask is not None:
                 self.core.request(protocol.encode_spng(self._ping_mask),
                                   lambda r: protocol.decode_empty("SPNG", r))
+            if self.profile.has_watch and self.watchdog:
+                # FW 1.3 arms WATCH at power-on; say so explicitly, a reboot may not have run
+                self.core.request(protocol.encode_watch(True, self.profile),
+                                  lambda r: protocol.decode_empty("WATCH", r))
             if self._acceleration is not None:
                 # A reconnect may follow a power cycle, which resets ACC to its default.
                 try:
@@ -424,6 +495,19 @@ class Board:
     def go_speed(self, left: int, right: int) -> None:
         """``GOSPD``: closed-loop wheel speeds in positions/s (forward positive)."""
         self._action(protocol.encode_gospd(left, right))
+
+    def stop_now(self) -> None:
+        """``STOP 0`` as an urgent request: no resynchronisation wait and no reconnect
+        handshake first (see :meth:`ProtocolCore.request`); cuts motor power."""
+        with self._lock:
+            self.core.request(protocol.encode_stop(0),
+                              lambda r: protocol.decode_empty("STOP", r), urgent=True)
+
+    def hold_now(self) -> None:
+        """``GOSPD 0 0`` as an urgent request: closed-loop hold at zero speed, ramped at ACC."""
+        with self._lock:
+            self.core.request(protocol.encode_gospd(0, 0),
+                              lambda r: protocol.decode_empty("GOSPD", r), urgent=True)
 
     def go_power(self, left: int, right: int) -> None:
         """``GO``: open-loop motor power, −127..127 per wheel."""

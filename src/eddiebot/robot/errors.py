@@ -4,6 +4,7 @@ from __future__ import annotations
 
 __all__ = [
     "BadChecksumError",
+    "BoardInterrupted",
     "BoardTimeout",
     "BufferOverflowError",
     "EncoderError",
@@ -145,6 +146,14 @@ class BoardTimeout(RobotError, TimeoutError):
         super().__init__(f"no reply to {command!r} within {timeout_s:.3f} s")
         self.command = command
         self.timeout_s = timeout_s
+
+
+class BoardInterrupted(RobotError):
+    """The request was abandoned before its reply arrived, to make room for a stop."""
+
+    def __init__(self, command: str) -> None:
+        super().__init__(f"{command!r} abandoned for an urgent command")
+        self.command = command
 
 
 class LinkLost(RobotError, ConnectionError):

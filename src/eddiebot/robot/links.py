@@ -8,12 +8,18 @@ A :class:`Link` moves bytes only; framing, timeouts and pairing live in
   vanishes and returns.
 * :class:`EmulatorLink`: in-process and synchronous: the emulator produces the reply inside
   :meth:`EmulatorLink.write`, on the caller's (simulation) clock.
+* :class:`TimedEmulatorLink`: the same, and it adds up how long each exchange would take on
+  Eddie's real wire (:mod:`eddiebot.robot.timing`: 115,200 baud, the FTDI latency timer,
+  PING's blocking time, timeouts for replies that never come), so a scheduler on sim time
+  can hold the link busy as long as the board would; it can also lose commands on the
+  wire, for fault-injection tests.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import threading
 from collections.abc import Callable
 from typing import Any, Protocol
@@ -23,10 +29,52 @@ import serial
 from eddiebot.robot.constants import BAUD_RATE
 from eddiebot.robot.emulator import FirmwareEmulator
 from eddiebot.robot.errors import LinkLost
+from eddiebot.robot.timing import LinkTiming, reply_delay_s
 
-__all__ = ["EmulatorLink", "Link", "SerialLink"]
+__all__ = ["EmulatorLink", "Link", "SerialLink", "TimedEmulatorLink"]
 
 _log = logging.getLogger(__name__)
+
+
+def _keep_dtr_on_close(port: Any) -> None:
+    """Clear HUPCL on a real tty, so closing the port does not drop DTR.
+
+    Opening a tty raises DTR, and the board's reset circuit reboots the Propeller on that edge
+    (counters zeroed, ~1.5 s deaf: the driver handles it). Without HUPCL the line stays up
+    between a close and the next open, so a reconnect does not reboot the board again."""
+    fd = getattr(port, "fd", None)
+    if not isinstance(fd, int):
+        return
+    try:
+        import termios
+
+        attrs = termios.tcgetattr(fd)
+        attrs[2] &= ~termios.HUPCL
+        termios.tcsetattr(fd, termios.TCSANOW, attrs)
+    except (ImportError, OSError, termios.error):  # a pty or a platform without termios
+        pass
+
+
+def ftdi_latency_ms(device: str) -> int | None:
+    """The FTDI latency timer (ms) of a ``/dev/ttyUSB*`` device, or None if not an FTDI."""
+    try:
+        name = os.path.basename(os.path.realpath(device))
+        with open(f"/sys/bus/usb-serial/devices/{name}/latency_timer") as f:
+            return int(f.read().strip())
+    except (OSError, ValueError):
+        return None
+
+
+def warn_ftdi_latency(device: str) -> None:
+    """Warn once when an FTDI adapter runs its shipped 16 ms latency timer: every reply then
+    waits up to 16 ms in the chip, and the poll rate falls to ~13 Hz."""
+    latency = ftdi_latency_ms(device)
+    if latency is not None and latency > 2:
+        _log.warning(
+            "%s: the FTDI latency timer is %d ms, so every board reply waits up to that long "
+            "(poll rate ~13 Hz). Set it to 1 ms: echo 1 | sudo tee "
+            "/sys/bus/usb-serial/devices/%s/latency_timer, or the udev rule in the README.",
+            device, latency, os.path.basename(os.path.realpath(device)))
 
 
 class Link(Protocol):
@@ -117,6 +165,66 @@ class EmulatorLink:
         self._rx.clear()
 
 
+class TimedEmulatorLink(EmulatorLink):
+    """An :class:`EmulatorLink` that accounts for the real wire's time.
+
+    Each :meth:`write` adds to :attr:`elapsed_ns` the time from the host's write until the
+    whole reply is readable on the host (:func:`~eddiebot.robot.timing.reply_delay_s`), or
+    ``reply_timeout_s`` when no reply comes, or ``resync_quiet_s`` for a lone CR (the driver
+    waits for a quiet line after one). A scheduler reads it with :meth:`take_elapsed_ns`.
+
+    Fault injection: :meth:`lose` drops the next write(s) of a command on the wire (the
+    board never sees them); ``mute`` drops every write.
+    """
+
+    def __init__(self, emulator: FirmwareEmulator, clock_ns: Callable[[], int] | None = None, *,
+                 timing: LinkTiming | None = None, reply_timeout_s: float = 0.25,
+                 resync_quiet_s: float | None = None) -> None:
+        super().__init__(emulator, clock_ns)
+        self.timing = timing if timing is not None else LinkTiming()
+        self.reply_timeout_s = reply_timeout_s
+        self.resync_quiet_s = reply_timeout_s if resync_quiet_s is None else resync_quiet_s
+        self.elapsed_ns = 0
+        self.mute = False
+        self.writes: list[tuple[int, bytes]] = []
+        """(emulator time ns, line) of the last 200 lines that reached the board (tests)."""
+        self._lose: dict[str, int] = {}
+
+    def lose(self, command: str, count: int = 1) -> None:
+        """Lose the next ``count`` writes that carry ``command`` (e.g. ``"STOP"``)."""
+        self._lose[command.upper()] = self._lose.get(command.upper(), 0) + count
+
+    def take_elapsed_ns(self) -> int:
+        """Wire time accumulated since the last call; resets it."""
+        out, self.elapsed_ns = self.elapsed_ns, 0
+        return out
+
+    def write(self, data: bytes) -> None:
+        """Feed the emulator (unless lost) and account for the wire time."""
+        lines = [part for part in data.split(b"\r") if part.strip()]
+        if not lines:
+            if self.clock_ns is not None:
+                self.emulator.advance_to_ns(self.clock_ns())
+            self.emulator.feed(data)
+            self.elapsed_ns += round(self.resync_quiet_s * 1e9)
+            return
+        command = lines[0].split()[0].decode("latin-1").upper()
+        if self.mute or self._lose.get(command, 0) > 0:
+            if not self.mute:
+                self._lose[command] -= 1
+            self.elapsed_ns += round(self.reply_timeout_s * 1e9)
+            return
+        before = len(self._rx)
+        super().write(data)
+        reply = bytes(self._rx[before:])
+        self.writes.append((self.emulator.time_ns, lines[-1]))
+        del self.writes[:-200]
+        if reply:
+            self.elapsed_ns += round(reply_delay_s(self.timing, data, reply, command) * 1e9)
+        else:
+            self.elapsed_ns += round(self.reply_timeout_s * 1e9)
+
+
 class SerialLink:
     """pyserial link (115200 8N1, no flow control) with a reader thread and reconnection.
 
@@ -162,6 +270,7 @@ class SerialLink:
         port.open()
         with contextlib.suppress(Exception):
             port.reset_input_buffer()
+        _keep_dtr_on_close(port)
         return port
 
     def open(self) -> None:
@@ -175,6 +284,7 @@ class SerialLink:
         with self._cond:
             self._port = port
             self._generation += 1
+        warn_ftdi_latency(self.url)
         self._closing.clear()
         self._thread = threading.Thread(target=self._reader, name=f"serial-{self.url}",
                                         daemon=True)
