@@ -32,7 +32,9 @@ class Rig:
         self.estop = self.probe.create_publisher(Bool, "/e_stop", qos_profile_latched)
         self.emulator = self.ctx.resources["emulator"]
         self.link = self.ctx.resources["board_link"]
-        self.ex.spin_for(0.5)  # handshake, first polls
+        # opening the port reboots the board (1.5 s), then the handshake and the first polls
+        self.ex.spin_for(2.2)
+        assert self.board.connected
 
     @property
     def now(self) -> int:
@@ -287,3 +289,15 @@ def test_a_missing_port_is_reported_once(caplog):
     errors = [r for r in caplog.records if "ttyUSB_not_here" in r.getMessage()]
     assert len(errors) == 1
     assert "dialout" in errors[0].getMessage() and "ls /dev/ttyUSB*" in errors[0].getMessage()
+
+
+def test_an_obstacle_during_travel_stops_it(rig):
+    rig.call(DriveWithDistance, "/drive_with_distance", distance=300, speed=40)
+    rig.ex.spin_for(1.0)
+    assert rig.speed() > 10
+    t0 = rig.now
+    rig.emulator.sensors = _Wall()
+    rig.ex.spin_for(0.5)
+    stops = rig.stops_after(t0, (b"STOP 0",))
+    # the wall is seen at the next PING/ADC poll; the IR is debounced over two samples
+    assert stops and (stops[0] - t0) / S < 0.3

@@ -192,6 +192,9 @@ class BoardNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.context.add_safety_stop(self.emergency_stop)
         self._next_connect_ns = 0
+        self._booting = False
+        self._boot_s = DEFAULT_TIMING.boot_s if emulator_timing or not self.port.startswith(
+            "emulator") else 0.0
         self._connect()
 
     # -- link ------------------------------------------------------------------------------
@@ -245,12 +248,33 @@ class BoardNode(Node):
         timer = self.create_timer(delay_ns / 1e9, fire, oneshot=True)
 
     def _connect(self) -> None:
-        """Open the port and run the handshake on the I/O side (never on the executor);
-        at most once a second."""
-        now = time.monotonic_ns()
-        if self.io.pending("connect") or now < self._next_connect_ns:
+        """Open the port, wait out the board's boot, run the handshake — all on the I/O side
+        (never on the executor); at most once a second of node time."""
+        now = self.get_clock().now_ns()
+        if (self.io.pending("open") or self.io.pending("connect") or self._booting
+                or now < self._next_connect_ns):
             return
         self._next_connect_ns = now + 1_000_000_000
+        if self.board.link.generation == 0:
+            self.io.submit(BoardOp("open", lambda b: b.link.open(), self._on_opened,
+                                   Priority.STOP))
+        else:
+            self._handshake()
+
+    def _on_opened(self, _: Any, error: BaseException | None) -> None:
+        if error is not None:
+            self._on_connected(None, error)
+            return
+        # opening the port raises DTR, which reboots the Propeller: it is deaf until it booted
+        self._booting = True
+
+        def booted() -> None:
+            self._booting = False
+            self._handshake()
+
+        self._call_later(round(self._boot_s * 1e9), booted)
+
+    def _handshake(self) -> None:
         acceleration = self.acceleration
 
         def run(board: Board) -> FirmwareProfile:
@@ -278,7 +302,7 @@ class BoardNode(Node):
             f", {self.counts_per_rev} counts/rev")
 
     def _log_connect_failure(self, error: BaseException) -> None:
-        now = time.monotonic_ns()
+        now = self.get_clock().now_ns()
         last = self._missing_port_logged_ns
         if last is None:
             hint = ""

@@ -190,6 +190,15 @@ class TimedEmulatorLink(EmulatorLink):
         """(emulator time ns, line) of the last 200 lines that reached the board (tests)."""
         self._lose: dict[str, int] = {}
 
+    def open(self) -> None:
+        """Connect; the first open reboots the board as a DTR pulse does (unless the timing
+        model is off), so it is deaf for ``timing.boot_s``."""
+        first = self._generation == 0
+        super().open()
+        if first and self.timing.boot_s > 0:
+            now = self.clock_ns() if self.clock_ns is not None else self.emulator.time_ns
+            self.emulator.reboot(now, boot_s=self.timing.boot_s)
+
     def lose(self, command: str, count: int = 1) -> None:
         """Lose the next ``count`` writes that carry ``command`` (e.g. ``"STOP"``)."""
         self._lose[command.upper()] = self._lose.get(command.upper(), 0) + count
