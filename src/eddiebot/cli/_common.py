@@ -226,23 +226,43 @@ class CliSession:
             time.sleep(0.02)
 
 
+def cli_transport_config() -> Any:
+    """The Zenoh settings of a short-lived CLI process: a *client* of the router.
+
+    A peer opens a link to every process the router names, and closing the session waits
+    for links still being opened; one peer that does not answer (a stopped or stalled
+    process) held every ``eddie node list`` for Zenoh's 10 s handshake timeout, deaf to
+    Ctrl-C. A client has one link, to the router, and the router forwards everything a CLI
+    command needs. ``EDDIE_ZENOH_MODE`` or ``EDDIE_ZENOH_CONFIG`` still decide when set.
+    """
+    from eddiebot.transport import ZenohConfig
+
+    config = ZenohConfig.from_env()
+    if config.config_file is None and not os.environ.get("EDDIE_ZENOH_MODE"):
+        config.mode = "client"
+    return config
+
+
 @contextlib.contextmanager
 def cli_session(command: str, *, use_transport: bool = True) -> Iterator[CliSession]:
-    """A fresh context with a hidden node ``_eddie_<command>_<pid>``, joined to the graph."""
+    """A fresh context with a hidden node ``_eddie_<command>_<pid>``, joined to the graph
+    as a client of the router (`cli_transport_config`)."""
     from eddiebot.core import Context, Node
 
     context = Context()
-    node = Node(f"_eddie_{command}_{os.getpid()}", context=context,
-                start_parameter_services=False)
-    transport = None
-    if use_transport:
-        from eddiebot.transport import connect
-
-        transport = connect(context)
-        if transport is None:
-            print(f"eddie {command}: no transport (EDDIE_TRANSPORT=none?): "
-                  "only this process is visible", file=sys.stderr)
     try:
+        node = Node(f"_eddie_{command}_{os.getpid()}", context=context,
+                    start_parameter_services=False)
+        transport = None
+        if use_transport:
+            from eddiebot.transport import connect, transport_enabled
+
+            transport = connect(context, cli_transport_config())
+            if transport is None:
+                why = ("EDDIE_TRANSPORT=none" if not transport_enabled()
+                       else "the Zenoh router cannot be reached")
+                print(f"eddie {command}: no transport ({why}): only this process is visible",
+                      file=sys.stderr)
         yield CliSession(context, node, transport)
     finally:
         context.shutdown()

@@ -1,18 +1,22 @@
 """Running a launch description in the foreground: executor, /clock, transport, dashboard.
 
-Shared by ``eddie sim``, ``eddie slam`` and ``eddie nav``.
+Shared by ``eddie sim``, ``eddie slam``, ``eddie vslam`` and ``eddie nav``. Whatever stops
+the start (a misspelt world, a parameter file error, a busy dashboard port, a lifecycle
+manager that cannot bring its nodes up) is raised as a typed error after every node built
+so far is destroyed; ``eddie``'s main prints it as one line.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from typing import Any
 
+from eddiebot.cli.errors import BringUpError
 from eddiebot.core.context import Context
-from eddiebot.core.errors import ParameterError
 from eddiebot.core.launch import (
     LaunchDescription,
-    LaunchError,
     build_nodes,
     connect_transport,
     find_launch_file,
@@ -22,7 +26,10 @@ from eddiebot.core.launch import (
 from eddiebot.core.node import Node
 from eddiebot.registry import NODES
 
-__all__ = ["add_run_arguments", "run_stack"]
+__all__ = ["add_run_arguments", "check_world", "run_nodes", "run_stack"]
+
+#: How often a lifecycle manager's bring-up is checked (node clock), s.
+_BRING_UP_CHECK_S = 0.2
 
 
 def add_run_arguments(parser: argparse.ArgumentParser) -> None:
@@ -44,28 +51,126 @@ def build_description(launch: str, launch_args: dict[str, str]) -> LaunchDescrip
     return parse_launch_file(find_launch_file(launch), launch_args)
 
 
+def check_world(world: str) -> None:
+    """Raise `eddiebot.sim.errors.SimError` (naming the built-in worlds) unless ``world`` is
+    a built-in world or a readable world file — before anything is built."""
+    from eddiebot.sim.worlds import load_world
+
+    load_world(world)
+
+
 def run_stack(args: argparse.Namespace, launch: str, launch_args: dict[str, str]) -> int:
     """Build ``launch`` on a sim clock this process owns and spin it until interrupted."""
+    if "world" in launch_args:
+        check_world(launch_args["world"])
     context = Context(use_sim_time=True)
-    try:
-        nodes: list[Node] = build_nodes(build_description(launch, launch_args), context, NODES)
-    except (LaunchError, ParameterError) as exc:
-        print(f"eddie: {exc}", file=sys.stderr)
-        return 2
-    if not args.no_transport:
-        connect_transport(context)
-    dashboard = None
-    if args.dashboard:
-        try:
-            from eddiebot.viz.dashboard import start_dashboard  # type: ignore[attr-defined]
+    return run_nodes(args, context, lambda: build_nodes(
+        build_description(launch, launch_args), context, NODES),
+        real_time_factor=None if args.fast else args.rate, owns_sim_clock=True)
 
-            dashboard = start_dashboard(context, "127.0.0.1", args.dashboard_port)
-            print(dashboard.url, flush=True)
-        except ImportError:
-            print("eddie: the dashboard is not installed", file=sys.stderr)
+
+def run_nodes(args: argparse.Namespace, context: Context, build: Callable[[], list[Node]], *,
+              real_time_factor: float | None = None, owns_sim_clock: bool | None = None) -> int:
+    """Build the nodes, join the graph (unless ``--no-transport``), serve the dashboard
+    (``--dashboard``), and spin until interrupted or ``--duration`` is over.
+
+    Nothing is left running when a step fails: the nodes are destroyed and the context
+    shut down before the error propagates.
+    """
+    dashboard = None
     try:
-        return spin_nodes(nodes, context, real_time_factor=None if args.fast else args.rate,
-                          duration_s=args.duration, owns_sim_clock=True)
+        if getattr(args, "dashboard", False):
+            _check_port_free(args.dashboard_port)  # before minutes of start-up, not after
+        nodes = build()
+        if not args.no_transport:
+            connect_transport(context)
+        if getattr(args, "dashboard", False):
+            dashboard = _start_dashboard(context, args.dashboard_port)
+        for node in nodes:
+            _watch_bring_up(node)
+        return spin_nodes(nodes, context, real_time_factor=real_time_factor,
+                          duration_s=args.duration, owns_sim_clock=owns_sim_clock)
+    except _BringUpFailed as exc:
+        raise BringUpError(str(exc)) from None
     finally:
         if dashboard is not None:
             dashboard.stop()
+        context.shutdown()
+
+
+def _start_dashboard(context: Context, port: int) -> Any:
+    try:
+        from eddiebot.viz.dashboard import start_dashboard
+    except ImportError:
+        print("eddie: the dashboard is not installed", file=sys.stderr)
+        return None
+    from eddiebot.viz.dashboard.errors import DashboardBindError
+
+    try:
+        return start_dashboard(context, "127.0.0.1", port)
+    except DashboardBindError as exc:
+        raise DashboardBindError(f"{exc} (choose another with --dashboard-port)") from exc
+
+
+def _check_port_free(port: int) -> None:
+    """Raise `DashboardBindError` when the dashboard could not listen on ``port``."""
+    import socket
+
+    from eddiebot.viz.dashboard.errors import DashboardBindError
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind(("127.0.0.1", port))
+        except OSError as exc:
+            raise DashboardBindError(
+                f"cannot serve the dashboard on 127.0.0.1:{port}: {exc.strerror or exc} "
+                "(choose another with --dashboard-port)") from exc
+
+
+class _BringUpFailed(BaseException):
+    """Raised from a timer callback to stop the spin: a BaseException, so that the node's
+    callback guard (which logs an ``Exception`` and carries on) lets it through."""
+
+
+def _watch_bring_up(node: Node) -> None:
+    """Stop the run when ``node``, an autostarting lifecycle manager, fails to bring its
+    nodes up (Nav2's manager logs the error and idles; a user at a terminal is left with a
+    stack that never starts)."""
+    from eddiebot.core.lifecycle import LifecycleManager
+
+    if not isinstance(node, LifecycleManager) or not node.get_parameter("autostart").value:
+        return
+    timer: Any = None
+
+    def check() -> None:
+        if node.system_active:
+            timer.cancel()
+        elif node.last_error and not _running(LifecycleManager.startup):
+            timer.cancel()
+            raise _BringUpFailed(f"{node.get_name()} could not bring its nodes up: "
+                                 f"{node.last_error}{_reason(node)}")
+
+    timer = node.create_timer(_BRING_UP_CHECK_S, check)
+
+
+def _reason(manager: Any) -> str:
+    """``: <why>`` from the managed node that failed (Nav2 servers keep their last
+    transition error), else nothing."""
+    for other in list(manager.context.nodes):
+        why = getattr(other, "last_error", "")
+        if other is not manager and other.get_name() in manager.node_names and why:
+            return f": {why}"
+    return ""
+
+
+def _running(function: Any) -> bool:
+    """True when ``function`` is on this thread's stack: a service call inside the manager's
+    start-up spins the executor, which may run the check half-way through it."""
+    code = function.__code__
+    frame = sys._getframe(1)
+    while frame is not None:
+        if frame.f_code is code:
+            return True
+        frame = frame.f_back  # type: ignore[assignment]
+    return False

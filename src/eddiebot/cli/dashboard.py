@@ -36,10 +36,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"eddie dashboard: transport unavailable ({exc})", file=sys.stderr)
     try:
         handle = start_dashboard(context, args.host, args.port, args.token, args.read_only)
-    except OSError as exc:
-        print(f"eddie dashboard: cannot bind {args.host}:{args.port}: {exc}", file=sys.stderr)
+    except BaseException:  # a busy port (DashboardBindError): eddie's main says so in one line
         context.shutdown()
-        return 1
+        raise
     try:
         while handle.is_alive():
             time.sleep(0.5)

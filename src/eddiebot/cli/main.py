@@ -3,6 +3,21 @@
 Each sub-command lives in ``eddiebot.cli.<module>`` and exposes
 ``add_arguments(parser)`` and ``run(args) -> int``; modules are imported only when their
 command runs, so ``eddie --help`` is instant.
+
+How every command ends, decided here once:
+
+- a typed error — any exception of a class defined in a package's ``errors`` module
+  (``eddiebot.sim.errors.UnknownWorldError``, ``eddiebot.core.launch.LaunchError``'s base,
+  ``eddiebot.cli.errors.ParamsFileError``, ...), an ``OSError`` (a busy port, a missing
+  file) or a YAML syntax error — prints one line ``eddie: error: <message>`` on stderr and
+  exits 2 (``--log-level debug`` shows the traceback instead);
+- Ctrl-C exits 130, quietly;
+- stdout closed by its reader (``eddie topic echo /scan | head -3``) exits 141 (128 +
+  SIGPIPE, as a program killed by SIGPIPE), quietly, also when the write happened in a
+  subscription callback;
+- run as the program, a Zenoh session still closing (a peer that does not answer) gets at
+  most ``EDDIE_ZENOH_CLOSE_TIMEOUT`` (0.5 s) and is then left behind: the process exits
+  without waiting for it.
 """
 
 from __future__ import annotations
@@ -11,8 +26,16 @@ import argparse
 import importlib
 import logging
 import os
+import signal
 import sys
+import threading
 from collections.abc import Sequence
+from typing import Any, TextIO
+
+#: Exit statuses: a fatal start-up error, Ctrl-C, stdout closed by its reader.
+EXIT_ERROR = 2
+EXIT_INTERRUPTED = 130
+EXIT_CLOSED_PIPE = 141
 
 #: (command, module, one-line help) — the explicit registry of sub-commands.
 COMMANDS: list[tuple[str, str, str]] = [
@@ -81,7 +104,8 @@ def configure_logging(level: str) -> None:
     )
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def _parse_and_run(argv: Sequence[str] | None) -> int:
+    """Run the chosen command; its exit status (2 with one line for a typed error)."""
     parser, subparsers = build_parser()
     args_list = list(sys.argv[1:] if argv is None else argv)
     # Only the chosen command's module is imported to add its arguments.
@@ -106,8 +130,161 @@ def main(argv: Sequence[str] | None = None) -> int:
     module = importlib.import_module(args._module)
     try:
         return int(module.run(args) or 0)
+    except BrokenPipeError:
+        raise  # stdout's reader went away: not an error of the command
+    except Exception as exc:
+        message = fatal_message(exc)
+        if message is None or args.log_level == "debug":
+            raise
+        print(f"eddie: error: {message}", file=sys.stderr, flush=True)
+        return EXIT_ERROR
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``eddie`` with ``argv`` (default: the command line) and return the exit status.
+
+    Called without ``argv`` (as the program) it may end the process itself: see the
+    module docstring about Zenoh sessions still closing.
+    """
+    as_program = argv is None
+    interrupted = _InterruptFlag(install=as_program)
+    if as_program:
+        os.environ.setdefault("EDDIE_ZENOH_CLOSE_TIMEOUT", "0.5")
+    stdout = sys.stdout
+    sys.stdout = _GuardedStdout(stdout)  # type: ignore[assignment]
+    try:
+        code = _parse_and_run(argv)
+    except (_StdoutClosed, BrokenPipeError):
+        code = _stdout_closed(stdout)
     except KeyboardInterrupt:
-        return 130
+        code = EXIT_INTERRUPTED
+    except BaseException:
+        if not interrupted.seen:
+            raise
+        # Ctrl-C inside C code often surfaces as another error (an import that failed)
+        code = EXIT_INTERRUPTED
+    finally:
+        sys.stdout = stdout
+        interrupted.restore()
+    if as_program:
+        _exit_without_waiting_for_zenoh(code)
+    return code
+
+
+def fatal_message(exc: BaseException) -> str | None:
+    """The one line ``eddie: error:`` prints for ``exc``, or None if it is a bug (a
+    traceback then says where)."""
+    if _is_typed(exc):
+        text = str(exc) or type(exc).__name__
+    elif isinstance(exc, OSError):
+        text = _os_error_text(exc)
+    elif _is_yaml_error(exc):
+        text = f"malformed YAML: {exc}"
+    else:
+        return None
+    return " ".join(text.split())
+
+
+def _is_typed(exc: BaseException) -> bool:
+    """An exception of a class from an ``eddiebot.<package>.errors`` module (or a subclass)."""
+    for cls in type(exc).__mro__:
+        module = cls.__module__
+        if module.startswith("eddiebot.") and module.rsplit(".", 1)[-1] == "errors":
+            return True
+    return False
+
+
+def _os_error_text(exc: OSError) -> str:
+    if exc.strerror and exc.filename is not None:
+        return f"{exc.filename}: {exc.strerror}"
+    return exc.strerror or str(exc) or type(exc).__name__
+
+
+def _is_yaml_error(exc: BaseException) -> bool:
+    yaml = sys.modules.get("yaml")
+    return yaml is not None and isinstance(exc, yaml.YAMLError)
+
+
+class _InterruptFlag:
+    """Python's SIGINT handler, remembering that it ran."""
+
+    def __init__(self, *, install: bool) -> None:
+        self.seen = False
+        self._previous: Any = None
+        if install and threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def restore(self) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
+
+
+class _StdoutClosed(BaseException):
+    """stdout's reader went away. A BaseException, as KeyboardInterrupt, so that no
+    ``except Exception`` around a callback logs it and carries on printing."""
+
+
+class _GuardedStdout:
+    """sys.stdout, except that a write to a closed pipe from the main thread raises
+    `_StdoutClosed`."""
+
+    def __init__(self, stream: TextIO) -> None:
+        self._stream = stream
+
+    def _guard(self, exc: BrokenPipeError) -> BaseException:
+        if threading.current_thread() is threading.main_thread():
+            return _StdoutClosed()
+        return exc
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError as exc:
+            raise self._guard(exc) from None
+
+    def writelines(self, lines: Any) -> None:
+        for line in lines:
+            self.write(line)
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError as exc:
+            raise self._guard(exc) from None
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+def _stdout_closed(stdout: TextIO) -> int:
+    """Point stdout at /dev/null so that the interpreter's last flush does not fail again
+    (the recipe of Python's ``signal`` documentation)."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # not a file (a capture): leave it
+        pass
+    return EXIT_CLOSED_PIPE
+
+
+def _exit_without_waiting_for_zenoh(code: int) -> None:
+    """Exit now if a Zenoh session is still opening or closing in a helper thread:
+    waiting would hang, and letting the interpreter shut down around it can abort."""
+    zenoh_transport = sys.modules.get("eddiebot.transport.zenoh")
+    if zenoh_transport is None or not zenoh_transport.sessions_still_closing():
+        return
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
 
 
 if __name__ == "__main__":

@@ -13,14 +13,13 @@ needs ``--initial-pose 0 0 0``). Send goals with ``eddie goal X Y YAW``.
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
-from typing import Any
 
 import yaml
 
-from eddiebot.cli._stack import add_run_arguments, run_stack
+from eddiebot.cli._stack import add_run_arguments, check_world, run_nodes, run_stack
+from eddiebot.cli.errors import CliError
 
 __all__ = ["HELP", "add_arguments", "resolve_params", "run"]
 
@@ -51,10 +50,17 @@ def default_params() -> Path:
 
 def resolve_params(source: Path, out_dir: Path, initial_pose: tuple[float, float, float] | None
                    ) -> Path:
-    """Write the Nav2 parameters with the costmaps folded in (and AMCL's initial pose)."""
+    """Write the Nav2 parameters with the costmaps folded in (and AMCL's initial pose).
+
+    Raises `eddiebot.cli.errors.ParamsFileError` (``FILE:LINE: ...``) for a file that is
+    not YAML or sets a parameter no Nav2 server has.
+    """
+    from eddiebot.cli._params import check_nav_params, load_params_file
     from eddiebot.nav.nodes._common import nest_nav2_params
 
-    doc: Any = yaml.safe_load(source.read_text()) or {}
+    doc, tree = load_params_file(source)
+    doc = doc or {}
+    check_nav_params(source, doc, tree)
     doc = nest_nav2_params(doc)
     if initial_pose is not None:
         amcl = doc.setdefault("amcl", {}).setdefault("ros__parameters", {})
@@ -69,12 +75,25 @@ def resolve_params(source: Path, out_dir: Path, initial_pose: tuple[float, float
     return out
 
 
+def check_map(path: Path, localization: str) -> None:
+    """Raise a typed error naming the file unless ``path`` is a usable map: a nav2 map YAML
+    whose image exists (AMCL), or an existing SLAM session (``--localization slam``)."""
+    if not path.exists():
+        raise CliError(f"{path}: no such map file")
+    if localization == "amcl":
+        from eddiebot.maps import MapFormatError, read_map_yaml
+
+        meta = read_map_yaml(path)
+        if not meta.image.is_file():
+            raise MapFormatError(f"{path}: key 'image': file {meta.image} not found")
+
+
 def run(args: argparse.Namespace) -> int:
     from eddiebot.cli.sim import camera_args
 
-    if not args.map.exists():
-        print(f"eddie nav: no map file {args.map}", file=sys.stderr)
-        return 2
+    if args.world is not None:
+        check_world(args.world)
+    check_map(args.map, args.localization)
     params = args.params or default_params()
     pose = tuple(args.initial_pose) if args.initial_pose else None
     if pose is None and args.world is not None and args.localization == "amcl":
@@ -82,11 +101,7 @@ def run(args: argparse.Namespace) -> int:
 
         pose = tuple(load_world(args.world).start)
     run_dir = args.run_dir or Path(tempfile.mkdtemp(prefix="eddie_nav_"))
-    try:
-        resolved = resolve_params(params, run_dir, pose)  # type: ignore[arg-type]
-    except (OSError, yaml.YAMLError) as exc:
-        print(f"eddie nav: {params}: {exc}", file=sys.stderr)
-        return 2
+    resolved = resolve_params(params, run_dir, pose)  # type: ignore[arg-type]
     print(f"parameters: {resolved}", flush=True)
     launch_args = {"map": str(args.map.resolve()), "params_file": str(resolved),
                    "localization": args.localization}
@@ -99,23 +114,9 @@ def run(args: argparse.Namespace) -> int:
 def _run_real(args: argparse.Namespace, launch_args: dict[str, str]) -> int:
     """The navigation alone, on the wall clock, joined to the robot's graph."""
     from eddiebot.core.context import Context
-    from eddiebot.core.errors import ParameterError
-    from eddiebot.core.launch import (
-        LaunchError,
-        build_nodes,
-        connect_transport,
-        find_launch_file,
-        parse_launch_file,
-        spin_nodes,
-    )
+    from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
     from eddiebot.registry import NODES
 
     context = Context(use_sim_time=False)
-    try:
-        nodes = build_nodes(parse_launch_file(find_launch_file("nav"), launch_args), context, NODES)
-    except (LaunchError, ParameterError) as exc:
-        print(f"eddie nav: {exc}", file=sys.stderr)
-        return 2
-    if not args.no_transport and not connect_transport(context):
-        print("eddie nav: no transport: cannot reach the robot", file=sys.stderr)
-    return spin_nodes(nodes, context, duration_s=args.duration)
+    return run_nodes(args, context, lambda: build_nodes(
+        parse_launch_file(find_launch_file("nav"), launch_args), context, NODES))

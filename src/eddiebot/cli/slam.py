@@ -262,6 +262,9 @@ def _live(args: argparse.Namespace) -> int:
 
     launch_args = {"world": args.world, "seed": str(args.seed), **camera_args(args.camera)}
     if args.live_params is not None:
+        from eddiebot.cli._params import load_params_file
+
+        load_params_file(args.live_params)  # unreadable or not YAML: say so before the build
         launch_args["slam_params"] = str(args.live_params)
     return run_stack(args, "slam", launch_args)
 

@@ -28,7 +28,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from eddiebot.sim.errors import SimError
     from eddiebot.sim.worlds import list_worlds, load_world
 
     if args.world_command == "list":
@@ -37,11 +36,8 @@ def run(args: argparse.Namespace) -> int:
             xmin, ymin, xmax, ymax = w.bounds
             print(f"{name:<10} {xmax - xmin:5.1f} x {ymax - ymin:4.1f} m  {w.description}")
         return 0
-    try:
-        world = load_world(args.name)
-    except SimError as exc:
-        print(f"eddie world: {exc}", file=sys.stderr)
-        return 2
+    # an unknown name raises UnknownWorldError, which eddie's main prints as one line
+    world = load_world(args.name)
     import cv2
 
     from eddiebot.sim.preview import top_view

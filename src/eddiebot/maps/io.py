@@ -105,6 +105,10 @@ def read_map_yaml(yaml_path: str | os.PathLike[str]) -> MapYaml:
         raise MapFormatError(f"{path}: cannot read map YAML: {exc.strerror or exc}") from exc
     try:
         doc = yaml.safe_load(text)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
+        raise MapFormatError(f"{where}: not valid YAML: {exc.problem or exc.context}") from exc
     except yaml.YAMLError as exc:
         raise MapFormatError(f"{path}: not valid YAML: {exc}") from exc
     if not isinstance(doc, dict):

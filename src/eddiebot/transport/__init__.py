@@ -95,5 +95,9 @@ def connect(
             raise TransportError(f"cannot start the Zenoh transport: {exc}") from exc
         log.warning("no inter-process transport: %s", exc)
         return None
-    ctx.attach_transport(transport)
+    try:
+        ctx.attach_transport(transport)
+    except BaseException:  # Ctrl-C half-way: leave no open session behind
+        transport.close()
+        raise
     return transport

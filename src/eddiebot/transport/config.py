@@ -13,7 +13,10 @@ Environment (all optional):
 - ``EDDIE_ZENOH_CONFIG`` — a Zenoh JSON5 config file for sessions, used as is (then the
   settings above are not applied);
 - ``EDDIE_ZENOH_ROUTER_CONFIG`` — the same for the router (``eddie daemon``);
-- ``EDDIE_ROUTER_AUTOSTART=0`` — do not start a detached router when none is reachable.
+- ``EDDIE_ROUTER_AUTOSTART=0`` — do not start a detached router when none is reachable;
+- ``EDDIE_ZENOH_MODE`` — ``peer`` (default) or ``client`` (only a link to the router);
+- ``EDDIE_ZENOH_CLOSE_TIMEOUT`` — seconds ``close`` waits for the session to shut down
+  (default: as long as it takes; the ``eddie`` CLI sets 0.5).
 """
 
 from __future__ import annotations
@@ -38,6 +41,17 @@ def normalize_endpoint(text: str) -> str:
     return text
 
 
+def _seconds(env: Any, key: str) -> float | None:
+    text = (env.get(key) or "").strip()
+    if not text:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise ValueError(f"{key} must be a number of seconds, got {text!r}") from None
+    return max(0.0, value)
+
+
 @dataclass
 class ZenohConfig:
     """How a process joins the graph (see the module docstring for the environment)."""
@@ -54,6 +68,10 @@ class ZenohConfig:
     result_timeout_s: float = 24 * 3600.0
     #: How long a new session waits to link up with the router before going on without.
     router_wait_s: float = 2.0
+    #: How long ``close`` waits for the session to shut down; None: as long as it takes.
+    #: Closing waits for links still being opened, up to Zenoh's 10 s handshake timeout
+    #: when a peer in the graph does not answer (a stopped or stalled process).
+    close_timeout_s: float | None = None
 
     @classmethod
     def from_env(cls, env: dict[str, str] | None = None) -> ZenohConfig:
@@ -71,6 +89,7 @@ class ZenohConfig:
             autostart_router=e.get("EDDIE_ROUTER_AUTOSTART", "1").strip().lower()
             not in ("0", "false", "no", "off"),
             mode=e.get("EDDIE_ZENOH_MODE", "peer"),
+            close_timeout_s=_seconds(e, "EDDIE_ZENOH_CLOSE_TIMEOUT"),
         )
 
     @property

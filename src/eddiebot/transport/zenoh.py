@@ -14,6 +14,13 @@
   cache (the advanced publisher), which late-joining subscribers query, as in rmw_zenoh;
 - reliable QoS is Zenoh reliable with congestion control *block*; best effort *drops*;
 - services are queryables; a call is a ``get`` whose reply completes the client's future.
+
+Opening and closing the session run in a helper thread that the caller waits for: inside
+Zenoh's native code the main thread runs no Python signal handler, so Ctrl-C would wait for
+the call to return (closing waits up to Zenoh's 10 s handshake timeout for links still being
+opened to a peer that does not answer: a stopped or stalled process in the graph).
+``config.close_timeout_s`` bounds that wait; `sessions_still_closing` tells a process about
+to exit that it should not wait for them (``os._exit`` after flushing, as ``eddie`` does).
 """
 
 from __future__ import annotations
@@ -52,9 +59,70 @@ if TYPE_CHECKING:
     from eddiebot.core.context import Context
     from eddiebot.core.node import Node, Publisher, Service, Subscription
 
-__all__ = ["ZenohTransport"]
+__all__ = ["ZenohTransport", "sessions_still_closing"]
 
 log = logging.getLogger("eddiebot.transport")
+
+#: Helper threads still opening or closing a session that nobody waits for any more.
+_LEFT_RUNNING: set[threading.Thread] = set()
+
+
+def sessions_still_closing() -> bool:
+    """True while a session open or close that the caller stopped waiting for still runs.
+
+    Python joins no daemon thread at exit, but such a thread returning from Zenoh during
+    interpreter shutdown can abort the process; exit with ``os._exit`` instead.
+    """
+    return any(t.is_alive() for t in list(_LEFT_RUNNING))
+
+
+def _call_in_thread(fn: Callable[[], Any], what: str, timeout_s: float | None,
+                    on_late_result: Callable[[Any], None] | None = None) -> tuple[bool, Any]:
+    """Run ``fn`` in a daemon thread and wait for it, interruptibly (Ctrl-C), for at most
+    ``timeout_s`` (None: until it returns). Returns (finished, result); re-raises what ``fn``
+    raised. When the wait ends first, ``on_late_result`` gets the result once ``fn`` returns.
+    """
+    lock = threading.Lock()
+    box: dict[str, Any] = {}
+
+    def target() -> None:
+        try:
+            value = fn()
+        except BaseException as exc:
+            with lock:
+                box["error"] = exc
+            return
+        with lock:
+            box["value"] = value
+            late = box.get("abandoned", False)
+        if late and on_late_result is not None:
+            on_late_result(value)
+
+    thread = threading.Thread(target=target, name=f"eddie-zenoh-{what}", daemon=True)
+    thread.start()
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    try:
+        while thread.is_alive():
+            remaining = None if deadline is None else deadline - time.monotonic()
+            if remaining is not None and remaining <= 0:
+                break
+            thread.join(0.05 if remaining is None else min(0.05, remaining))
+    finally:
+        with lock:
+            done = "value" in box or "error" in box
+            if not done:
+                box["abandoned"] = True
+                _LEFT_RUNNING.add(thread)
+    if "error" in box:
+        raise box["error"]
+    return done, box.get("value")
+
+
+def _close_quietly(session: Any) -> None:
+    try:
+        session.close()
+    except Exception as exc:  # pragma: no cover
+        log.debug("closing the zenoh session: %s", exc)
 
 #: A call that finds no queryable within this time of its start is retried, not failed.
 _QUERYABLE_GRACE_S = 3.0
@@ -86,7 +154,18 @@ class ZenohTransport:
         self.context = context
         self.config = config or ZenohConfig.from_env()
         self.domain = int(context.domain_id)
-        self.session = zenoh.open(self.config.session_config())
+        session_config = self.config.session_config()
+        _, self.session = _call_in_thread(lambda: zenoh.open(session_config), "open", None,
+                                          on_late_result=_close_quietly)
+        try:
+            self._start()
+        except BaseException:
+            # Ctrl-C or a failure half-way: never leave a session (and Zenoh's callback
+            # threads, which Python waits for at exit) behind
+            self._close_session()
+            raise
+
+    def _start(self) -> None:
         self.zid = str(self.session.zid())
         self.cache = GraphCache()
         self.cache.listeners.append(self._on_graph_change)
@@ -529,12 +608,19 @@ class ZenohTransport:
             self._pubs.clear()
             self._topic_subs.clear()
             self._queryables.clear()
-        for h in [*handles, self._lv_sub]:
-            _undeclare(h)
-        try:
-            self.session.close()
-        except Exception as exc:  # pragma: no cover
-            log.debug("closing the zenoh session: %s", exc)
+        for h in [*handles, getattr(self, "_lv_sub", None)]:
+            if h is not None:
+                _undeclare(h)
+        self._close_session()
+
+    def _close_session(self) -> None:
+        """Close the session, waiting at most ``config.close_timeout_s`` (interruptibly)."""
+        self._closed = True
+        finished, _ = _call_in_thread(lambda: _close_quietly(self.session), "close",
+                                      self.config.close_timeout_s)
+        if not finished:
+            log.debug("the Zenoh session is still closing after %.3g s (a peer does not "
+                      "answer); not waiting for it", self.config.close_timeout_s)
 
     def __repr__(self) -> str:
         return f"<ZenohTransport zid={self.zid} domain={self.domain} router={self.config.router}>"

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["CommandError", "DashboardError", "RateLimitedError"]
+__all__ = ["CommandError", "DashboardBindError", "DashboardError", "RateLimitedError"]
 
 
 class DashboardError(Exception):
@@ -20,3 +20,8 @@ class CommandError(DashboardError):
 
 class RateLimitedError(CommandError):
     """A command arrived faster than its rate limit allows."""
+
+
+class DashboardBindError(DashboardError, OSError):
+    """The dashboard cannot listen on its address (the port is taken, or the address is
+    not this machine's); the message names host and port."""

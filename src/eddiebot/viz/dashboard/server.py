@@ -41,7 +41,7 @@ from eddiebot.viz.dashboard.core import (
     parse_command,
     text_frame,
 )
-from eddiebot.viz.dashboard.errors import CommandError, RateLimitedError
+from eddiebot.viz.dashboard.errors import CommandError, DashboardBindError, RateLimitedError
 from eddiebot.viz.dashboard.hub import Hub
 from eddiebot.viz.dashboard.node import FOOTPRINT_RADIUS, DashboardNode
 
@@ -340,7 +340,7 @@ def start_dashboard(context: Context, host: str = "127.0.0.1", port: int = 8080,
     A ``DashboardNode`` joins ``context`` with its own executor (wall clock; it never
     drives a sim clock). ``port`` 0 picks a free port. Any ``host`` that is not loopback
     gets a random token unless one is given. With ``print_url`` the URL (with the token)
-    is printed to stdout.
+    is printed to stdout. Raises `DashboardBindError` when the address cannot be bound.
     """
     import uvicorn
 
@@ -354,10 +354,11 @@ def start_dashboard(context: Context, host: str = "127.0.0.1", port: int = 8080,
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         sock.bind((host, port))
-    except OSError:
+    except OSError as exc:
         sock.close()
         node.destroy_node()
-        raise
+        raise DashboardBindError(
+            f"cannot serve the dashboard on {host}:{port}: {exc.strerror or exc}") from exc
     config.port = sock.getsockname()[1]
     app = create_app(node, hub, config)
     uv_config = uvicorn.Config(app, log_level="warning", access_log=False, ws_max_size=1 << 20,
