@@ -82,26 +82,14 @@ def _insert(queue: deque[BoardOp], op: BoardOp) -> None:
     queue.append(op)
 
 
-class ThreadedBoardIO:
-    """Runs ops on a worker thread; ``post(fn)`` must run ``fn`` on the node's executor."""
+class _OpQueue:
+    """The queue both implementations keep: ops by priority and the one in flight."""
 
-    def __init__(self, board: Board, post: Callable[[Callable[[], None]], None]) -> None:
+    def __init__(self, board: Board) -> None:
         self.board = board
-        self._post = post
         self._queue: deque[BoardOp] = deque()
         self._current: BoardOp | None = None
         self._cond = threading.Condition()
-        self._closing = False
-        self._thread = threading.Thread(target=self._worker, name="board-io", daemon=True)
-        self._thread.start()
-
-    def submit(self, op: BoardOp) -> None:
-        with self._cond:
-            _insert(self._queue, op)
-            current = self._current
-            if op.priority == Priority.STOP and current is not None and current.priority > op.priority:
-                self.board.core.interrupt()
-            self._cond.notify_all()
 
     def pending(self, name: str) -> bool:
         with self._cond:
@@ -114,6 +102,25 @@ class ThreadedBoardIO:
             for op in [op for op in self._queue if predicate(op)]:
                 op.cancelled = True
                 self._queue.remove(op)
+
+
+class ThreadedBoardIO(_OpQueue):
+    """Runs ops on a worker thread; ``post(fn)`` must run ``fn`` on the node's executor."""
+
+    def __init__(self, board: Board, post: Callable[[Callable[[], None]], None]) -> None:
+        super().__init__(board)
+        self._post = post
+        self._closing = False
+        self._thread = threading.Thread(target=self._worker, name="board-io", daemon=True)
+        self._thread.start()
+
+    def submit(self, op: BoardOp) -> None:
+        with self._cond:
+            _insert(self._queue, op)
+            current = self._current
+            if op.priority == Priority.STOP and current is not None and current.priority > op.priority:
+                self.board.core.interrupt()
+            self._cond.notify_all()
 
     def _worker(self) -> None:
         while True:
@@ -152,7 +159,7 @@ class ThreadedBoardIO:
                                        timeout_s)
 
 
-class TimedBoardIO:
+class TimedBoardIO(_OpQueue):
     """Runs ops inline against a :class:`~eddiebot.robot.links.TimedEmulatorLink` and
     delivers each result after the wire time the link accounted for.
 
@@ -160,10 +167,8 @@ class TimedBoardIO:
     """
 
     def __init__(self, board: Board, call_later: Callable[[int, Callable[[], None]], Any]) -> None:
-        self.board = board
+        super().__init__(board)
         self._call_later = call_later
-        self._queue: deque[BoardOp] = deque()
-        self._current: BoardOp | None = None
         self._result: tuple[Any, BaseException | None] = (None, None)
         self._token = 0
         self._closing = False
@@ -178,16 +183,6 @@ class TimedBoardIO:
             if current.done is not None and not current.cancelled:
                 current.done(None, BoardInterrupted(current.name))
         self._kick()
-
-    def pending(self, name: str) -> bool:
-        current = self._current
-        return (current is not None and current.name == name) or any(
-            op.name == name for op in self._queue)
-
-    def cancel(self, predicate: Callable[[BoardOp], bool]) -> None:
-        for op in [op for op in self._queue if predicate(op)]:
-            op.cancelled = True
-            self._queue.remove(op)
 
     def _kick(self) -> None:
         if self._current is not None or not self._queue:

@@ -680,7 +680,7 @@ class BoardNode(Node):
             self.get_logger().error(f"acceleration_rate refused: {exc}")
             return str(exc)
         self.acceleration = rate
-        self.io.submit(BoardOp("ACC", lambda b: b.set_acceleration(rate), None, Priority.MOTION))
+        self.io.submit(BoardOp("ACC", lambda b: b.set_acceleration(rate), None, Priority.ROUTINE))
         return None
 
     # -- parameters and diagnostics --------------------------------------------------------
