@@ -15,7 +15,15 @@ from typing import Any
 
 from eddiebot.core.lifecycle import State, TransitionCallbackReturn
 from eddiebot.core.qos import DurabilityPolicy, QoSProfile
-from eddiebot.maps import OccupancyMap, load_map, map_from_msg, map_to_msg, save_map
+from eddiebot.maps import (
+    DEFAULT_FREE_THRESH,
+    DEFAULT_OCCUPIED_THRESH,
+    OccupancyMap,
+    load_map,
+    map_from_msg,
+    map_to_msg,
+    save_map,
+)
 from eddiebot.nav.errors import ParameterError
 from eddiebot.nav.nodes._common import NavServer
 
@@ -96,8 +104,11 @@ class MapServer(NavServer):
 
 class MapSaver(NavServer):
     default_node_name = "map_saver"
-    PARAMETERS = {"save_map_timeout": 2.0, "free_thresh_default": 0.25,
-                  "occupied_thresh_default": 0.65, "map_subscribe_transient_local": True}
+    # eddiebot.maps' thresholds (free 0.196: unknown grey 205 reloads as unknown, as Nav2
+    # saves since navigation2 #5278) for requests that leave them 0 (the dashboard's button)
+    PARAMETERS = {"save_map_timeout": 2.0, "free_thresh_default": DEFAULT_FREE_THRESH,
+                  "occupied_thresh_default": DEFAULT_OCCUPIED_THRESH,
+                  "map_subscribe_transient_local": True}
 
     def __init__(self, node_name: str = "map_saver", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
