@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from eddiebot.core.node import Node
+from eddiebot.core.parameters import ParameterDescriptor
 from eddiebot.msgs.eddiebot_msgs import ADC, BatteryLevel, Distances, Ping, Voltages
 from eddiebot.msgs.sensor_msgs import Range
 from eddiebot.robot.constants import (
@@ -40,7 +41,8 @@ class RangeNode(Node):
 
     def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self.ping_mask = int(self.declare_parameter("ping_mask", PING_MASK).value)
+        self.ping_mask = int(self.declare_parameter(
+            "ping_mask", PING_MASK, ParameterDescriptor(read_only=True)).value)
         self.ir_pubs = {s.name: self.create_publisher(Range, f"/eddie/ir/{s.name.split('_')[1]}", 10)
                         for s in IR_SENSORS}
         self.ping_pubs = {s.name: self.create_publisher(Range, f"/eddie/ping/{s.name.split('_')[1]}", 10)

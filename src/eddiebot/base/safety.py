@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from eddiebot.core.node import Node
+from eddiebot.core.parameters import ParameterDescriptor
 from eddiebot.core.qos import qos_profile_latched
 from eddiebot.msgs.eddiebot_msgs import GetStatus
 from eddiebot.msgs.std_msgs import Bool
@@ -314,7 +315,8 @@ class SafetyNode(Node):
 
     def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        stale_after = float(self.declare_parameter("stale_after", SafetyConfig.stale_after).value)
+        stale_after = float(self.declare_parameter(
+            "stale_after", SafetyConfig.stale_after, ParameterDescriptor(read_only=True)).value)
         if not stale_after > 0.0:
             raise ValueError(f"{self.fully_qualified_name}: stale_after must be > 0 s")
         self.monitor = BoardVetoMonitor(stale_after_ns=round(stale_after * 1e9))
