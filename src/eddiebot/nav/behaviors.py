@@ -234,7 +234,7 @@ BEHAVIOR_PLUGINS: dict[str, type[_Timed]] = {
 def build_behaviors(params: dict[str, object], server: str = "behavior_server"
                     ) -> tuple[BehaviorServerConfig, dict[str, _Timed]]:
     """Behaviour server config and ``{name: behaviour}`` from its ``ros__parameters``."""
-    from eddiebot.nav.errors import ParameterError
+    from eddiebot.nav.errors import UnsupportedPlugin
     from eddiebot.nav.params import from_params
 
     flat = {k: v for k, v in params.items() if not isinstance(v, dict)}
@@ -245,7 +245,7 @@ def build_behaviors(params: dict[str, object], server: str = "behavior_server"
         plugin = str(sub.get("plugin", "")) if isinstance(sub, dict) else ""
         cls = BEHAVIOR_PLUGINS.get(plugin.replace("/", "::"))
         if cls is None:
-            raise ParameterError(server, f"{name}.plugin", plugin or None,
+            raise UnsupportedPlugin(server, f"{name}.plugin", plugin or None,
                                  f"unknown behaviour plugin; known: {sorted(BEHAVIOR_PLUGINS)}")
         out[name] = cls(cfg)
     return cfg, out

@@ -21,7 +21,7 @@ from eddiebot.nav.behaviors import BehaviorServerConfig, build_behaviors
 from eddiebot.nav.collision_monitor import CollisionMonitor, build_collision_monitor
 from eddiebot.nav.controllers import ControllerServer, build_controller_server
 from eddiebot.nav.costmap.layered import LayeredCostmap, build_costmap
-from eddiebot.nav.errors import ParameterError
+from eddiebot.nav.errors import UnsupportedPlugin
 from eddiebot.nav.params import from_params
 from eddiebot.nav.planners import GlobalPlanner, build_planners, plugin_key
 from eddiebot.nav.smoother import SimpleSmoother, SimpleSmootherConfig
@@ -100,7 +100,7 @@ def load_nav2_config(
             sub = dict(p.get(name, {}) or {})
             plugin = plugin_key(str(sub.pop("plugin", "nav2_smoother::SimpleSmoother")))
             if plugin != "nav2_smoother::SimpleSmoother":
-                raise ParameterError("smoother_server", f"{name}.plugin", plugin,
+                raise UnsupportedPlugin("smoother_server", f"{name}.plugin", plugin,
                                      "only nav2_smoother::SimpleSmoother is implemented")
             out.smoothers[name] = SimpleSmoother(
                 from_params(SimpleSmootherConfig, sub, server=f"smoother_server.{name}"), name)

@@ -28,6 +28,15 @@ class ParameterError(NavError, ValueError):
         super().__init__(f"{server}: parameter {key!r} = {value!r}: {reason}")
 
 
+class UnsupportedPlugin(ParameterError):
+    """A plugin type named in the parameters that eddiebot cannot load (``key`` is
+    ``<instance>.plugin``, ``value`` the type); the bring-up must not go on without it."""
+
+    @property
+    def plugin(self) -> str:
+        return str(self.value)
+
+
 class CostmapError(NavError):
     """Invalid costmap operation (bad geometry, unknown layer)."""
 
@@ -182,4 +191,5 @@ __all__ = [
     "SmootherTimedOut",
     "StartOccupied",
     "StartOutsideMapBounds",
+    "UnsupportedPlugin",
 ]

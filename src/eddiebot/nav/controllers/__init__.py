@@ -29,7 +29,7 @@ from eddiebot.nav.controllers.rpp import (
     RegulatedPurePursuitController,
 )
 from eddiebot.nav.costmap.layered import LayeredCostmap
-from eddiebot.nav.errors import InvalidController, ParameterError
+from eddiebot.nav.errors import InvalidController, ParameterError, UnsupportedPlugin
 from eddiebot.nav.params import from_params, require
 from eddiebot.nav.planners import plugin_key
 from eddiebot.nav.types import Twist2D
@@ -120,7 +120,7 @@ def _plugin(params: Mapping[str, Any], name: str, registry: Mapping[str, type[An
         raise ParameterError(server, f"{name}.plugin", None, "missing plugin type")
     cls = registry.get(plugin_key(str(plugin)))
     if cls is None:
-        raise ParameterError(server, f"{name}.plugin", plugin,
+        raise UnsupportedPlugin(server, f"{name}.plugin", plugin,
                              f"unknown plugin; known: {sorted(registry)}")
     return cls, sub
 

@@ -40,7 +40,7 @@ from eddiebot.nav.costmap.layers import (
     StaticLayerConfig,
     empty_bounds,
 )
-from eddiebot.nav.errors import ParameterError
+from eddiebot.nav.errors import ParameterError, UnsupportedPlugin
 from eddiebot.nav.params import from_params, require
 
 
@@ -269,7 +269,7 @@ def _layer_from_params(name: str, params: Mapping[str, Any], server: str) -> Lay
         raise ParameterError(server, f"{name}.plugin", None, "missing plugin type")
     cls = COSTMAP_PLUGINS.get(plugin)
     if cls is None:
-        raise ParameterError(server, f"{name}.plugin", plugin,
+        raise UnsupportedPlugin(server, f"{name}.plugin", plugin,
                              f"unknown costmap plugin; known: {sorted(COSTMAP_PLUGINS)}")
     where = f"{server}.{name}"
     if cls is StaticLayer:

@@ -5,7 +5,8 @@ One module per server (``map_server``, ``amcl``, ``planner_server``, ``controlle
 ``bt_navigator``, ``waypoint_follower``), each taking Nav2's parameter names and defaults,
 serving the nav2_msgs actions and services, and publishing Nav2's topics. The velocity
 chain is ``/cmd_vel_nav`` → velocity smoother → ``/cmd_vel_smoothed`` → collision monitor
-→ ``/cmd_vel_safe``. ``SERVER_CLASSES`` maps default node names to classes, imported lazily.
+→ ``/cmd_vel_safe``. ``SERVER_CLASSES`` maps default node names to classes, imported lazily;
+``params_audit.audit_nav2_params`` says what a Nav2 parameters file asks that they do not do.
 """
 
 from __future__ import annotations

@@ -53,7 +53,7 @@ from eddiebot.nav.errors import ParameterError
 from eddiebot.nav.nodes._common import NavServer, twist_from_msg, twist_to_msg
 from eddiebot.nav.nodes.amcl import LocalizationWatch
 
-__all__ = ["CollisionMonitorNode"]
+__all__ = ["SOURCE_KEYS", "CollisionMonitorNode"]
 
 _SOURCE_DEFAULTS: dict[str, dict[str, Any]] = {
     "scan": {},
@@ -61,6 +61,10 @@ _SOURCE_DEFAULTS: dict[str, dict[str, Any]] = {
     "range": {"obstacles_angle": math.pi / 180.0},
     "polygon": {"sampling_distance": 0.1},
 }
+#: the keys each source type reads
+SOURCE_KEYS: dict[str, frozenset[str]] = {
+    kind: frozenset({"type", "topic", "enabled", "source_timeout", *defaults})
+    for kind, defaults in _SOURCE_DEFAULTS.items()}
 
 
 def _matrix(t: Any) -> np.ndarray:

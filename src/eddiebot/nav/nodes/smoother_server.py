@@ -18,9 +18,9 @@ from eddiebot.nav.errors import (
     FailedToSmoothPath,
     InvalidSmoother,
     NavError,
-    ParameterError,
     SmootherError,
     SmootherTimedOut,
+    UnsupportedPlugin,
 )
 from eddiebot.nav.nodes._common import NavServer, path_from_msg, path_to_msg
 from eddiebot.nav.params import from_params
@@ -63,7 +63,7 @@ class SmootherServer(NavServer):
                 sub = dict(tree.get(name) or {})
                 plugin = plugin_key(str(sub.pop("plugin", "nav2_smoother::SimpleSmoother")))
                 if plugin != "nav2_smoother::SimpleSmoother":
-                    raise ParameterError(self.get_name(), f"{name}.plugin", plugin,
+                    raise UnsupportedPlugin(self.get_name(), f"{name}.plugin", plugin,
                                          "only nav2_smoother::SimpleSmoother is implemented")
                 self.smoothers[name] = SimpleSmoother(
                     from_params(SimpleSmootherConfig, sub, server=f"{self.get_name()}.{name}"), name)

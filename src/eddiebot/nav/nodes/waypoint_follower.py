@@ -20,13 +20,19 @@ import numpy as np
 from eddiebot.core.action import ActionClient, ActionServer, CancelResponse, ServerGoalHandle, sleep
 from eddiebot.core.lifecycle import State, TransitionCallbackReturn
 from eddiebot.core.qos import qos_profile_sensor_data
-from eddiebot.nav.errors import ParameterError
+from eddiebot.nav.errors import ParameterError, UnsupportedPlugin
 from eddiebot.nav.nodes._common import NavServer
 
-__all__ = ["WaypointFollower", "image_to_bgr", "write_png_atomic"]
+__all__ = ["TASK_EXECUTOR_KEYS", "WaypointFollower", "image_to_bgr", "write_png_atomic"]
 
-_TASKS = ("nav2_waypoint_follower::WaitAtWaypoint", "nav2_waypoint_follower::PhotoAtWaypoint",
-          "nav2_waypoint_follower::InputAtWaypoint")
+#: task executor plugins and the keys each one reads (besides ``plugin`` and ``enabled``)
+TASK_EXECUTOR_KEYS: dict[str, frozenset[str]] = {
+    "nav2_waypoint_follower::WaitAtWaypoint": frozenset({"waypoint_pause_duration"}),
+    "nav2_waypoint_follower::PhotoAtWaypoint": frozenset(
+        {"camera_image_topic_name", "save_images_dir", "image_format"}),
+    "nav2_waypoint_follower::InputAtWaypoint": frozenset(),
+}
+_TASKS = tuple(TASK_EXECUTOR_KEYS)
 
 
 def image_to_bgr(msg: Any) -> np.ndarray:
@@ -94,7 +100,7 @@ class WaypointFollower(NavServer):
             default = "nav2_waypoint_follower::WaitAtWaypoint" if name == "wait_at_waypoint" else ""
             plugin = str(sub.get("plugin", default)).replace("/", "::")
             if plugin not in _TASKS:
-                raise ParameterError(self.get_name(), f"{name}.plugin", plugin or None,
+                raise UnsupportedPlugin(self.get_name(), f"{name}.plugin", plugin or None,
                                      f"unknown task executor; known: {list(_TASKS)}")
             task: dict[str, Any] = {"plugin": plugin, "enabled": bool(sub.get("enabled", True))}
             if plugin.endswith("WaitAtWaypoint"):

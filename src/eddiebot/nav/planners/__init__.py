@@ -17,7 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from eddiebot.nav.costmap.costmap2d import Costmap2D
-from eddiebot.nav.errors import InvalidPlanner, ParameterError
+from eddiebot.nav.errors import InvalidPlanner, ParameterError, UnsupportedPlugin
 from eddiebot.nav.params import from_params, require
 from eddiebot.nav.planners.navfn import NavfnConfig, NavfnPlanner
 from eddiebot.nav.planners.theta_star import ThetaStarConfig, ThetaStarPlanner
@@ -68,7 +68,7 @@ def build_planners(params: Mapping[str, Any] | None = None, server: str = "plann
             raise ParameterError(server, f"{name}.plugin", None, "missing plugin type")
         entry = PLANNER_PLUGINS.get(plugin_key(str(plugin)))
         if entry is None:
-            raise ParameterError(server, f"{name}.plugin", plugin,
+            raise UnsupportedPlugin(server, f"{name}.plugin", plugin,
                                  f"unknown planner plugin; known: {sorted(PLANNER_PLUGINS)}")
         cls, cfg_cls = entry
         out[name] = cls(from_params(cfg_cls, sub, server=f"{server}.{name}"), name=name)
