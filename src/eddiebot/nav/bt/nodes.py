@@ -42,7 +42,7 @@ __all__ = [
 ]
 
 #: planner/controller codes no recovery can fix (Nav2's WouldA*RecoveryHelp lists the others)
-_HOPELESS = {201, 203, 204, 205, 206, 101, 103}
+_HOPELESS = {201, 203, 204, 205, 206, 301, 303, 304, 305, 306, 101, 103}
 
 
 @dataclass

@@ -30,6 +30,7 @@ __all__ = [
     "path_from_msg",
     "path_to_msg",
     "pose_from_msg",
+    "pose_is_finite",
     "pose_stamped",
     "robot_pose",
     "twist_from_msg",
@@ -135,6 +136,14 @@ class NavServer(LifecycleNode):
 # -- conversions ---------------------------------------------------------------------------
 def _yaw_of(q: Any) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
+def pose_is_finite(pose: Any) -> bool:
+    """Whether a geometry_msgs/Pose has a finite position and orientation (a NaN or inf goal
+    is refused at once: the planner would report it outside the map only after the robot's
+    pose, and a NaN yaw makes a goal checker spin forever)."""
+    p, q = pose.position, pose.orientation
+    return all(math.isfinite(float(v)) for v in (p.x, p.y, p.z, q.x, q.y, q.z, q.w))
 
 
 def pose_from_msg(pose: Any) -> npt.NDArray[np.float64]:

@@ -33,7 +33,13 @@ from eddiebot.nav.bt import (
 )
 from eddiebot.nav.bt.nodes import path_length_from
 from eddiebot.nav.errors import ParameterError
-from eddiebot.nav.nodes._common import NavServer, path_from_msg, pose_stamped, robot_pose
+from eddiebot.nav.nodes._common import (
+    NavServer,
+    path_from_msg,
+    pose_is_finite,
+    pose_stamped,
+    robot_pose,
+)
 
 __all__ = ["BtNavigator"]
 
@@ -191,6 +197,17 @@ class BtNavigator(NavServer):
         action = NavigateToPose if kind == "navigate_to_pose" else NavigateThroughPoses
         result = action.Result()
         assert self._clients is not None
+        poses = [handle.request.pose] if kind == "navigate_to_pose" else list(handle.request.poses)
+        bad = [i for i, ps in enumerate(poses) if not pose_is_finite(ps.pose)]
+        if bad:
+            # refused before it preempts anything: the planner would answer GOAL_OUTSIDE_MAP
+            # (204, or 304 through poses) only after a tick, a NaN yaw never satisfies a goal
+            # checker, and no recovery helps either
+            result.error_code = 204 if kind == "navigate_to_pose" else 304
+            result.error_msg = f"{kind}: goal pose {bad[0]} is not finite"
+            self.get_logger().warning(result.error_msg)
+            handle.abort()
+            return result
         previous = self._handle
         self._handle = handle
         if previous is not None and previous.is_active and self._tree is not None and self._kind == kind:

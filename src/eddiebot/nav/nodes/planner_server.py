@@ -21,8 +21,14 @@ from eddiebot.core.tf import Buffer, TransformException, TransformListener
 from eddiebot.core.time import Duration
 from eddiebot.msgs.nav_msgs import Path
 from eddiebot.nav.costmap import LayeredCostmap, build_costmap
-from eddiebot.nav.errors import NavError, PlannerError, PlannerTFError
-from eddiebot.nav.nodes._common import NavServer, path_to_msg, pose_from_msg
+from eddiebot.nav.errors import (
+    GoalOutsideMapBounds,
+    NavError,
+    PlannerError,
+    PlannerTFError,
+    StartOutsideMapBounds,
+)
+from eddiebot.nav.nodes._common import NavServer, path_to_msg, pose_from_msg, pose_is_finite
 from eddiebot.nav.nodes._costmap import CostmapHost
 from eddiebot.nav.planners import GlobalPlanner, build_planners, get_planner
 
@@ -97,8 +103,12 @@ class PlannerServer(NavServer):
         return CancelResponse.ACCEPT
 
     # -- planning -----------------------------------------------------------------------------
-    def _in_global(self, pose_stamped: Any) -> npt.NDArray[np.float64]:
+    def _in_global(self, pose_stamped: Any, what: str = "goal") -> npt.NDArray[np.float64]:
         assert self.host is not None
+        if not pose_is_finite(pose_stamped.pose):
+            # no map holds a NaN/inf position; a NaN orientation is as unusable
+            error = StartOutsideMapBounds if what == "start" else GoalOutsideMapBounds
+            raise error(f"{what} pose is not finite: {_pose_text(pose_stamped.pose)}")
         p = pose_from_msg(pose_stamped.pose)
         frame = pose_stamped.header.frame_id or self.host.global_frame
         if frame == self.host.global_frame:
@@ -113,7 +123,7 @@ class PlannerServer(NavServer):
     def _start(self, goal: Any) -> npt.NDArray[np.float64]:
         assert self.host is not None
         if goal.use_start:
-            return self._in_global(goal.start)
+            return self._in_global(goal.start, "start")
         pose = self.host.robot_pose()
         if pose is None:
             raise PlannerTFError(f"no robot pose ({self.host.global_frame} -> {self.host.base_frame})")
@@ -128,11 +138,12 @@ class PlannerServer(NavServer):
         return np.asarray(path, dtype=np.float64).reshape(-1, 3)
 
     def _finish(self, handle: ServerGoalHandle, result: Any, path: npt.NDArray[np.float64] | None,
-                err: NavError | None, t0: int) -> Any:
+                err: NavError | None, t0: int, code_offset: int = 0) -> Any:
+        """``code_offset`` 100 gives ComputePathThroughPoses' codes (300..309)."""
         assert self.host is not None
         result.planning_time = Duration(nanoseconds=self.now().nanoseconds - t0).to_msg()
         if err is not None:
-            result.error_code = int(err.result_code or PlannerError.result_code)
+            result.error_code = int(err.result_code or PlannerError.result_code) + code_offset
             result.error_msg = str(err)
             self.get_logger().warning(f"planning failed: {err}")
             handle.abort()
@@ -151,7 +162,8 @@ class PlannerServer(NavServer):
         goal = handle.request
         result = ComputePathToPose.Result()
         try:
-            path = self.plan(self._start(goal), self._in_global(goal.goal), goal.planner_id)
+            target = self._in_global(goal.goal)
+            path = self.plan(self._start(goal), target, goal.planner_id)
         except NavError as err:
             return self._finish(handle, result, None, err, t0)
         return self._finish(handle, result, path, None, t0)
@@ -165,14 +177,19 @@ class PlannerServer(NavServer):
         try:
             if not goal.goals:
                 raise PlannerError("no goals given")
+            targets = [self._in_global(g, f"goal {i}") for i, g in enumerate(goal.goals)]
             start = self._start(goal)
             parts: list[npt.NDArray[np.float64]] = []
-            for g in goal.goals:
-                target = self._in_global(g)
+            for target in targets:
                 seg = self.plan(start, target, goal.planner_id)
                 parts.append(seg if not parts else seg[1:])
                 start = target
             path = np.concatenate(parts, axis=0)
         except NavError as err:
-            return self._finish(handle, result, None, err, t0)
+            return self._finish(handle, result, None, err, t0, 100)
         return self._finish(handle, result, path, None, t0)
+
+
+def _pose_text(pose: Any) -> str:
+    p, q = pose.position, pose.orientation
+    return f"position ({p.x}, {p.y}, {p.z}), orientation ({q.x}, {q.y}, {q.z}, {q.w})"

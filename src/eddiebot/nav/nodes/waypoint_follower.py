@@ -21,7 +21,7 @@ from eddiebot.core.action import ActionClient, ActionServer, CancelResponse, Ser
 from eddiebot.core.lifecycle import State, TransitionCallbackReturn
 from eddiebot.core.qos import qos_profile_sensor_data
 from eddiebot.nav.errors import ParameterError, UnsupportedPlugin
-from eddiebot.nav.nodes._common import NavServer
+from eddiebot.nav.nodes._common import NavServer, pose_is_finite
 
 __all__ = ["TASK_EXECUTOR_KEYS", "WaypointFollower", "image_to_bgr", "write_png_atomic"]
 
@@ -33,6 +33,8 @@ TASK_EXECUTOR_KEYS: dict[str, frozenset[str]] = {
     "nav2_waypoint_follower::InputAtWaypoint": frozenset(),
 }
 _TASKS = tuple(TASK_EXECUTOR_KEYS)
+#: FollowWaypoints' NO_VALID_WAYPOINTS (Kilted's code; Jazzy's message ends at 601)
+NO_VALID_WAYPOINTS = 602
 
 
 def image_to_bgr(msg: Any) -> np.ndarray:
@@ -172,6 +174,13 @@ class WaypointFollower(NavServer):
         loops = int(getattr(goal, "number_of_loops", 0))
         start = int(getattr(goal, "goal_index", 0))
         stop_on_failure = bool(self.param("stop_on_failure"))
+        bad = [i for i, ps in enumerate(poses) if not pose_is_finite(ps.pose)]
+        if not poses or bad:
+            result.error_code = NO_VALID_WAYPOINTS
+            result.error_msg = (f"waypoints {bad} are not finite" if bad else "no waypoints given")
+            self.get_logger().warning(f"follow_waypoints: {result.error_msg}")
+            handle.abort()
+            return result
         missed: list[Any] = []
         for loop in range(loops + 1):
             for i in range(start if loop == 0 else 0, len(poses)):
