@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -23,7 +24,14 @@ import yaml
 
 from eddiebot.slam.errors import ConfigError
 
-__all__ = ["SlamConfig", "SlamMode", "load_slam_config"]
+__all__ = [
+    "CERES_PARAMETERS",
+    "NODE_PARAMETERS",
+    "SlamConfig",
+    "SlamMode",
+    "load_slam_config",
+    "parameter_warnings",
+]
 
 SlamMode = str  # "mapping" | "localization" | "lifelong"
 _MODES = ("mapping", "localization", "lifelong")
@@ -52,6 +60,17 @@ class SlamConfig:
     use_map_saver: bool = True
     mode: str = "mapping"
     map_file_name: str = ""
+    map_start_pose: tuple[float, ...] = ()
+    """Pose (x, y, theta in the map frame, m/rad) at which a session loaded from
+    ``map_file_name`` at start-up begins; empty = unset (see ``map_start_at_dock``)."""
+    map_start_at_dock: bool = False
+    """Begin a session loaded at start-up at its first node (mapping, lifelong)."""
+    map_name: str = "/map"
+    """Topic of the occupancy grid (its metadata on ``<map_name>_metadata``)."""
+    scan_queue_size: int = 1
+    """Async processing: scans kept waiting while one is processed (older ones dropped)."""
+    paused_new_measurements: bool = False
+    """Start with new measurements paused (``~/pause_new_measurements`` toggles it)."""
     debug_logging: bool = False
     throttle_scans: int = 1
     transform_publish_period: float = 0.05
@@ -94,6 +113,19 @@ class SlamConfig:
     use_response_expansion: bool = True
     min_pass_through: int = 2
     occupancy_threshold: float = 0.1
+    # --- upstream keys accepted and not used (the node names each one it is given:
+    # `ignored_parameters`)
+    position_covariance_scale: float = 1.0
+    yaw_covariance_scale: float = 1.0
+    use_lifecycle_manager: bool = False
+    lifelong_search_use_tree: bool = False
+    lifelong_minimum_score: float = 0.1
+    lifelong_iou_match: float = 0.85
+    lifelong_node_removal_score: float = 0.04
+    lifelong_overlap_score_scale: float = 0.06
+    lifelong_constraint_multiplier: float = 0.08
+    lifelong_nearby_penalty: float = 0.001
+    lifelong_candidates_scale: float = 0.03
     # --- eddiebot's own
     optimizer: str = "isam2"
     """``isam2`` (incremental, every node) or ``levenberg_marquardt`` (batch, on loop closure)."""
@@ -241,6 +273,15 @@ class SlamConfig:
     depth camera's far returns are too coarse for the map; 0 = ``max_laser_range``."""
     lifelong_node_overlap: float = 0.9
     """Lifelong mode retires an old node when this share of its cells is seen by a newer one."""
+    max_odometry_jump: float = 1.0
+    """Largest odometry translation (m) between two consecutive scans the core is given that
+    is taken as motion; a larger change (a wheel-odometry reset, a bad sample) is not
+    integrated: the odometry is re-anchored where the robot last was and the scan starts a
+    new chain, linked to the graph by scan matching. 1 m is 2 s at Eddie's top speed
+    (0.5 m/s), more than the node's ``minimum_time_interval`` gate lets pass; 0 = off."""
+    max_odometry_jump_heading: float = 2.0
+    """The same for the odometry heading (rad): 2 rad is 2 s at 1 rad/s, beyond anything
+    Eddie turns between two scans that pass the node's gate; 0 = off."""
     extra: dict[str, Any] = field(default_factory=dict, compare=False, repr=False)
     """Parameters present in the file but not used by the core (kept for the node)."""
 
@@ -248,6 +289,8 @@ class SlamConfig:
         # A node that declares every field as a parameter hands ``extra`` back as None.
         if self.extra is None:
             object.__setattr__(self, "extra", {})
+        if not isinstance(self.map_start_pose, tuple):
+            object.__setattr__(self, "map_start_pose", tuple(self.map_start_pose or ()))
 
     def validated(self) -> SlamConfig:
         """Apply the node's fall-backs for non-positive values and check enumerations."""
@@ -305,7 +348,22 @@ class SlamConfig:
             value = getattr(out, name)
             if not math.isfinite(value) or value < 0:
                 raise ConfigError(f"parameter '{name}' must be a finite value >= 0, got {value}")
+        if out.map_start_pose and (
+            len(out.map_start_pose) != 3
+            or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                for v in out.map_start_pose
+            )
+        ):
+            raise ConfigError(
+                f"parameter 'map_start_pose' must be [x, y, theta], got {list(out.map_start_pose)}"
+            )
+        for name in ("max_odometry_jump", "max_odometry_jump_heading"):
+            value = getattr(out, name)
+            if not math.isfinite(value) or value < 0:
+                raise ConfigError(f"parameter '{name}' must be a finite value >= 0, got {value}")
         for name, least in (
+            ("scan_queue_size", 1),
             ("isam2_relinearize_skip", 1),
             ("isam2_recent_nodes_last", 0),
             ("loop_match_maximum_chains", 0),
@@ -356,6 +414,12 @@ def _coerce(key: str, value: Any, default: Any, source: str) -> Any:
         if isinstance(value, str):
             return value
         raise ConfigError(f"{source}: parameter '{key}' must be a string, got {value!r}")
+    if isinstance(default, tuple):
+        if isinstance(value, (list, tuple)) and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value
+        ):
+            return tuple(float(v) for v in value)
+        raise ConfigError(f"{source}: parameter '{key}' must be a list of numbers, got {value!r}")
     return value
 
 
@@ -398,3 +462,108 @@ def load_slam_config(
     if overrides:
         params.update(overrides)
     return SlamConfig.from_parameters(params, source=source)
+
+
+#: The Ceres solver's keys: GTSAM optimises the pose graph instead (``optimizer``).
+CERES_PARAMETERS = (
+    "solver_plugin",
+    "ceres_linear_solver",
+    "ceres_preconditioner",
+    "ceres_trust_strategy",
+    "ceres_dogleg_type",
+    "ceres_loss_function",
+)
+
+#: The node's own parameters, not `SlamConfig` fields.
+NODE_PARAMETERS = ("processing", "use_sim_time")
+
+
+_Rule = Callable[["SlamConfig", Any], "str | None"]
+
+
+def _always(why: str) -> _Rule:
+    return lambda _config, _value: why
+
+
+def _if_true(why: str) -> _Rule:
+    return lambda _config, value: why if value else None
+
+
+def _if_not_one(why: str) -> _Rule:
+    return lambda _config, value: why if value != 1.0 else None
+
+
+def _lifelong(config: SlamConfig, _value: Any) -> str:
+    if config.mode == "lifelong":
+        return (
+            "eddiebot's lifelong mode retires a node when lifelong_node_overlap of its cells "
+            "is seen again, not by Karto's lifelong scores"
+        )
+    return f"read in lifelong mode only, and mode is {config.mode}"
+
+
+_LIFELONG_PARAMETERS = (
+    "lifelong_search_use_tree",
+    "lifelong_minimum_score",
+    "lifelong_iou_match",
+    "lifelong_node_removal_score",
+    "lifelong_overlap_score_scale",
+    "lifelong_constraint_multiplier",
+    "lifelong_nearby_penalty",
+    "lifelong_candidates_scale",
+)
+
+#: slam_toolbox keys that are accepted but change nothing here → why, or None when the given
+#: value asks for nothing the node leaves out (a feature off, a scale of 1).
+_IGNORED: dict[str, _Rule] = {
+    **dict.fromkeys(
+        CERES_PARAMETERS,
+        lambda config, _value: (
+            f"GTSAM replaces Ceres: the pose graph is optimised with {config.optimizer}, "
+            "see the 'optimizer' parameter"
+        ),
+    ),
+    "stack_size_to_use": _always("the Python (de)serialisation needs no larger stack"),
+    "enable_interactive_mode": _if_true(
+        "no interactive markers; the graph is published on ~/graph_visualization"
+    ),
+    "position_covariance_scale": _if_not_one("no ~/pose topic is published"),
+    "yaw_covariance_scale": _if_not_one("no ~/pose topic is published"),
+    "use_lifecycle_manager": _if_true("the node is not a lifecycle node: it starts active"),
+    "localization_on_configure": _always(
+        "only slam_toolbox's experimental map_and_localization node reads it"
+    ),
+    "paused_processing": _always("slam_toolbox's interactive mode sets it at run time"),
+    "interactive_mode": _always("slam_toolbox's interactive mode sets it at run time"),
+    **dict.fromkeys(_LIFELONG_PARAMETERS, _lifelong),
+}
+
+
+def parameter_warnings(given: dict[str, Any], config: SlamConfig) -> list[str]:
+    """What a parameter set asks for that the SLAM does not do, one line per reason.
+
+    ``given``: the parameters a file or command line set (name → value), ``config`` the
+    resulting configuration. Accepted-but-unused slam_toolbox keys whose value would matter
+    give ``ignored: <key>[, <key>...] (<why>)`` (keys sharing a reason share a line: Ceres'
+    keys, the lifelong ones); a key that is neither slam_toolbox's nor eddiebot's gives
+    ``unknown parameter: <key> (...)``.
+    """
+    reasons: dict[str, list[str]] = {}
+    unknown: list[str] = []
+    known = {f.name for f in fields(SlamConfig)} - {"extra"}
+    for name, value in given.items():
+        if name in NODE_PARAMETERS:
+            continue
+        rule = _IGNORED.get(name)
+        if rule is not None:
+            why = rule(config, value)
+            if why is not None:
+                reasons.setdefault(why, []).append(name)
+        elif name not in known:
+            unknown.append(name)
+    out = [f"ignored: {', '.join(names)} ({why})" for why, names in reasons.items()]
+    out += [
+        f"unknown parameter: {name} (neither slam_toolbox's nor eddiebot's; ignored)"
+        for name in unknown
+    ]
+    return out

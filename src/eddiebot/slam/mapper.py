@@ -21,7 +21,13 @@ to the node.)
 
 Bad input never raises and never reaches the graph: a scan with a beam count that does not
 match its angles or its announced count, too few valid ranges, non-finite angles, a stamp
-older than the previous scan's, or a non-finite odometry pose is skipped with one warning.
+older than the previous scan's, a beam count or angle range other than the first scan's (as
+Karto's laser check), or a non-finite odometry pose is skipped with one warning. NaN and ±Inf
+ranges are ignored beam by beam (one warning, then counted in ``nonfinite_range_scans``). An
+odometry step between consecutive scans beyond ``max_odometry_jump`` (m) or
+``max_odometry_jump_heading`` (rad) is not integrated: the robot is taken to be where it was,
+the odometry is re-anchored there, and the scan starts a new chain that scan matching links to
+the nearest recent node (a weak link where the match fails); ``odometry_jumps`` counts them.
 """
 
 from __future__ import annotations
@@ -381,6 +387,12 @@ class _State:
     running: deque[int] = field(default_factory=deque)
     chain_start: int = 0
     """First node of the current odometry chain (odometry poses before it are in another frame)."""
+    last_seen_odom: FloatArray | None = None
+    """Odometry pose of the last scan that passed the input checks (for `max_odometry_jump`)."""
+    pending_start: FloatArray | None = None
+    """Robot pose (map frame) at which the next scan starts (`start_at`)."""
+    scan_shape: tuple[int, float, float] | None = None
+    """Beam count and first / last beam angle of the first scan; later scans must match."""
 
 
 class SlamCore:
@@ -444,6 +456,10 @@ class SlamCore:
         self._bary_local = np.zeros((0, 2))
         self._normal_cache: dict[int, FloatArray] = {}
         self._active = np.zeros(0, dtype=bool)
+        self.odometry_jumps = 0
+        """Odometry jumps beyond `max_odometry_jump` / `max_odometry_jump_heading` re-anchored."""
+        self.nonfinite_range_scans = 0
+        """Scans that held NaN or ±Inf ranges (those beams are ignored)."""
 
     @property
     def mode(self) -> str:
@@ -497,6 +513,94 @@ class SlamCore:
         self._state.last_pose = p.copy()
         self._state.last_processed_odom = None
         self._state.map_to_odom = se2_compose(p, se2_inverse(o))
+
+    def start_at(self, pose: npt.ArrayLike) -> None:
+        """Begin the next scan at robot pose ``pose`` (map frame, m/rad) whatever its odometry.
+
+        The scan starts a new odometry chain; in mapping and lifelong modes it is matched
+        against, and linked to, the graph's nodes near ``pose`` (slam_toolbox's
+        START_AT_GIVEN_POSE / START_AT_FIRST_NODE / LOCALIZE_AT_POSE after a load)."""
+        p = np.asarray(pose, dtype=np.float64).reshape(3).copy()
+        st = self._state
+        st.pending_start = p
+        st.last_pose = p.copy()
+        st.last_processed_odom = None
+        st.last_seen_odom = None
+        if not self.nodes or self.mode == "localization":
+            return
+        positions = self._positions()
+        sensor = _compose1(p, self.sensor_offset)
+        active = np.flatnonzero(self._active_nodes())
+        if active.size == 0:
+            return
+        d = np.hypot(positions[active, 0] - sensor[0], positions[active, 1] - sensor[1])
+        order = np.argsort(d, kind="stable")
+        near = [int(active[k]) for k in order if d[k] <= self.config.scan_buffer_maximum_scan_distance]
+        if not near:
+            near = [int(active[order[0]])]
+        st.running = deque(sorted(near[: self.config.scan_buffer_size]))
+
+    def forget_odometry(self) -> None:
+        """Do not compare the next scan's odometry with the last one's (after a pause, when
+        the robot may have moved any distance)."""
+        self._state.last_seen_odom = None
+
+    def _reanchor(
+        self, odom: FloatArray, step: FloatArray, warnings: list[SlamWarning], stamp: int
+    ) -> None:
+        """Refuse an odometry jump: the robot is taken to be where it was before it, and the
+        scan starts a new chain (linked to the graph by scan matching, see `_map`)."""
+        st = self._state
+        before = st.last_seen_odom
+        assert before is not None
+        if st.last_pose is not None and st.last_processed_odom is not None:
+            where = _compose1(st.last_pose, _between1(st.last_processed_odom, before))
+        else:
+            where = _compose1(st.map_to_odom, before)
+        st.map_to_odom = _compose1(where, _inverse1(odom))
+        st.last_pose = where
+        st.last_processed_odom = None
+        self.odometry_jumps += 1
+        cfg = self.config
+        self._warn(
+            warnings,
+            "odometry_jump",
+            f"odometry jumped {math.hypot(step[0], step[1]):.2f} m, "
+            f"{abs(_wrap1(float(step[2]))):.2f} rad before the scan at {stamp * 1e-9:.3f} s "
+            f"(max_odometry_jump {cfg.max_odometry_jump} m, max_odometry_jump_heading "
+            f"{cfg.max_odometry_jump_heading} rad): not integrated; the odometry is re-anchored "
+            "where the robot was and the scan starts a new chain, linked by scan matching",
+            stamp,
+        )
+
+    def _odometry_jumped(self, odom: FloatArray) -> FloatArray | None:
+        """The odometry step since the last scan when it is a jump, else None."""
+        last = self._state.last_seen_odom
+        if last is None:
+            return None
+        cfg = self.config
+        step = _between1(last, odom)
+        far = cfg.max_odometry_jump > 0 and math.hypot(step[0], step[1]) > cfg.max_odometry_jump
+        turned = (
+            cfg.max_odometry_jump_heading > 0
+            and abs(_wrap1(float(step[2]))) > cfg.max_odometry_jump_heading
+        )
+        return step if far or turned else None
+
+    def _scan_shape_error(self, scan: Scan) -> str:
+        """Why a scan's beams differ from the first scan's (empty when they do not)."""
+        n = scan.ranges.size
+        shape = (n, float(scan.angles[0]), float(scan.angles[-1])) if n else (0, 0.0, 0.0)
+        first = self._state.scan_shape
+        if first is None:
+            self._state.scan_shape = shape
+            return ""
+        if shape[0] == first[0] and abs(shape[1] - first[1]) <= 1e-6 and abs(shape[2] - first[2]) <= 1e-6:
+            return ""
+        return (
+            f"{shape[0]} beams over [{shape[1]:.4f}, {shape[2]:.4f}] rad; the first scan had "
+            f"{first[0]} over [{first[1]:.4f}, {first[2]:.4f}] rad"
+        )
 
     # ------------------------------------------------------------------ warnings
     def _warn(self, out: list[SlamWarning], kind: str, message: str, stamp_ns: int) -> None:
@@ -554,7 +658,34 @@ class SlamCore:
             kind = "time_backwards" if "backwards" in check.reason else "bad_scan"
             self._warn(warnings, kind, f"scan at {stamp} ns skipped: {check.reason}", stamp)
             return ProcessResult(ProcessStatus.SKIPPED, self.map_to_odom, warnings=tuple(warnings))
+        shape_error = self._scan_shape_error(scan)
+        if shape_error:
+            self._warn(
+                warnings, "scan_shape", f"scan at {stamp * 1e-9:.3f} s skipped: {shape_error}", stamp
+            )
+            return ProcessResult(ProcessStatus.SKIPPED, self.map_to_odom, warnings=tuple(warnings))
+        nan = int(np.count_nonzero(np.isnan(scan.ranges)))
+        inf = int(np.count_nonzero(np.isinf(scan.ranges)))
+        if nan or inf:
+            self.nonfinite_range_scans += 1
+            if self.nonfinite_range_scans == 1:
+                self._warn(
+                    warnings,
+                    "nonfinite_ranges",
+                    f"scan at {stamp * 1e-9:.3f} s has {nan} NaN and {inf} ±Inf ranges of "
+                    f"{scan.ranges.size}: those beams are ignored (counted in "
+                    "nonfinite_range_scans; not repeated)",
+                    stamp,
+                )
         st.last_stamp_ns = stamp
+        if st.pending_start is not None:
+            st.map_to_odom = _compose1(st.pending_start, _inverse1(odom))
+            st.pending_start = None
+        else:
+            jump = self._odometry_jumped(odom)
+            if jump is not None:
+                self._reanchor(odom, jump, warnings, stamp)
+        st.last_seen_odom = odom.copy()
         if self.config.scan_range_bias_quadratic > 0.0:
             scan = corrected_scan(scan, self.config.scan_range_bias_quadratic)
         if not self._moved_enough(odom):
@@ -870,8 +1001,14 @@ class SlamCore:
                     stamp,
                 )
         edge: tuple[FloatArray, FloatArray, EdgeKind] | None = None
+        link = len(self.nodes) - 1
         if self.nodes:
-            prev_pose = self.graph.pose(len(self.nodes) - 1)
+            if not chain_from_odometry and running:
+                # a new chain (after a load, a start pose, an odometry jump): linked to the
+                # nearest node it was matched against, not to the last node added
+                here = _compose1(pose, self.sensor_offset)[:2]
+                link = min(running, key=lambda i: float(np.hypot(*(self._reference_position(i) - here))))
+            prev_pose = self.graph.pose(link)
             if not chain_from_odometry and not matched:
                 # first scan after loading a session: the odom frames of the two runs are
                 # unrelated, so only a weak link to where the session ended
@@ -894,7 +1031,7 @@ class SlamCore:
         idx = self.graph.add_node(pose)
         self.nodes.append(NodeRecord(scan, points, odom.copy()))
         if edge is not None:
-            self.graph.add_edge(idx - 1, idx, edge[0], edge[1], kind=edge[2])
+            self.graph.add_edge(link, idx, edge[0], edge[1], kind=edge[2])
         if not chain_from_odometry:
             st.chain_start = idx
         span = cfg.odometry_span_nodes
@@ -1329,6 +1466,8 @@ class SlamCore:
             self.graph.add_edge(i, j, z, cov, kind=kind, robust=robust)
         # the stored estimate is kept as is; iSAM2 takes the whole graph at the next update
         self.graph.set_poses(poses)
+        if nodes:
+            self._scan_shape_error(nodes[0].scan)  # later scans must have the session's beams
         if nodes and self.mode in ("mapping", "lifelong"):
             last = len(nodes) - 1
             st = self._state

@@ -2,10 +2,24 @@
 ``map → odom``, on `SlamCore`.
 
 Parameters are slam_toolbox's names (every field of `SlamConfig`, declared with the
-upstream node's code defaults); ``mode`` is ``mapping``, ``localization`` or ``lifelong``
-(a saved session is loaded from ``map_file_name`` for the latter two). ``processing``
-chooses between slam_toolbox's sync node (every accepted scan, queued) and async node (the
-latest scan only; older ones are dropped while one is being processed).
+upstream node's code defaults); ``mode`` is ``mapping``, ``localization`` or ``lifelong``.
+Every slam_toolbox key is accepted; at start the node logs once each one it does not honour
+(``ignored: <key> (<why>)``, Ceres' keys in one line: GTSAM replaces Ceres) and each key that
+is neither slam_toolbox's nor eddiebot's (`eddiebot.slam.config.parameter_warnings`);
+``startup_warnings`` keeps the lines. ``processing`` chooses between slam_toolbox's sync node
+(every scan queued and processed, none dropped) and async node (at most ``scan_queue_size``
+scans wait; older ones are dropped).
+
+``map_file_name`` loads a saved session at start-up in every mode, as slam_toolbox: in
+localization mode with LOCALIZE_AT_POSE at ``map_start_pose``; otherwise at ``map_start_pose``
+(START_AT_GIVEN_POSE) or, with ``map_start_at_dock``, at the session's first node
+(START_AT_FIRST_NODE); neither set: at the map origin. ``~/deserialize_map`` takes the same
+match types: LOCALIZE_AT_POSE only in localization mode (and only it there), UNSET refused.
+
+One laser: the map is built from the first laser frame's scans; a scan from another frame
+whose mount differs is refused (one warning; ``scans_refused_frame`` counts them), so earlier
+scans are never re-placed under another mount. ``transform_publish_period`` 0 publishes no
+map → odom transform. ``paused_new_measurements`` starts paused.
 
 Services (under the node's name, as slam_toolbox): ``~/save_map`` (slam_toolbox/SaveMap:
 nav2 map_server files), ``~/serialize_map`` and ``~/deserialize_map`` (the session file),
@@ -30,6 +44,9 @@ of each occupancy-grid refresh for ``/map``.
 from __future__ import annotations
 
 import dataclasses
+import logging
+import math
+import os
 import time
 from collections import deque
 from pathlib import Path
@@ -38,7 +55,12 @@ from typing import Any
 import numpy as np
 
 from eddiebot.core.node import Node
-from eddiebot.core.qos import QoSProfile, qos_profile_latched, qos_profile_sensor_data
+from eddiebot.core.qos import (
+    HistoryPolicy,
+    QoSProfile,
+    qos_profile_latched,
+    qos_profile_sensor_data,
+)
 from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, make_transform_2d
 from eddiebot.core.time import stamp_to_ns
 from eddiebot.geometry import yaw_to_quaternion
@@ -55,7 +77,8 @@ from eddiebot.msgs.slam_toolbox import (
     SerializePoseGraph,
 )
 from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
-from eddiebot.slam.config import SlamConfig
+from eddiebot.slam._files import created_file_mode
+from eddiebot.slam.config import SlamConfig, parameter_warnings
 from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning, warm_up
 from eddiebot.slam.scan import Scan
 from eddiebot.slam.session import load_session, save_session
@@ -83,7 +106,18 @@ class SlamNode(Node):
         self.processing = str(self.declare_parameter("processing", "async").value)
         if self.processing not in ("sync", "async"):
             raise ValueError(f"{self.fully_qualified_name}: processing must be sync or async")
-        self.config = SlamConfig(**values).validated()
+        # slam_toolbox keys that are no field (and unknown keys) are declared, so a user's
+        # file launches; parameter_warnings names each
+        extra: dict[str, Any] = {}
+        for o in self.undeclared_overrides():
+            extra[o.name] = self.declare_parameter(o.name, o.value).value
+        self.config = SlamConfig(**values, extra=extra).validated()
+        given = {name: o.value for name, o in self._overrides.items()}
+        self.startup_warnings = parameter_warnings(given, self.config)
+        for line in self.startup_warnings:
+            self.get_logger().warning(line)
+        if self.config.debug_logging:
+            self.get_logger().set_level(logging.DEBUG)
         self._warned: set[str] = set()
         self.low_feature_episodes = 0
         self.low_feature_matches = 0
@@ -91,11 +125,7 @@ class SlamNode(Node):
         self._well_constrained_run = 0
         self.scan_cpu_s: deque[float] = deque(maxlen=100_000)
         self.map_update_cpu_s: deque[float] = deque(maxlen=100_000)
-        if self.config.mode in ("localization", "lifelong") and self.config.map_file_name:
-            self.core = load_session(self.config.map_file_name, self.config, mode=self.config.mode)
-            self.core.on_warning = self._on_warning
-        else:
-            self.core = SlamCore(self.config, on_warning=self._on_warning)
+        self.core = SlamCore(self.config, on_warning=self._on_warning)
         # numba compiles the kernels on their first call: now, not on the first real scan
         seconds = warm_up(self.config)
         if seconds > 2.0:
@@ -103,29 +133,50 @@ class SlamNode(Node):
                 f"compiled the scan-matching kernels in {seconds:.1f} s "
                 "(once after an install; numba caches them)"
             )
-        self.paused = False
-        self._sensor_offset: tuple[str, np.ndarray] | None = None
-        self._scan_queue: deque[Any] = deque(maxlen=max(1, self.config.scan_buffer_size))
+        self.paused = self.config.paused_new_measurements
+        self._laser: tuple[str, np.ndarray] | None = None
+        """The laser frame the map is built from and its mount (x, y, yaw in base_frame)."""
+        # sync: every scan waits its turn; async: at most scan_queue_size wait (upstream's
+        # tf2 MessageFilter queue), older ones are dropped
+        queue_size = None if self.processing == "sync" else self.config.scan_queue_size
+        self._scan_queue: deque[Any] = deque(maxlen=queue_size)
         self._last_scan_ns: int | None = None
         self._scan_count = 0
         self._map_dirty = False
+        self.scans_received = 0
+        """Scans delivered to the node (before throttling, pausing and queueing)."""
+        self.scans_dropped = 0
+        """Scans dropped from a full async queue, or by ``~/clear_queue``."""
+        self.scans_processed = 0
+        """Scans handed to the SLAM core."""
+        self.scans_refused_frame = 0
+        """Scans refused because they came from a second laser with another mount."""
         self.tf_buffer = Buffer(self.config.tf_buffer_duration, node=self)
         self.tf_listener = TransformListener(self.tf_buffer, self)
         self.tf_broadcaster = TransformBroadcaster(self)
-        self.map_pub = self.create_publisher(OccupancyGrid, "/map", qos_profile_latched)
-        self.meta_pub = self.create_publisher(MapMetaData, "/map_metadata", qos_profile_latched)
-        self.graph_pub = self.create_publisher(MarkerArray, "~/graph_visualization", 1)
-        depth = 1 if self.processing == "async" else max(1, self.config.scan_buffer_size)
-        self.create_subscription(
-            LaserScan,
-            self.config.scan_topic,
-            self._on_scan,
-            QoSProfile(depth=depth, reliability=qos_profile_sensor_data.reliability),
+        map_topic = self.config.map_name
+        self.map_pub = self.create_publisher(OccupancyGrid, map_topic, qos_profile_latched)
+        self.meta_pub = self.create_publisher(
+            MapMetaData, f"{map_topic}_metadata", qos_profile_latched
         )
-        self.create_timer(self.config.transform_publish_period, self._publish_transform)
+        self.graph_pub = self.create_publisher(MarkerArray, "~/graph_visualization", 1)
+        if self.processing == "sync":
+            scan_qos = QoSProfile(
+                history=HistoryPolicy.KEEP_ALL, reliability=qos_profile_sensor_data.reliability
+            )
+        else:
+            scan_qos = QoSProfile(
+                depth=self.config.scan_queue_size,
+                reliability=qos_profile_sensor_data.reliability,
+            )
+        self.create_subscription(LaserScan, self.config.scan_topic, self._on_scan, scan_qos)
+        if self.config.transform_publish_period > 0:
+            self.create_timer(self.config.transform_publish_period, self._publish_transform)
         self.create_timer(0.02, self._drain)
         self.create_timer(self.config.map_update_interval, self._publish_map)
-        self.create_service(SaveMap, "~/save_map", self._save_map)
+        # as slam_toolbox: no map saver when use_map_saver is false or when localizing
+        if self.config.use_map_saver and self.config.mode != "localization":
+            self.create_service(SaveMap, "~/save_map", self._save_map)
         self.create_service(SerializePoseGraph, "~/serialize_map", self._serialize)
         self.create_service(DeserializePoseGraph, "~/deserialize_map", self._deserialize)
         self.create_service(Pause, "~/pause_new_measurements", self._pause)
@@ -134,6 +185,8 @@ class SlamNode(Node):
         self.get_logger().info(
             f"slam in {self.config.mode} mode ({self.processing}), resolution {self.config.resolution} m"
         )
+        if self.config.map_file_name:
+            self._load_at_start()
 
     # -- warnings --------------------------------------------------------------------------
     def _on_warning(self, w: SlamWarning) -> None:
@@ -161,8 +214,9 @@ class SlamNode(Node):
 
     # -- scans -----------------------------------------------------------------------------
     def _sensor_pose(self, frame: str) -> np.ndarray | None:
-        if self._sensor_offset is not None and self._sensor_offset[0] == frame:
-            return self._sensor_offset[1]
+        """The laser's mount; None (scan refused) when unknown or not the map's laser's."""
+        if self._laser is not None and self._laser[0] == frame:
+            return self._laser[1]
         try:
             x, y, yaw = self.tf_buffer.lookup_pose2d(self.config.base_frame, frame, 0)
         except Exception as exc:
@@ -171,11 +225,28 @@ class SlamNode(Node):
             )
             return None
         offset = np.array([x, y, yaw])
-        self._sensor_offset = (frame, offset)
-        self.core.sensor_offset = offset
+        # the core holds one mount for all its scans: a scan under another mount would
+        # re-place every earlier one, so it is refused (a loaded session fixes the mount too)
+        reference = self._laser[1] if self._laser is not None else (
+            self.core.sensor_offset if self.core.nodes else None
+        )
+        if reference is not None and not _same_mount(reference, offset):
+            self.scans_refused_frame += 1
+            first = self._laser[0] if self._laser is not None else "the loaded session's laser"
+            self._warn_once(
+                f"second_laser:{frame}",
+                f"scans from {frame} refused: mounted at {_fmt_pose(offset)}, the map is "
+                f"built from {first} at {_fmt_pose(reference)} (one laser per map; further "
+                "scans from it are refused silently, counted in scans_refused_frame)",
+            )
+            return None
+        if self._laser is None:
+            self._laser = (frame, offset)
+            self.core.sensor_offset = offset
         return offset
 
     def _on_scan(self, msg: Any) -> None:
+        self.scans_received += 1
         if self.paused:
             return
         self._scan_count += 1
@@ -183,6 +254,8 @@ class SlamNode(Node):
             return
         # tf2 MessageFilter's role: a scan waits (up to transform_timeout) for the odometry
         # of its time, which may be published just after it
+        if self._scan_queue.maxlen is not None and len(self._scan_queue) == self._scan_queue.maxlen:
+            self.scans_dropped += 1
         self._scan_queue.append(msg)
         self._drain()
 
@@ -212,7 +285,9 @@ class SlamNode(Node):
         if self._last_scan_ns is not None:
             if stamp < self._last_scan_ns:
                 self._warn_once(
-                    "time_backwards", "scan time went backwards (bag restarted?): skipped"
+                    "time_backwards",
+                    f"scan time went backwards ({stamp * 1e-9:.3f} s after "
+                    f"{self._last_scan_ns * 1e-9:.3f} s; bag restarted?): skipped",
                 )
                 return
             if stamp - self._last_scan_ns < self.config.minimum_time_interval * 1e9 * 0.999:
@@ -228,7 +303,8 @@ class SlamNode(Node):
             return
         scan = Scan.from_laser_scan(msg, stamp)
         cpu0 = time.thread_time()
-        result = self.core.process(scan, np.array(odom), expected_beams=len(msg.ranges))
+        self.scans_processed += 1
+        result = self.core.process(scan, np.array(odom))
         cpu = time.thread_time() - cpu0
         if result.status in (ProcessStatus.ADDED, ProcessStatus.LOCALIZED):
             self.scan_cpu_s.append(cpu)
@@ -305,7 +381,14 @@ class SlamNode(Node):
             return res
         try:
             self.core.update_map()
-            save_map(self.core.occupancy_map(), Path(name).expanduser())
+            base = Path(name).expanduser()
+            yaml_path = save_map(self.core.occupancy_map(), base)
+            # the map writer renames a 0600 temporary file into place: give the files the
+            # mode the user's umask gives new files
+            mode = created_file_mode()
+            for written in {Path(yaml_path), base.with_suffix(".yaml"), base.with_suffix(".pgm")}:
+                if written.is_file():
+                    os.chmod(written, mode)
             res.result = SaveMap.Response.RESULT_SUCCESS
             self.get_logger().info(f"saved the map to {name}.yaml / {name}.pgm")
         except Exception as exc:
@@ -324,37 +407,112 @@ class SlamNode(Node):
         return res
 
     def _deserialize(self, req: Any, res: Any) -> Any:
-        try:
-            core = load_session(
-                Path(str(req.filename)).expanduser(), self.config, mode=self.config.mode
+        p = req.initial_pose
+        self.load_session_file(
+            str(req.filename), int(req.match_type), (float(p.x), float(p.y), float(p.theta))
+        )
+        return res
+
+    def _load_at_start(self) -> None:
+        """slam_toolbox's ``loadPoseGraphByParams``: ``map_file_name`` at start-up."""
+        cfg = self.config
+        request = DeserializePoseGraph.Request
+        pose = cfg.map_start_pose or (0.0, 0.0, 0.0)
+        if cfg.mode == "localization":
+            if cfg.map_start_at_dock and not cfg.map_start_pose:
+                self.get_logger().warning(
+                    "map_start_at_dock: localization does not start at the first node; "
+                    "starting at map_start_pose (the origin when unset)"
+                )
+            match = request.LOCALIZE_AT_POSE
+        elif cfg.map_start_pose:
+            match = request.START_AT_GIVEN_POSE
+        elif cfg.map_start_at_dock:
+            match = request.START_AT_FIRST_NODE
+        else:
+            match = request.START_AT_GIVEN_POSE
+            self.get_logger().info(
+                "map_file_name without map_start_pose or map_start_at_dock: starting at the "
+                "map origin"
             )
+        if not self.load_session_file(cfg.map_file_name, match, tuple(pose)):
+            self.get_logger().error(
+                f"map_file_name {cfg.map_file_name!r} not loaded; starting with an empty map"
+            )
+
+    def load_session_file(
+        self, filename: str, match_type: int, pose: tuple[float, ...] = (0.0, 0.0, 0.0)
+    ) -> bool:
+        """Load a saved session as ``~/deserialize_map`` does; False (and a log line) when
+        refused or unreadable, the current session kept.
+
+        ``match_type``: START_AT_FIRST_NODE (the robot is at the session's first node),
+        START_AT_GIVEN_POSE (at ``pose``, map frame x, y, theta) — mapping and lifelong;
+        LOCALIZE_AT_POSE (at ``pose``) — localization only. The next scan is placed there,
+        whatever its odometry, and matched against the nodes near it."""
+        request = DeserializePoseGraph.Request
+        names = {
+            request.START_AT_FIRST_NODE: "START_AT_FIRST_NODE",
+            request.START_AT_GIVEN_POSE: "START_AT_GIVEN_POSE",
+            request.LOCALIZE_AT_POSE: "LOCALIZE_AT_POSE",
+        }
+        mode = self.config.mode
+        if match_type not in names:
+            self.get_logger().error(
+                f"deserialize_map {filename!r}: match_type {match_type} is not set "
+                "(START_AT_FIRST_NODE 1, START_AT_GIVEN_POSE 2, LOCALIZE_AT_POSE 3); not loaded"
+            )
+            return False
+        if mode == "localization" and match_type != request.LOCALIZE_AT_POSE:
+            self.get_logger().error(
+                f"deserialize_map {filename!r}: {names[match_type]} refused in localization "
+                "mode (use LOCALIZE_AT_POSE); not loaded"
+            )
+            return False
+        if mode != "localization" and match_type == request.LOCALIZE_AT_POSE:
+            self.get_logger().error(
+                f"deserialize_map {filename!r}: LOCALIZE_AT_POSE refused in {mode} mode (it "
+                "needs mode localization; use START_AT_GIVEN_POSE); not loaded"
+            )
+            return False
+        if not filename:
+            self.get_logger().warning("deserialize_map: no map file given")
+            return False
+        try:
+            core = load_session(Path(filename).expanduser(), self.config, mode=mode)
         except Exception as exc:
             self.get_logger().error(
-                f"deserialize_map {req.filename!r} failed: {exc}; kept the current session"
+                f"deserialize_map {filename!r} failed: {exc}; kept the current session"
             )
-            return res
+            return False
+        if self._laser is not None and not _same_mount(core.sensor_offset, self._laser[1]):
+            self.get_logger().error(
+                f"deserialize_map {filename!r}: the session's laser was mounted at "
+                f"{_fmt_pose(core.sensor_offset)}, {self._laser[0]} is at "
+                f"{_fmt_pose(self._laser[1])}; not loaded"
+            )
+            return False
         core.on_warning = self._on_warning
-        if self._sensor_offset is not None:
-            core.sensor_offset = self._sensor_offset[1]
-        if req.match_type in (
-            DeserializePoseGraph.Request.START_AT_GIVEN_POSE,
-            DeserializePoseGraph.Request.LOCALIZE_AT_POSE,
-        ):
-            p = req.initial_pose
-            try:
-                odom = self.tf_buffer.lookup_pose2d(
-                    self.config.odom_frame, self.config.base_frame, 0
-                )
-            except Exception:
-                odom = (0.0, 0.0, 0.0)
-            core.set_initial_pose([p.x, p.y, p.theta], odom)
+        if match_type == request.START_AT_FIRST_NODE and core.nodes:
+            start = core.node_poses()[0]
+        else:
+            start = np.asarray(pose, dtype=np.float64)
+        core.start_at(start)
         self.core = core
+        self._last_scan_ns = None
         self._map_dirty = True
-        self.get_logger().info(f"loaded session {req.filename} ({len(core.nodes)} nodes)")
-        return res
+        self.get_logger().info(
+            f"loaded session {filename} ({len(core.nodes)} nodes), {names[match_type]} at "
+            f"{_fmt_pose(start)}"
+        )
+        return True
 
     def _pause(self, req: Any, res: Any) -> Any:
         self.paused = not self.paused
+        if not self.paused:
+            # the robot may have moved any distance meanwhile: not an odometry jump
+            self.core.forget_odometry()
+        self.set_parameter("paused_new_measurements", self.paused)
         res.status = True
         self.get_logger().info(
             "paused new measurements" if self.paused else "resumed new measurements"
@@ -364,14 +522,30 @@ class SlamNode(Node):
     def _reset(self, req: Any, res: Any) -> Any:
         self.core.clear()
         self._last_scan_ns = None
+        self._scan_queue.clear()
         self.paused = bool(req.pause_new_measurements)
         self._map_dirty = True
         res.result = Reset.Response.RESULT_SUCCESS
         return res
 
     def _clear_queue(self, req: Any, res: Any) -> Any:
+        dropped = len(self._scan_queue)
+        self._scan_queue.clear()
+        self.scans_dropped += dropped
+        self.get_logger().info(f"clear_queue: dropped {dropped} queued scans")
         res.status = True
         return res
 
     def map_to_odom_quaternion(self) -> tuple[float, float, float, float]:
         return yaw_to_quaternion(float(self.core.map_to_odom[2]))
+
+
+def _same_mount(a: np.ndarray, b: np.ndarray) -> bool:
+    """Two laser mounts (x, y, yaw) equal to within 1 mm and 1 mrad."""
+    dx, dy = float(a[0] - b[0]), float(a[1] - b[1])
+    dyaw = math.remainder(float(a[2] - b[2]), math.tau)
+    return math.hypot(dx, dy) <= 1e-3 and abs(dyaw) <= 1e-3
+
+
+def _fmt_pose(p: Any) -> str:
+    return f"({float(p[0]):.3f}, {float(p[1]):.3f}, {float(p[2]):.3f})"

@@ -11,7 +11,7 @@ Format (``.eslam``, version 1): a ZIP archive holding
   ``edge_kind`` (E,) int8 (0 odometry, 1 scan match, 2 loop); ``edge_robust`` (E,) bool.
 
 Writing goes to a temporary file renamed over the target, so a failure never leaves a
-half-written session. Reading checks the format tag, the version and every array's shape; a
+half-written session; the file gets the mode the user's umask gives new files. Reading checks the format tag, the version and every array's shape; a
 mismatch raises `SessionVersionError`, anything else wrong `SessionError`.
 """
 
@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from eddiebot.slam._files import created_file_mode
 from eddiebot.slam.config import SlamConfig
 from eddiebot.slam.errors import SessionError, SessionVersionError
 from eddiebot.slam.mapper import NodeRecord, SlamCore
@@ -86,6 +87,7 @@ def save_session(core: SlamCore, path: str | os.PathLike[str]) -> Path:
                 zf.writestr("header.json", json.dumps(header, indent=1))
                 zf.writestr("arrays.npz", npz.getvalue())
             raw.flush()
+            os.fchmod(raw.fileno(), created_file_mode())
             os.fsync(raw.fileno())
         os.replace(tmp, target)
         tmp = ""

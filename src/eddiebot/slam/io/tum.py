@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
+from eddiebot.slam._files import created_file_mode
+
 __all__ = ["read_tum", "write_tum"]
 
 FloatArray = npt.NDArray[np.float64]
@@ -31,6 +33,7 @@ def write_tum(path: str | os.PathLike[str], stamps_s: npt.ArrayLike, poses: npt.
     try:
         with os.fdopen(fd, "w", encoding="utf-8") as handle:
             handle.writelines(lines)
+            os.fchmod(handle.fileno(), created_file_mode())
         os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(OSError):
