@@ -785,7 +785,9 @@ def estimate_covariance(
 
     Squared distance between each old point and the new point mapped into the old frame (a new
     point without depth is taken along its ray at 1.1 × the old point's depth), and the angle
-    between the two as seen from the new camera; variance = 2.1981 × the order statistic at n/ratio.
+    between the two as seen from the new camera; variance = 2.1981 × the order statistic at n/ratio
+    of the squared distances (m²) and of the angles (rad, not squared, as upstream's
+    util3d::estimateMotion3DTo2D).
     """
     n = from_points.shape[0]
     if n == 0:
@@ -813,7 +815,10 @@ def estimate_covariance(
     ang = np.arccos(np.clip(cosang, -1.0, 1.0))
     k = min(n - 1, n // max(1, median_ratio))
     lin = max(_CHI2_FACTOR * float(np.sort(err2)[k]), _LINEAR_VARIANCE_FLOOR)
-    angv = max(_CHI2_FACTOR * float(np.sort(ang)[k]) ** 2, _ANGULAR_VARIANCE_FLOOR)
+    # Upstream takes the order statistic of the angles themselves (rad), not of their squares:
+    # squaring made links claim a fraction of their real angular error, and
+    # RGBD/OptimizeMaxError then rejected true loop closures.
+    angv = max(_CHI2_FACTOR * float(np.sort(ang)[k]), _ANGULAR_VARIANCE_FLOOR)
     return np.diag([lin, lin, lin, angv, angv, angv])
 
 

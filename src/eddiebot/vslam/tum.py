@@ -154,14 +154,17 @@ def read_tum_sequence(folder: str | Path, max_difference: float = 0.02) -> TumSe
     return TumSequence(root, frames, stamps, poses, tum_camera(root, w, h))
 
 
-def load_tum_frame(frame: TumFrame) -> tuple[NDArray[np.uint8], NDArray[np.float32]]:
-    """RGB (H, W, 3) uint8 and depth in metres (float32, 0 = none)."""
+def load_tum_frame(
+    frame: TumFrame, depth_scale: float = TUM_DEPTH_SCALE,
+) -> tuple[NDArray[np.uint8], NDArray[np.float32]]:
+    """RGB (H, W, 3) uint8 and depth in metres (float32, 0 = none); `depth_scale` is the
+    depth PNG's units per metre (TUM 5000, ICL-NUIM/Redwood 1000)."""
     bgr = cv2.imread(str(frame.rgb_path), cv2.IMREAD_COLOR)
     raw = cv2.imread(str(frame.depth_path), cv2.IMREAD_UNCHANGED)
     if bgr is None or raw is None:
         raise TumFormatError(f"cannot read {frame.rgb_path} or {frame.depth_path}")
     rgb = np.asarray(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB), dtype=np.uint8)
-    return rgb, np.asarray(raw, dtype=np.float32) / np.float32(TUM_DEPTH_SCALE)
+    return rgb, np.asarray(raw, dtype=np.float32) / np.float32(depth_scale)
 
 
 def tum_row_to_matrix(values: Sequence[float]) -> F64:
