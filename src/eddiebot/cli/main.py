@@ -65,6 +65,7 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("play", "eddiebot.cli.play", "play a rosbag2 with its original timing"),
     ("bag", "eddiebot.cli.bag", "bag info"),
     ("daemon", "eddiebot.cli.daemon", "run the Zenoh router other processes meet at"),
+    ("bridge", "eddiebot.cli.bridge", "mirror topics to and from ROS 2 on DDS (eddie bridge dds)"),
     ("dashboard", "eddiebot.cli.dashboard", "web dashboard: map, robot, scan, camera, teleop"),
     ("foxglove", "eddiebot.cli.foxglove", "Foxglove WebSocket bridge"),
     ("view", "eddiebot.cli.view", "render a map, bag or trajectory to PNG"),

@@ -1,0 +1,295 @@
+"""``eddie bridge dds`` between our graph and a DDS domain, with a ROS 2-like DDS peer.
+
+The bridge runs as a process (``eddie bridge dds``) on a private DDS domain and the session's
+private Zenoh router; this test process is both a node of our graph (a context with the
+Zenoh transport) and a ROS 2-like DDS participant (Cyclone DDS: ``rt/`` names,
+``pkg::msg::dds_::Type_`` types, raw CDR serialized with rosbags, ``typehash`` user data).
+"""
+
+from __future__ import annotations
+
+import random
+import signal
+import sys
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import pytest
+from _procs import Proc
+
+cyclonedds = pytest.importorskip("cyclonedds")
+
+from cyclonedds._clayer import ddspy_take, ddspy_write  # noqa: E402
+from cyclonedds.builtin import (  # noqa: E402
+    BuiltinDataReader,
+    BuiltinTopicDcpsParticipant,
+    BuiltinTopicDcpsPublication,
+)
+from cyclonedds.core import InstanceState, SampleState, ViewState  # noqa: E402
+from cyclonedds.domain import Domain, DomainParticipant  # noqa: E402
+from cyclonedds.idl import make_idl_struct  # noqa: E402
+from cyclonedds.idl import types as idl  # noqa: E402
+from cyclonedds.pub import DataWriter  # noqa: E402
+from cyclonedds.qos import Policy, Qos  # noqa: E402
+from cyclonedds.sub import DataReader  # noqa: E402
+from cyclonedds.topic import Topic  # noqa: E402
+
+from eddiebot.core import Context, Node, QoSProfile, SingleThreadedExecutor  # noqa: E402
+from eddiebot.core.qos import DurabilityPolicy  # noqa: E402
+from eddiebot.msgs import TYPESTORE, serialize, type_hash  # noqa: E402
+from eddiebot.msgs.geometry_msgs import Twist, Vector3  # noqa: E402
+from eddiebot.msgs.std_msgs import String  # noqa: E402
+from eddiebot.transport import connect  # noqa: E402
+from eddiebot.transport.dds import cyclone_config  # noqa: E402
+
+#: Only the topics of these tests are bridged (other tests share the router).
+PREFIX = "/ddstest"
+_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+
+# The types as a ROS 2 node declares them on DDS (written by hand, not by the bridge).
+_String = make_idl_struct("String_", "std_msgs::msg::dds_::String_", {"data": str})
+_Vector3 = make_idl_struct("Vector3_", "geometry_msgs::msg::dds_::Vector3_",
+                           {"x": idl.float64, "y": idl.float64, "z": idl.float64})
+_Twist = make_idl_struct("Twist_", "geometry_msgs::msg::dds_::Twist_",
+                         {"linear": _Vector3, "angular": _Vector3})
+
+
+def _wait(cond: Callable[[], bool], timeout: float = 15.0) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if cond():
+            return True
+        time.sleep(0.02)
+    return False
+
+
+class RosPeer:
+    """A DDS participant behaving as a ROS 2 node on rmw_cyclonedds (raw CDR in and out)."""
+
+    def __init__(self, domain_id: int) -> None:
+        self.domain = Domain(domain_id, cyclone_config("loopback"))
+        self.participant = DomainParticipant(domain_id, qos=Qos(Policy.Userdata(b"enclave=/;")))
+        self.publications = BuiltinDataReader(self.participant, BuiltinTopicDcpsPublication)
+        self.participants = BuiltinDataReader(self.participant, BuiltinTopicDcpsParticipant)
+        self._topics: dict[str, Any] = {}
+        self._known: dict[str, Any] = {}
+
+    def _topic(self, name: str, cls: Any) -> Any:
+        if name not in self._topics:
+            self._topics[name] = Topic(self.participant, name, cls)
+        return self._topics[name]
+
+    @staticmethod
+    def qos(ros_type: str, *, latched: bool = False, depth: int = 10) -> Qos:
+        return Qos(
+            Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+            Policy.Durability.TransientLocal if latched else Policy.Durability.Volatile,
+            Policy.History.KeepLast(depth),
+            Policy.DataRepresentation(use_cdrv0_representation=True),
+            Policy.Userdata(f"typehash={type_hash(ros_type)};".encode()),
+        )
+
+    def writer(self, topic: str, cls: Any, ros_type: str, **kw: Any) -> Any:
+        return DataWriter(self.participant, self._topic("rt" + topic, cls),
+                          qos=self.qos(ros_type, **kw))
+
+    def reader(self, topic: str, cls: Any, ros_type: str, **kw: Any) -> Any:
+        return DataReader(self.participant, self._topic("rt" + topic, cls),
+                          qos=self.qos(ros_type, **kw))
+
+    @staticmethod
+    def write(writer: Any, msg: Any) -> None:
+        cdr = serialize(msg)
+        assert ddspy_write(writer._ref, cdr.ljust(-(-len(cdr) // 4) * 4, b"\0")) == 0
+
+    @staticmethod
+    def take(reader: Any, ros_type: str) -> list[Any]:
+        got = ddspy_take(reader._ref, _ANY, 100)
+        return [TYPESTORE.deserialize_cdr(bytes(d), ros_type) for d, info in got
+                if info.valid_data]
+
+    def publications_on(self, dds_topic: str) -> list[Any]:
+        """Alive publications of other participants on ``dds_topic`` (DCPSPublication)."""
+        for s in self.publications.take(N=200):
+            key = str(s.key)
+            if s.sample_info.instance_state == InstanceState.Alive:
+                self._known[key] = s
+            else:
+                self._known.pop(key, None)
+        own = str(self.participant.guid)
+        return [s for s in self._known.values()
+                if s.topic_name == dds_topic and str(s.participant_key) != own]
+
+
+@pytest.fixture(scope="module")
+def dds_domain() -> int:
+    return random.randint(100, 200)
+
+
+@pytest.fixture(scope="module")
+def ros_peer(dds_domain: int) -> RosPeer:
+    return RosPeer(dds_domain)
+
+
+@pytest.fixture(scope="module")
+def bridge(zenoh_env: dict[str, str], dds_domain: int) -> Iterator[Proc]:
+    env = {**zenoh_env, "ROS_DOMAIN_ID": "0"}
+    p = Proc([sys.executable, "-m", "eddiebot.cli.main", "bridge", "dds",
+              "--domain", str(dds_domain), "--allow", f"^{PREFIX}/"], env)
+    if not p.wait_for("eddie bridge dds: domain", timeout=30):
+        p.finish(timeout=5)
+        pytest.fail(f"the bridge did not start: {p.stderr}")
+    yield p
+    p.popen.send_signal(signal.SIGINT)
+    try:
+        p.popen.wait(timeout=10)
+    except Exception:
+        p.popen.kill()
+
+
+@pytest.fixture
+def ours(zenoh_config: Any, bridge: Proc) -> Iterator[tuple[Context, Node, Any]]:
+    """A node of our graph in this process (the bridge already runs)."""
+    ctx = Context(domain_id=0)
+    node = Node("dds_test_node", context=ctx)
+    transport = connect(ctx, zenoh_config, required=True)
+    yield ctx, node, transport
+    ctx.shutdown()
+
+
+def test_our_topic_appears_on_dds_with_ros_names_and_user_data(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    _ctx, node, _t = ours
+    topic = f"{PREFIX}/chatter"
+    pub = node.create_publisher(String, topic, 10)
+    reader = ros_peer.reader(topic, _String, "std_msgs/msg/String")
+    assert _wait(lambda: bool(ros_peer.publications_on("rt" + topic))), bridge.stderr
+    [ep] = ros_peer.publications_on("rt" + topic)
+    assert ep.type_name == "std_msgs::msg::dds_::String_"
+    assert ep.qos[Policy.Userdata].data == f"typehash={type_hash('std_msgs/msg/String')};".encode()
+    assert ep.qos[Policy.Reliability] != Policy.Reliability.BestEffort
+    parts = {str(s.key): s for s in ros_peer.participants.read(N=100)}
+    assert parts[str(ep.participant_key)].qos[Policy.Userdata].data == b"enclave=/;"
+
+    got: list[Any] = []
+
+    def delivered() -> bool:
+        pub.publish(String(data="hello dds"))
+        got.extend(ros_peer.take(reader, "std_msgs/msg/String"))
+        return bool(got)
+
+    assert _wait(delivered), bridge.stderr
+    assert got[0].data == "hello dds"
+
+
+def test_dds_publication_arrives_on_our_graph(ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    ctx, node, transport = ours
+    topic = f"{PREFIX}/cmd_vel"
+    got: list[Any] = []
+    node.create_subscription(Twist, topic, got.append, 10)
+    writer = ros_peer.writer(topic, _Twist, "geometry_msgs/msg/Twist")
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    assert _wait(lambda: any(e.type_name == "geometry_msgs/msg/Twist"
+                             for e in transport.cache.publishers(topic))), bridge.stderr
+    twist = Twist(linear=Vector3(x=0.25, y=0.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=-0.5))
+
+    def delivered() -> bool:
+        RosPeer.write(writer, twist)
+        ex.spin_once(timeout_sec=0.05)
+        return bool(got)
+
+    assert _wait(delivered), bridge.stderr
+    assert (got[0].linear.x, got[0].angular.z) == (0.25, -0.5)
+    del writer
+
+
+def test_latched_topics_reach_late_subscribers_both_ways(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    ctx, node, transport = ours
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    # ours → DDS: published once, before any DDS reader exists
+    out_topic = f"{PREFIX}/robot_description"
+    pub = node.create_publisher(String, out_topic, latched)
+    pub.publish(String(data="<robot name='eddie'/>"))
+    assert _wait(lambda: bool(ros_peer.publications_on("rt" + out_topic))), bridge.stderr
+    [ep] = ros_peer.publications_on("rt" + out_topic)
+    assert ep.qos[Policy.Durability] == Policy.Durability.TransientLocal
+    time.sleep(0.5)  # the bridge's writer has the sample in its history
+    reader = ros_peer.reader(out_topic, _String, "std_msgs/msg/String", latched=True, depth=1)
+    got: list[Any] = []
+    assert _wait(lambda: bool(got.extend(ros_peer.take(reader, "std_msgs/msg/String")) or got))
+    assert [m.data for m in got] == ["<robot name='eddie'/>"]
+
+    # DDS → ours: written once, before any subscription of ours exists
+    in_topic = f"{PREFIX}/map_name"
+    writer = ros_peer.writer(in_topic, _String, "std_msgs/msg/String", latched=True, depth=1)
+    RosPeer.write(writer, String(data="office"))
+    assert _wait(lambda: bool(transport.cache.publishers(in_topic))), bridge.stderr
+    time.sleep(0.5)
+    late: list[Any] = []
+    node.create_subscription(String, in_topic, late.append, latched)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    assert _wait(lambda: ex.spin_once(timeout_sec=0.05) or bool(late)), bridge.stderr
+    assert [m.data for m in late] == ["office"]
+    del writer
+
+
+def test_no_sample_loops_back(ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    """Both sides publish on one topic; every sample is seen once on each side."""
+    ctx, node, transport = ours
+    topic = f"{PREFIX}/both"
+    seen_ours: list[str] = []
+    node.create_subscription(String, topic, lambda m: seen_ours.append(m.data), 100)
+    pub = node.create_publisher(String, topic, 100)
+    writer = ros_peer.writer(topic, _String, "std_msgs/msg/String", depth=100)
+    reader = ros_peer.reader(topic, _String, "std_msgs/msg/String", depth=100)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    # both routes up: the bridge's writer on DDS, its publisher in our graph
+    assert _wait(lambda: bool(ros_peer.publications_on("rt" + topic))
+                 and bool(transport.cache.publishers(topic))), bridge.stderr
+    seen_dds: list[str] = []
+    # warm up until each side hears the other
+    n = 0
+    while not (any(s.startswith("dds") for s in seen_ours)
+               and any(s.startswith("ours") for s in seen_dds)):
+        assert n < 300, (seen_ours, seen_dds, bridge.stderr)
+        n += 1
+        pub.publish(String(data=f"ours-warm-{n}"))
+        RosPeer.write(writer, String(data=f"dds-warm-{n}"))
+        ex.spin_once(timeout_sec=0.05)
+        seen_dds.extend(m.data for m in ros_peer.take(reader, "std_msgs/msg/String"))
+    for i in range(20):
+        pub.publish(String(data=f"ours-{i}"))
+        RosPeer.write(writer, String(data=f"dds-{i}"))
+        time.sleep(0.005)
+    end = time.monotonic() + 2.0  # room for any echo to come back
+    while time.monotonic() < end:
+        ex.spin_once(timeout_sec=0.05)
+        seen_dds.extend(m.data for m in ros_peer.take(reader, "std_msgs/msg/String"))
+    ours_then = [s for s in seen_ours if not s.startswith(("ours-warm", "dds-warm"))]
+    dds_then = [s for s in seen_dds if not s.startswith(("ours-warm", "dds-warm"))]
+    # each side: its own samples once (in-process / within the participant), the other
+    # side's once through the bridge, never an echo of its own through the bridge
+    both = sorted([f"ours-{i}" for i in range(20)] + [f"dds-{i}" for i in range(20)])
+    assert sorted(ours_then) == both
+    assert sorted(dds_then) == both
+    assert all(seen_ours.count(s) == 1 for s in seen_ours)
+    assert all(seen_dds.count(s) == 1 for s in seen_dds)
+    del writer, reader
+
+
+def test_routes_follow_publishers_away(ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    _ctx, node, transport = ours
+    topic = f"{PREFIX}/transient"
+    pub = node.create_publisher(String, topic, 10)
+    assert _wait(lambda: bool(ros_peer.publications_on("rt" + topic))), bridge.stderr
+    pub.destroy()
+    assert _wait(lambda: not ros_peer.publications_on("rt" + topic)), bridge.stderr
+    writer = ros_peer.writer(f"{PREFIX}/gone", _String, "std_msgs/msg/String")
+    assert _wait(lambda: bool(transport.cache.publishers(f"{PREFIX}/gone"))), bridge.stderr
+    writer.__del__()
+    assert _wait(lambda: not transport.cache.publishers(f"{PREFIX}/gone")), bridge.stderr
