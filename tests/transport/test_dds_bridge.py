@@ -202,7 +202,6 @@ def test_dds_publication_arrives_on_our_graph(ours: Any, ros_peer: RosPeer, brid
 
     assert _wait(delivered), bridge.stderr
     assert (got[0].linear.x, got[0].angular.z) == (0.25, -0.5)
-    del writer
 
 
 def test_latched_topics_reach_late_subscribers_both_ways(
