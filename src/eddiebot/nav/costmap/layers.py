@@ -217,7 +217,8 @@ class StaticLayer(CostmapLayer):
 
     Non-rolling: the master is resized to the map and the layer's grid is combined with max
     (``use_maximum``) or true overwrite. Rolling: each master cell samples the map through
-    ``map_to_global`` (pose of the map frame in the costmap's global frame).
+    ``map_to_global`` (pose of the map frame in the costmap's global frame, x/y m and yaw
+    rad; whoever runs the costmap sets it before each update, None skips the layer).
     """
 
     def __init__(self, name: str = "static_layer", config: StaticLayerConfig | None = None) -> None:
@@ -227,7 +228,7 @@ class StaticLayer(CostmapLayer):
         self._map: OccupancyMap | None = None
         self._map_costs: npt.NDArray[np.uint8] | None = None
         self._has_updated_data = False
-        self.map_to_global = np.zeros(3)
+        self.map_to_global: npt.NDArray[np.float64] | None = np.zeros(3)
 
     @property
     def has_map(self) -> bool:
@@ -279,9 +280,12 @@ class StaticLayer(CostmapLayer):
             self._has_updated_data or self._extra[0] <= self._extra[2]
         ):
             return
+        if self.layered.rolling_window and self.map_to_global is None:
+            return
         self._use_extra_bounds(bounds)
         m = self._map
         if self.layered.rolling_window:
+            assert self.map_to_global is not None
             x, y, th = self.map_to_global
             corners = np.array([[0, 0], [m.width, 0], [0, m.height], [m.width, m.height]],
                                dtype=np.float64) * m.resolution + np.array(m.origin[:2])
@@ -303,6 +307,8 @@ class StaticLayer(CostmapLayer):
                 update_with_true_overwrite(master, self.costmap, i0, j0, i1, j1)
             return
         # Rolling window: sample the map at each master cell centre.
+        if self.map_to_global is None:
+            return
         m = self._map
         ii, jj = np.meshgrid(np.arange(i0, i1), np.arange(j0, j1))
         wx = master.origin_x + (ii + 0.5) * master.resolution

@@ -75,6 +75,7 @@ class CostmapHost:
         self.buffer = buffer
         self.pose: npt.NDArray[np.float64] | None = None
         self.updated = False
+        self._map_frame = ""
         self._subs: list[Any] = []
         self._timers: list[Any] = []
         self._pubs: list[Any] = []
@@ -151,13 +152,33 @@ class CostmapHost:
 
     # -- inputs -------------------------------------------------------------------------------
     def _on_map(self, msg: Any) -> None:
+        self._map_frame = msg.header.frame_id or "map"
         self.costmap.set_static_map(map_from_msg(msg))
         self.update()
 
-    def _sensor_pose(self, frame: str) -> tuple[float, float, float, float] | None:
+    def _transform_at(self, frame: str, stamp_ns: int) -> Any:
+        """``global_frame`` <- ``frame`` at the data's stamp (Nav2's observation buffer
+        transforms a cloud at its own stamp: a moving robot's scan lands where it was taken).
+        The latest transform stands in when ``stamp_ns`` is 0 or within the costmap's
+        ``transform_tolerance`` of it; None when neither is known."""
+        if stamp_ns:
+            try:
+                return self.buffer.lookup_transform(self.global_frame, frame, stamp_ns).transform
+            except TransformException:
+                try:
+                    latest = self.buffer.get_latest_common_time(self.global_frame, frame).nanoseconds
+                except TransformException:
+                    return None
+                if abs(stamp_ns - latest) * 1e-9 > self.costmap.config.transform_tolerance:
+                    return None
         try:
-            t = self.buffer.lookup_transform(self.global_frame, frame, 0).transform
+            return self.buffer.lookup_transform(self.global_frame, frame, 0).transform
         except TransformException:
+            return None
+
+    def _sensor_pose(self, frame: str, stamp_ns: int = 0) -> tuple[float, float, float, float] | None:
+        t = self._transform_at(frame, stamp_ns)
+        if t is None:
             return None
         q = t.rotation
         yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
@@ -167,12 +188,13 @@ class CostmapHost:
         cfg = layer.config.sources[source]
 
         def callback(msg: Any) -> None:
-            pose = self._sensor_pose(cfg.sensor_frame or msg.header.frame_id)
+            stamp = stamp_to_ns(msg.header.stamp)
+            pose = self._sensor_pose(cfg.sensor_frame or msg.header.frame_id, stamp)
             if pose is None:
                 return
             obs = scan_observation(msg.ranges, msg.angle_min, msg.angle_increment, msg.range_min,
                                    msg.range_max, pose, inf_is_valid=cfg.inf_is_valid,
-                                   stamp_ns=stamp_to_ns(msg.header.stamp))
+                                   stamp_ns=stamp)
             layer.add_observation(source, obs)
         return callback
 
@@ -181,9 +203,8 @@ class CostmapHost:
 
         def callback(msg: Any) -> None:
             frame = cfg.sensor_frame or msg.header.frame_id
-            try:
-                t = self.buffer.lookup_transform(self.global_frame, frame, 0).transform
-            except TransformException:
+            t = self._transform_at(frame, stamp_to_ns(msg.header.stamp))
+            if t is None:
                 return
             pts = cloud_xyz(msg)
             if pts.shape[0] == 0:
@@ -198,7 +219,7 @@ class CostmapHost:
 
     def _range_cb(self, layer: RangeLayer) -> Any:
         def callback(msg: Any) -> None:
-            pose = self._sensor_pose(msg.header.frame_id)
+            pose = self._sensor_pose(msg.header.frame_id, stamp_to_ns(msg.header.stamp))
             if pose is None:
                 return
             layer.add_reading(RangeReading((pose[0], pose[1], pose[3]), float(msg.field_of_view),
@@ -222,8 +243,21 @@ class CostmapHost:
         for layer in self.costmap.layers:
             if isinstance(layer, RangeLayer):
                 layer.set_time(now_ns)  # no_readings_timeout
+            elif isinstance(layer, StaticLayer) and self.costmap.rolling_window:
+                layer.map_to_global = self._map_pose()
         self.costmap.update_map(pose)
         self.updated = True
+
+    def _map_pose(self) -> npt.NDArray[np.float64] | None:
+        """The map frame's pose in the rolling costmap's frame, looked up at each update as
+        Nav2's StaticLayer does (map -> odom moves as localization corrects); None (the
+        layer sits this update out) while it is unknown."""
+        if self._map_frame in ("", self.global_frame):
+            return np.zeros(3)
+        try:
+            return np.array(self.buffer.lookup_pose2d(self.global_frame, self._map_frame, 0))
+        except TransformException:
+            return None
 
     def publish(self) -> None:
         from eddiebot.msgs.geometry_msgs import (
