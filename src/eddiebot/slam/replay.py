@@ -68,6 +68,8 @@ class ReplayResult:
     core: SlamCore
     scans: int = 0
     dropped_busy: int = 0
+    time_backwards: int = 0
+    """Scans stamped before the scan read just before them (skipped, and reported)."""
     duration_s: float = 0.0
     wall_s: float = 0.0
     cpu_s: float = 0.0
@@ -119,12 +121,24 @@ def replay_scans(
     busy_until = -math.inf
     gate_ns = config.minimum_time_interval * 1e9 * 0.999 if node_time_gate else 0.0
     last_ns: int | None = None
+    newest_ns: int | None = None
     wall0, cpu0 = time.perf_counter(), time.process_time()
     for k, scan in enumerate(scans):
         if progress is not None:
             progress(1)
         result.scans += 1
         stamp_s = scan.stamp_ns * 1e-9
+        if newest_ns is not None and scan.stamp_ns < newest_ns:
+            # before the busy and time gates, which would drop it without a word
+            result.time_backwards += 1
+            result.warnings["time_backwards"] += 1
+            if len(result.first_warnings) < 10:
+                result.first_warnings.append(
+                    f"scan {k} at {stamp_s:.3f} s is older than the scan before it "
+                    f"({newest_ns * 1e-9:.3f} s): skipped"
+                )
+            continue
+        newest_ns = scan.stamp_ns
         if mode == "async" and stamp_s < busy_until:
             result.dropped_busy += 1
             continue
@@ -455,6 +469,7 @@ def write_outputs(
         f"| scans read | {result.scans} |",
         f"| scans processed (nodes) | {len(core.nodes)} |",
         f"| dropped while busy (async) | {result.dropped_busy} |",
+        f"| skipped: time went backwards | {result.time_backwards} |",
         f"| statuses | {', '.join(f'{k} {v}' for k, v in sorted(result.statuses.items()))} |",
         f"| loop closures | {len(core.loop_closures)} |",
         f"| processing time | {result.cpu_s:.2f} s CPU, {result.wall_s:.2f} s wall |",
