@@ -251,3 +251,22 @@ def test_polygon_source_samples_outlines() -> None:
     assert pts.shape == (11 + 4 + 12, 2)
     assert np.allclose(pts[:11, 1], 0.0) and np.allclose(pts[:11, 0], np.linspace(0, 1, 11))
     assert polygon_source_points([], 0.1).shape == (0, 2)
+
+
+def test_eddie_near_wall_zone_limits_speed_but_keeps_turning() -> None:
+    from pathlib import Path
+
+    from eddiebot.nav.config import load_nav2_config
+
+    config = Path(__file__).resolve().parents[2] / "config" / "nav2.yaml"
+    m = load_nav2_config(config).collision_monitor
+    assert m is not None
+    wall = {"scan": np.array([[0.42, 0.05], [0.42, -0.05]])}  # inside 0.5 m, outside the stop circle
+    wall.update({n: np.zeros((0, 2)) for n in m.config.observation_sources if n != "scan"})
+    spin = m.process(Twist2D(0.0, 0.0, 1.2), wall, 0)
+    assert spin.action == ActionType.LIMIT and spin.polygon_name == "NearWallLimit"
+    assert spin.publish == Twist2D(0.0, 0.0, pytest.approx(1.0))  # 57 deg/s, not a crawl
+    slow = m.process(Twist2D(0.3, 0.0, 0.2), wall, 1)
+    assert slow.publish.vx == pytest.approx(0.2) and slow.publish.wz == pytest.approx(0.2 * 0.2 / 0.3)
+    gentle = m.process(Twist2D(0.0, 0.0, 0.5), wall, 2)
+    assert gentle.publish == Twist2D(0.0, 0.0, 0.5)  # under both limits: untouched
