@@ -41,7 +41,15 @@ from eddiebot.msgs import TYPESTORE, serialize, type_hash  # noqa: E402
 from eddiebot.msgs.geometry_msgs import Twist, Vector3  # noqa: E402
 from eddiebot.msgs.std_msgs import String  # noqa: E402
 from eddiebot.transport import connect  # noqa: E402
-from eddiebot.transport.dds import cyclone_config  # noqa: E402
+from eddiebot.transport.dds import (  # noqa: E402
+    DdsBridgeConfig,
+    cyclone_config,
+    dds_qos,
+    dds_topic_name,
+    idl_type,
+    qos_from_dds,
+    ros_topic_name,
+)
 
 #: Only the topics of these tests are bridged (other tests share the router).
 PREFIX = "/ddstest"
@@ -122,6 +130,54 @@ class RosPeer:
                 if s.topic_name == dds_topic and str(s.participant_key) != own]
 
 
+# -- pure parts -----------------------------------------------------------------------------
+def test_names_follow_ros2_on_dds() -> None:
+    assert dds_topic_name("/odom") == "rt/odom"
+    assert dds_topic_name("/eddie/ir/left") == "rt/eddie/ir/left"
+    assert ros_topic_name("rt/eddie/ir/left") == "/eddie/ir/left"
+    assert ros_topic_name("rq/add_two_intsRequest") is None
+    assert ros_topic_name("DCPSPublication") is None
+    assert idl_type("nav_msgs/msg/Odometry").__idl_typename__ == "nav_msgs::msg::dds_::Odometry_"
+
+
+@pytest.mark.parametrize("msg", [
+    String(data="hello"),
+    Twist(linear=Vector3(x=0.25, y=-1.0, z=0.0), angular=Vector3(x=0.0, y=0.0, z=2.5)),
+])
+def test_generated_dds_types_are_the_ros_definitions(msg: Any) -> None:
+    """The IDL struct built from rosbags' field definitions reads and writes the same CDR."""
+    cdr = serialize(msg)
+    cls = idl_type(msg.__msgtype__)
+    assert cls.deserialize(cdr).serialize() == cdr
+
+
+def test_qos_maps_both_ways() -> None:
+    from eddiebot.core.qos import HistoryPolicy, ReliabilityPolicy
+
+    latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    sensor = QoSProfile(depth=5, reliability=ReliabilityPolicy.BEST_EFFORT)
+    keep_all = QoSProfile(depth=10, history=HistoryPolicy.KEEP_ALL)
+    for profile in (latched, sensor, QoSProfile()):
+        assert qos_from_dds(dds_qos(profile)) == profile
+    assert qos_from_dds(dds_qos(keep_all)).history == HistoryPolicy.KEEP_ALL  # no depth on DDS
+    q = dds_qos(latched, b"typehash=RIHS01_00;")
+    assert q[Policy.Durability] == Policy.Durability.TransientLocal
+    assert q[Policy.History] == Policy.History.KeepLast(1)
+    assert q[Policy.Userdata].data == b"typehash=RIHS01_00;"
+    assert q[Policy.IgnoreLocal] == Policy.IgnoreLocal.Participant
+
+
+def test_topic_filters() -> None:
+    config = DdsBridgeConfig(allow="^/(odom|cmd_vel|eddie/)", deny="ping")
+    assert config.admits("/odom")
+    assert config.admits("/eddie/ir/left")
+    assert not config.admits("/eddie/ping/left")
+    assert not config.admits("/map")
+    assert "127.0.0.1" in cyclone_config("loopback")
+    assert "127.0.0.1" not in cyclone_config("lan")
+
+
+# -- through the bridge process ------------------------------------------------------------
 @pytest.fixture(scope="module")
 def dds_domain() -> int:
     return random.randint(100, 200)

@@ -72,8 +72,10 @@ log = logging.getLogger("eddiebot.transport.dds")
 
 #: The prefix rmw_cyclonedds / rmw_fastrtps give topics on DDS (``rq``/``rr`` are services).
 TOPIC_PREFIX = "rt"
-#: Writers block at most this long on a full reliable history (rmw's default is 100 ms too).
-_MAX_BLOCKING_NS = 100_000_000
+#: A reliable writer waits at most this long for room in its history (then the sample is
+#: dropped): long enough to pass a reader's back-pressure on to our publishers, short enough
+#: that a stalled DDS reader does not hold the bridge's Zenoh callbacks for good.
+_MAX_BLOCKING_NS = 1_000_000_000
 #: Samples taken per call from a DDS reader.
 _TAKE_BATCH = 64
 
@@ -154,10 +156,14 @@ def qos_from_dds(qos: Any) -> QoSProfile:
 def _merge_publisher_qos(profiles: list[QoSProfile]) -> QoSProfile:
     """What one bridged writer offers for several publishers of a topic: transient-local
     if any is, best-effort if any is (a reliable writer fed by a best-effort source would
-    still block), the deepest history."""
+    still block), the deepest history, keep-all if any is (a keep-all reliable writer
+    waits for its readers, which slows the publisher down through Zenoh instead of
+    overwriting samples no reader has yet)."""
     if not profiles:
         return QoSProfile()
     return QoSProfile(
+        history=HistoryPolicy.KEEP_ALL
+        if any(p.history == HistoryPolicy.KEEP_ALL for p in profiles) else HistoryPolicy.KEEP_LAST,
         depth=max(p.depth for p in profiles),
         reliability=ReliabilityPolicy.BEST_EFFORT
         if any(p.reliability == ReliabilityPolicy.BEST_EFFORT for p in profiles)
@@ -370,7 +376,6 @@ class DdsBridge:
             self._routes.clear()
         for live in lives:
             _quietly(live.close)
-        self._zenoh.close()
         self.node.destroy_node()
         # Cyclone's entities go with their Python objects; drop the participant first
         self._topics.clear()
@@ -402,7 +407,7 @@ class DdsBridge:
             current = dict(self._routes)
         for key, live in current.items():
             if key not in wanted:
-                log.info("unbridged %s [%s] (%s)", key[0], key[1], key[2])
+                log.info("unbridged %s [%s] (%s; %s)", key[0], key[1], key[2], live.stats)
                 with self._lock:
                     self._routes.pop(key, None)
                 _quietly(live.close)
@@ -418,9 +423,10 @@ class DdsBridge:
                 continue
             with self._lock:
                 self._routes[key] = live
-            log.info("bridged %s [%s] %s (%s, %s, depth %d)", route.topic, route.type_name,
+            log.info("bridged %s [%s] %s (%s, %s, %s %d)", route.topic, route.type_name,
                      route.direction, route.qos.reliability.name.lower(),
-                     route.qos.durability.name.lower(), route.qos.depth)
+                     route.qos.durability.name.lower(), route.qos.history.name.lower(),
+                     route.qos.depth)
 
     def _wanted_routes(self) -> dict[tuple[str, str, str], Route]:
         wanted: dict[tuple[str, str, str], Route] = {}
@@ -494,6 +500,7 @@ class DdsBridge:
                 return
             ret = ddspy_write(ref, _padded(cdr))
             if ret < 0:
+                live.stats["failed"] = live.stats.get("failed", 0) + 1
                 log.debug("DDS write on %s failed (%d)", route.topic, ret)
             else:
                 live.stats["samples"] += 1
@@ -626,9 +633,6 @@ class _ZenohSide:
                                                    allowed_origin=zenoh.Locality.REMOTE)
         token, _ = self._entity("MS", topic, type_name, qos)
         return _ZenohSubscriber(zsub, token)
-
-    def close(self) -> None:
-        pass
 
 
 class _ZenohPublisher:
