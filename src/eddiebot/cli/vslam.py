@@ -3,6 +3,8 @@
     eddie vslam [sim] --world office [--rate N | --fast] [--seed S] [--dashboard]
                       [--database FILE] [--keep-database] [--localization] [--map-topic /map]
     eddie vslam replay DIR|BAG [-o OUT] [--max-frames N] [--set Group/Name=VALUE ...]
+                      [--depth-scale UNITS_PER_M] [--fx FX --fy FY --cx CX --cy CY |
+                       --camera-info FILE.yaml]
     eddie vslam loops DIR -o FILE.csv
     eddie vslam db info FILE
     eddie vslam db export FILE [--ply OUT.ply] [--poses OUT.tum]
@@ -12,7 +14,11 @@ Without a sub-command (or with ``sim``) it runs the simulator, Eddie's base stac
 ``/rtabmap/map``. ``replay`` runs visual odometry + SLAM over a TUM RGB-D folder, or the
 ``rtabmap`` node (the report's parameters) over a rosbag2 of our topics (``/image_raw``,
 ``/depth/image_raw``, camera infos, ``/tf``, ``/tf_static``, ``/odom``, ``/scan``), writing
-``rtabmap.db`` and ``poses.txt`` (TUM) into OUT. ``loops`` runs appearance-only loop detection over an image folder and writes
+``rtabmap.db``, ``poses.txt`` (every input frame) and ``keyframes.txt`` (TUM) into OUT. A TUM
+folder's intrinsics come from ``--fx/--fy/--cx/--cy`` or ``--camera-info`` (ROS camera_info
+YAML), else from its name (freiburg1/2/3), else 525/525/319.5/239.5; its depth PNGs have
+``--depth-scale`` units per metre (default TUM's 5000; ICL-NUIM 1000). A bag's come from its
+camera_info and depth encoding. Depth whose median is not 0.3–10 m is refused. ``loops`` runs appearance-only loop detection over an image folder and writes
 ``query,match,score`` rows. ``db`` inspects and exports a session database.
 """
 
@@ -69,6 +75,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     rep.add_argument("--max-frames", type=int, default=0, help="stop after N frames (TUM)")
     rep.add_argument("--set", action="append", default=[], metavar="Group/Name=VALUE",
                      help="RTAB-Map parameter (repeatable), e.g. --set Reg/Force3DoF=true")
+    rep.add_argument("--depth-scale", type=float, default=None, metavar="UNITS_PER_M",
+                     help="depth PNG units per metre (TUM folder; default 5000, ICL-NUIM 1000)")
+    for name in ("fx", "fy", "cx", "cy"):
+        rep.add_argument(f"--{name}", type=float, default=None,
+                         help=f"intrinsic {name} in pixels (TUM folder; give all four)")
+    rep.add_argument("--camera-info", type=Path, default=None, metavar="FILE.yaml",
+                     help="intrinsics from a ROS camera_info YAML (TUM folder)")
     loops = sub.add_parser("loops", help="appearance-only loop detection over an image folder")
     loops.add_argument("folder", type=Path, help="folder of images (numeric order)")
     loops.add_argument("-o", "--output", type=Path, required=True, help="CSV to write")
@@ -163,13 +176,21 @@ def _replay(args: argparse.Namespace) -> int:
     retain_freed_memory()  # visual odometry runs in this process: no page faults per frame
     try:
         if _is_bag(src):
+            given = [f"--{n.replace('_', '-')}" for n in
+                     ("depth_scale", "fx", "fy", "cx", "cy", "camera_info")
+                     if getattr(args, n, None) is not None]
+            if given:
+                raise ValueError(f"{' '.join(given)}: a rosbag2 replay takes the intrinsics "
+                                 "from its camera_info and the depth units from its encoding")
             summary = replay_bag(src, out, params)
         else:
             from dataclasses import asdict
 
             from eddiebot.vslam.replay import replay_tum
 
-            summary = asdict(replay_tum(src, out, params or None, max_frames=args.max_frames))
+            setup = _tum_setup(src, args)
+            summary = asdict(replay_tum(src, out, params or None, max_frames=args.max_frames,
+                                        setup=setup))
     except (VslamError, OSError) as exc:
         print(f"eddie vslam replay: {exc}", file=sys.stderr)
         return 1
@@ -177,6 +198,82 @@ def _replay(args: argparse.Namespace) -> int:
         print(f"{k:16s} {v}")
     print(f"wrote {out}")
     return 0
+
+
+def _tum_setup(folder: Path, args: argparse.Namespace) -> Any:
+    """The replay's camera and depth units from --fx/--fy/--cx/--cy, --camera-info and
+    --depth-scale, with where each came from."""
+    import yaml
+
+    from eddiebot.vslam.camera import CameraIntrinsics, camera_info_from_yaml
+    from eddiebot.vslam.replay import tum_camera_setup
+    from eddiebot.vslam.tum import read_tum_sequence
+
+    values = [getattr(args, n, None) for n in ("fx", "fy", "cx", "cy")]
+    info_file = getattr(args, "camera_info", None)
+    camera = None
+    source = ""
+    if any(v is not None for v in values):
+        if info_file is not None:
+            raise ValueError("give either --fx/--fy/--cx/--cy or --camera-info, not both")
+        if any(v is None for v in values):
+            raise ValueError("--fx, --fy, --cx and --cy go together: give all four")
+        size = read_tum_sequence(folder).camera
+        fx, fy, cx, cy = (float(v) for v in values if v is not None)
+        if fx <= 0 or fy <= 0:
+            raise ValueError(f"--fx/--fy must be > 0, got {fx}, {fy}")
+        camera = CameraIntrinsics(fx, fy, cx, cy, size.width, size.height)
+        source = "--fx/--fy/--cx/--cy"
+    elif info_file is not None:
+        try:
+            data = yaml.safe_load(Path(info_file).read_text())
+        except yaml.YAMLError as exc:
+            raise ValueError(f"--camera-info {info_file}: not YAML ({exc})") from exc
+        if not isinstance(data, dict):
+            raise ValueError(f"--camera-info {info_file}: not a camera_info YAML mapping")
+        try:
+            camera = camera_info_from_yaml(data)
+        except ValueError as exc:
+            raise ValueError(f"--camera-info {info_file}: {exc}") from exc
+        source = f"--camera-info {info_file}"
+    scale = getattr(args, "depth_scale", None)
+    return tum_camera_setup(folder, camera, source, scale,
+                            "--depth-scale" if scale is not None else "")
+
+
+def _bag_camera(reader: Any, present: set[str]) -> dict[str, Any]:
+    """The intrinsics (first /camera_info) and depth units (first depth image's encoding) a
+    bag replay uses; refuses depth whose median is implausible."""
+    import numpy as np
+
+    from eddiebot.perception._image import image_to_array
+    from eddiebot.perception.errors import ImageSizeError, UnsupportedEncodingError
+    from eddiebot.vslam.camera import check_depth_plausible, depth_to_meters
+
+    out: dict[str, Any] = {"intrinsics": None, "intrinsics_source": "none: no /camera_info",
+                           "depth_scale": None, "depth_scale_source": "none: no depth"}
+    wanted = [t for t in ("/camera_info", "/depth/image_raw") if t in present]
+    for msg in reader.messages(topics=wanted):
+        obj = msg.decode()
+        if msg.topic == "/camera_info" and out["intrinsics"] is None:
+            k = np.asarray(obj.k, dtype=np.float64)
+            out["intrinsics"] = [float(k[0]), float(k[4]), float(k[2]), float(k[5]),
+                                 int(obj.width), int(obj.height)]
+            out["intrinsics_source"] = "the bag's /camera_info"
+        elif msg.topic == "/depth/image_raw" and out["depth_scale"] is None:
+            try:
+                raw = image_to_array(obj, ("16UC1", "32FC1"))
+            except (UnsupportedEncodingError, ImageSizeError):
+                continue  # the node skips such images too
+            scale = 1000.0 if raw.dtype == np.uint16 else 1.0
+            out["depth_scale"] = scale
+            out["depth_scale_source"] = f"the bag's depth encoding {obj.encoding}"
+            check_depth_plausible(depth_to_meters(raw), scale,
+                                  "the bag's depth images are not in ROS units (16UC1 mm, "
+                                  "32FC1 m)")
+        if out["intrinsics"] is not None and out["depth_scale"] is not None:
+            break
+    return out
 
 
 def replay_bag(bag: Path, out_dir: Path, parameters: dict[str, str] | None = None
@@ -197,6 +294,7 @@ def replay_bag(bag: Path, out_dir: Path, parameters: dict[str, str] | None = Non
     context = Context(use_sim_time=True)
     with BagReader(bag) as reader:
         present = {c.topic for c in reader.connections}
+        camera = _bag_camera(reader, present)
         overrides: dict[str, Any] = {
             "use_sim_time": True, "database_path": str(out_dir / "rtabmap.db"),
             "delete_db_on_start": True, "subscribe_scan": "/scan" in present,
@@ -224,7 +322,8 @@ def replay_bag(bag: Path, out_dir: Path, parameters: dict[str, str] | None = Non
     stamps, poses = slam.trajectory()
     write_tum_trajectory(out_dir / "poses.txt", [t / 1e9 for t in stamps], list(poses))
     summary = {"messages": n, "frames": slam.frames_processed, "nodes": len(stamps),
-               "loop_closures": slam.loop_closures, "database": str(out_dir / "rtabmap.db")}
+               "loop_closures": slam.loop_closures, "database": str(out_dir / "rtabmap.db"),
+               **camera}
     slam.destroy_node()
     player.destroy_node()
     context.shutdown()

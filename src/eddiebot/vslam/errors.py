@@ -7,6 +7,7 @@ __all__ = [
     "DatabaseError",
     "DatabaseLockedError",
     "DatabaseVersionError",
+    "DepthScaleError",
     "ParameterError",
     "TumFormatError",
     "VslamError",
@@ -39,3 +40,7 @@ class DatabaseVersionError(DatabaseError):
 
 class TumFormatError(VslamError, ValueError):
     """A TUM RGB-D folder or file is missing or malformed."""
+
+
+class DepthScaleError(VslamError, ValueError):
+    """Depth read with a units-per-metre scale that puts the scene at an implausible distance."""

@@ -9,24 +9,75 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
+from eddiebot.vslam.camera import CameraIntrinsics, check_depth_plausible
 from eddiebot.vslam.database import SessionDatabase
+from eddiebot.vslam.errors import TumFormatError
 from eddiebot.vslam.odometry import VisualOdometry
 from eddiebot.vslam.parameters import RtabmapParameters
 from eddiebot.vslam.rtabmap import Rtabmap
+from eddiebot.vslam.transforms import se3_inverse, to_3dof
 from eddiebot.vslam.tum import (
+    TUM_CALIBRATIONS,
+    TUM_DEPTH_SCALE,
     absolute_trajectory_error,
     load_tum_frame,
     read_tum_sequence,
     write_tum_trajectory,
 )
 
-__all__ = ["ReplayReport", "replay_tum"]
+__all__ = ["CameraSetup", "ReplayReport", "replay_tum", "tum_camera_setup"]
+
+F64 = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class CameraSetup:
+    """The intrinsics and depth units a replay uses, and where each came from."""
+
+    camera: CameraIntrinsics
+    intrinsics_source: str
+    depth_scale: float = TUM_DEPTH_SCALE
+    depth_scale_source: str = "TUM default (5000 units per metre)"
+
+
+def tum_camera_setup(
+    folder: str | Path, camera: CameraIntrinsics | None = None, intrinsics_source: str = "",
+    depth_scale: float | None = None, depth_scale_source: str = "",
+) -> CameraSetup:
+    """A TUM folder's camera: `camera` if given, else the TUM calibration its name selects
+    (freiburg1/2/3), else 525/525/319.5/239.5 (said so in the source); depth units per metre
+    `depth_scale` if given, else TUM's 5000."""
+    seq_camera = read_tum_sequence(folder).camera
+    if camera is not None:
+        if (camera.width, camera.height) != (seq_camera.width, seq_camera.height):
+            raise TumFormatError(
+                f"{folder}: images are {seq_camera.width}x{seq_camera.height}, the given "
+                f"intrinsics are for {camera.width}x{camera.height}")
+        source = intrinsics_source or "given"
+    else:
+        camera = seq_camera
+        name = Path(folder).name
+        key = next((k for k in TUM_CALIBRATIONS if k in name), None)
+        source = (f"TUM {key} calibration (folder name)" if key else
+                  "default 525/525/319.5/239.5 (the folder name selects no TUM calibration)")
+    if depth_scale is None:
+        return CameraSetup(camera, source)
+    if not depth_scale > 0:
+        raise ValueError(f"depth scale must be > 0 units per metre, got {depth_scale}")
+    return CameraSetup(camera, source, float(depth_scale), depth_scale_source or "given")
 
 
 @dataclass(frozen=True)
 class ReplayReport:
-    """Figures of one replay (ATE in m, NaN without ground truth; times in ms per frame)."""
+    """Figures of one replay (ATE in m, NaN without ground truth; times in ms per frame).
+
+    `slam_ate_m` is over every input frame (a lost frame keeps the last pose), `keyframe_ate_m`
+    over the key frames; `loop_closures` counts appearance (global) loop closures,
+    `proximity_links` proximity-by-space links, `rejected_hypotheses` loop hypotheses that
+    failed registration or `RGBD/OptimizeMaxError`.
+    """
 
     frames: int
     nodes: int
@@ -36,47 +87,71 @@ class ReplayReport:
     slam_ate_m: float
     odom_ms_median: float
     slam_ms_median: float
+    proximity_links: int = 0
+    rejected_hypotheses: int = 0
+    keyframe_ate_m: float = float("nan")
+    ate_frames: int = 0
+    intrinsics: tuple[float, float, float, float, int, int] = (0.0, 0.0, 0.0, 0.0, 0, 0)
+    intrinsics_source: str = ""
+    depth_scale: float = TUM_DEPTH_SCALE
+    depth_scale_source: str = ""
 
 
 def replay_tum(
     folder: str | Path, out_dir: str | Path,
     params: RtabmapParameters | Mapping[str, str] | None = None,
-    *, max_frames: int = 0,
+    *, max_frames: int = 0, setup: CameraSetup | None = None,
 ) -> ReplayReport:
-    """Run VO + SLAM on every associated frame; write ``odom.txt``, ``poses.txt`` (camera poses,
-    TUM format), ``rtabmap.db`` and ``report.json`` into `out_dir`.
+    """Run VO + SLAM on every associated frame; write into `out_dir`:
+
+    - ``poses.txt``: a pose for every input frame (its key frame's optimised pose composed
+      with the odometry since; a lost frame keeps the last one), TUM format, pose of the
+      colour camera's optical frame in the map frame;
+    - ``keyframes.txt``: the key frames' optimised poses (same frame);
+    - ``odom.txt`` (frames odometry tracked), ``rtabmap.db`` and ``report.json``.
 
     Every frame goes to the SLAM core (no `Rtabmap/DetectionRate` throttling, as in RTAB-Map's
-    TUM evaluation with update thresholds at 0 when so configured); lost frames are skipped.
+    TUM evaluation with update thresholds at 0 when so configured). The first frame's depth
+    must be plausible at the setup's scale (`DepthScaleError`).
     """
     if params is None:
         params = RtabmapParameters()
     elif not isinstance(params, RtabmapParameters):
         params = RtabmapParameters.from_dict(params)
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     seq = read_tum_sequence(folder)
-    camera = seq.camera
+    setup = setup or tum_camera_setup(folder)
+    camera, scale = setup.camera, setup.depth_scale
     lt = camera.local_transform
-    vo = VisualOdometry(params)
     frames = seq.frames[:max_frames] if max_frames > 0 else seq.frames
+    if frames:
+        check_depth_plausible(load_tum_frame(frames[0], scale)[1], scale,
+                              "give the depth images' units per metre with --depth-scale "
+                              "(TUM 5000, ICL-NUIM/Redwood 1000)")
+    out.mkdir(parents=True, exist_ok=True)
+    vo = VisualOdometry(params)
     odom_stamps: list[float] = []
-    odom_poses: list[np.ndarray] = []
+    odom_poses: list[F64] = []
     node_stamps: dict[int, float] = {}
-    lost = 0
-    loops = 0
+    # per input frame: (its key frame, odometry of the frame as the core sees it); None = lost
+    # before any key frame
+    frame_keys: list[tuple[int, F64] | None] = []
+    key_odom: dict[int, F64] = {}
+    key_order: list[int] = []
+    lost = loops = proximity = rejected = 0
     odom_ms: list[float] = []
     slam_ms: list[float] = []
     with SessionDatabase(out / "rtabmap.db", delete_on_start=True) as db:
         slam = Rtabmap(params, database=db)
         for frame in frames:
-            rgb, depth = load_tum_frame(frame)
+            rgb, depth = load_tum_frame(frame, scale)
             stamp_ns = round(frame.stamp * 1e9)
             t0 = time.perf_counter()
             odom = vo.process(rgb, depth, camera, stamp_ns)
             odom_ms.append((time.perf_counter() - t0) * 1e3)
             if odom.pose is None:
                 lost += 1
+                frame_keys.append(frame_keys[-1] if frame_keys else None)
                 continue
             odom_stamps.append(frame.stamp)
             odom_poses.append(odom.pose @ lt)
@@ -85,29 +160,68 @@ def replay_tum(
                                   odom_covariance=odom.covariance,
                                   features=odom.frame_features)
             slam_ms.append((time.perf_counter() - t0) * 1e3)
+            core_odom = to_3dof(odom.pose) if params.reg_force_3dof else np.asarray(odom.pose)
             if result.added:
                 node_stamps[result.node_id] = frame.stamp
-            if result.loop_closure_id:
-                loops += 1
+                key_odom[result.node_id] = core_odom
+                key_order.append(result.node_id)
+            frame_keys.append((key_order[-1], core_odom) if key_order else None)
+            loops += bool(result.loop_closure_id)
+            proximity += bool(result.proximity_id)
+            rejected += bool(result.rejected_loop_id)
         poses, _ = slam.graph()
         db.save_optimized(poses, slam.occupancy_grid())
     ids = sorted(i for i in poses if i in node_stamps)
-    slam_stamps = [node_stamps[i] for i in ids]
-    slam_poses = [poses[i] @ lt for i in ids]
+    key_stamps = [node_stamps[i] for i in ids]
+    key_poses = [poses[i] @ lt for i in ids]
+    frame_stamps, frame_poses = _every_frame_poses(
+        [f.stamp for f in frames], frame_keys, key_order, key_odom, poses)
+    frame_poses = [p @ lt for p in frame_poses]
     write_tum_trajectory(out / "odom.txt", odom_stamps, odom_poses)
-    write_tum_trajectory(out / "poses.txt", slam_stamps, slam_poses)
-    odom_ate = slam_ate = float("nan")
+    write_tum_trajectory(out / "poses.txt", frame_stamps, frame_poses)
+    write_tum_trajectory(out / "keyframes.txt", key_stamps, key_poses)
+    odom_ate = slam_ate = key_ate = float("nan")
+    ate_pairs = 0
     if seq.groundtruth_stamps.size:
-        odom_ate, _ = absolute_trajectory_error(
-            np.array(odom_stamps), np.array(odom_poses), seq.groundtruth_stamps,
-            seq.groundtruth_poses)
-        slam_ate, _ = absolute_trajectory_error(
-            np.array(slam_stamps), np.array(slam_poses), seq.groundtruth_stamps,
-            seq.groundtruth_poses)
+        gt = (seq.groundtruth_stamps, seq.groundtruth_poses)
+        odom_ate, _ = absolute_trajectory_error(np.array(odom_stamps), np.array(odom_poses), *gt)
+        slam_ate, ate_pairs = absolute_trajectory_error(
+            np.array(frame_stamps), np.array(frame_poses), *gt)
+        key_ate, _ = absolute_trajectory_error(np.array(key_stamps), np.array(key_poses), *gt)
     report = ReplayReport(
         len(frames), len(ids), lost, loops, odom_ate, slam_ate,
         float(np.median(odom_ms)) if odom_ms else float("nan"),
         float(np.median(slam_ms)) if slam_ms else float("nan"),
+        proximity_links=proximity, rejected_hypotheses=rejected, keyframe_ate_m=key_ate,
+        ate_frames=ate_pairs,
+        intrinsics=(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height),
+        intrinsics_source=setup.intrinsics_source, depth_scale=scale,
+        depth_scale_source=setup.depth_scale_source,
     )
     (out / "report.json").write_text(json.dumps(asdict(report), indent=2))
     return report
+
+
+def _every_frame_poses(
+    stamps: list[float], frame_keys: list[tuple[int, F64] | None], key_order: list[int],
+    key_odom: Mapping[int, F64], optimized: Mapping[int, F64],
+) -> tuple[list[float], list[F64]]:
+    """Map-frame base pose of every input frame: the optimised pose of its key frame (or of
+    the latest earlier key frame still in the graph, when the core merged it away) composed
+    with the odometry between the two. Frames before the first key frame have none."""
+    rank = {k: n for n, k in enumerate(key_order)}
+    out_stamps: list[float] = []
+    out_poses: list[F64] = []
+    for stamp, entry in zip(stamps, frame_keys):
+        if entry is None:
+            continue
+        key, odom = entry
+        n = rank[key]
+        while n >= 0 and key_order[n] not in optimized:
+            n -= 1
+        if n < 0:
+            continue
+        anchor = key_order[n]
+        out_stamps.append(stamp)
+        out_poses.append(optimized[anchor] @ se3_inverse(key_odom[anchor]) @ odom)
+    return out_stamps, out_poses

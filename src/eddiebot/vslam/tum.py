@@ -24,6 +24,7 @@ from eddiebot.vslam.errors import TumFormatError
 from eddiebot.vslam.transforms import OPTICAL_ROTATION, fit_rigid
 
 __all__ = [
+    "TUM_CALIBRATIONS",
     "TUM_DEPTH_SCALE",
     "TumFrame",
     "TumSequence",
@@ -43,7 +44,7 @@ TUM_DEPTH_SCALE = 5000.0
 F64 = NDArray[np.float64]
 
 # Per-sequence calibrations from the TUM RGB-D site (fx, fy, cx, cy); 525/319.5/239.5 otherwise.
-_CALIBRATIONS = {
+TUM_CALIBRATIONS = {
     "freiburg1": (517.3, 516.5, 318.6, 255.3),
     "freiburg2": (520.9, 521.0, 325.1, 249.7),
     "freiburg3": (535.4, 539.2, 320.1, 247.6),
@@ -127,7 +128,7 @@ def tum_camera(folder: str | Path, width: int = 640, height: int = 480) -> Camer
     """Intrinsics for a sequence from its name (freiburg1/2/3), base frame = optical frame rotated."""
     name = Path(folder).name
     fx, fy, cx, cy = 525.0, 525.0, 319.5, 239.5
-    for key, calib in _CALIBRATIONS.items():
+    for key, calib in TUM_CALIBRATIONS.items():
         if key in name:
             fx, fy, cx, cy = calib
     return CameraIntrinsics(fx, fy, cx, cy, width, height, OPTICAL_ROTATION.copy())
