@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+import yaml
 
 from eddiebot.cli.main import fatal_message, main
 from eddiebot.maps import OccupancyMap, save_map
@@ -88,14 +89,34 @@ def test_params_file_with_a_syntax_error(capsys: Any, tmp_path: Path, room_map: 
                      "but got ':'"]
 
 
-def test_params_file_with_an_unknown_key(capsys: Any, tmp_path: Path, room_map: Path) -> None:
+def test_params_file_keys_no_server_reads_are_named_and_left_out(
+        capsys: Any, tmp_path: Path) -> None:
+    from eddiebot.cli.nav import resolve_params
+
     params = tmp_path / "nav2.yaml"
     params.write_text("amcl:\n  ros__parameters:\n    alpha1: 0.005\n    alpah2: 0.005\n"
-                      "controller_server:\n  ros__parameters:\n    controller_frequency: 20.0\n")
+                      "controller_server:\n  ros__parameters:\n    controller_frequency: 20.0\n"
+                      "docking_server:\n  ros__parameters:\n    controller_frequency: 50.0\n")
+    out = resolve_params(params, tmp_path / "run", None)
+    err = capsys.readouterr().err.splitlines()
+    assert f"eddie nav: {params}: ignored: amcl.alpah2" in err
+    assert f"eddie nav: {params}: not supported: docking_server (whole section)" in err
+    resolved = yaml.safe_load(out.read_text())
+    assert "alpah2" not in resolved["amcl"]["ros__parameters"]
+    assert resolved["amcl"]["ros__parameters"]["alpha1"] == 0.005
+    assert "docking_server" not in resolved
+
+
+def test_params_file_with_a_plugin_we_cannot_load(capsys: Any, tmp_path: Path,
+                                                   room_map: Path) -> None:
+    params = tmp_path / "nav2.yaml"
+    params.write_text("controller_server:\n  ros__parameters:\n    controller_plugins: [FollowPath]\n"
+                      "    FollowPath:\n      plugin: nav2_mppi_controller::MPPIController\n")
     code, lines = eddie(capsys, "nav", "--map", str(room_map), "--world", "office",
                         "--params", str(params), "--run-dir", str(tmp_path / "run"))
     assert code == 2
-    assert lines == [f"eddie: error: {params}:4: node /amcl has no parameter 'alpah2'"]
+    assert lines[-1].startswith("eddie: error:")
+    assert "nav2_mppi_controller::MPPIController" in lines[-1] and "FollowPath" in lines[-1]
 
 
 def test_slam_params_file_with_a_syntax_error(capsys: Any, tmp_path: Path) -> None:

@@ -13,6 +13,7 @@ needs ``--initial-pose 0 0 0``). Send goals with ``eddie goal X Y YAW``.
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 from pathlib import Path
 
@@ -52,16 +53,27 @@ def resolve_params(source: Path, out_dir: Path, initial_pose: tuple[float, float
                    ) -> Path:
     """Write the Nav2 parameters with the costmaps folded in (and AMCL's initial pose).
 
-    Raises `eddiebot.cli.errors.ParamsFileError` (``FILE:LINE: ...``) for a file that is
-    not YAML or sets a parameter no Nav2 server has.
+    A Nav2 user's file drops in: each section of a server eddiebot does not run and each key
+    no server or plugin reads is named once on stderr (``not supported: …``, ``ignored: …``)
+    and left out. Raises `eddiebot.cli.errors.ParamsFileError` (``FILE:LINE: ...``) for a
+    file that is not YAML, and `eddiebot.nav.errors.UnsupportedPlugin` (server, key,
+    plugin) for a plugin that cannot be configured.
     """
-    from eddiebot.cli._params import check_nav_params, load_params_file
+    from eddiebot.cli._params import load_params_file
+    from eddiebot.cli.errors import ParamsFileError
     from eddiebot.nav.nodes._common import nest_nav2_params
+    from eddiebot.nav.nodes.params_audit import audit_nav2_params
 
-    doc, tree = load_params_file(source)
-    doc = doc or {}
-    check_nav_params(source, doc, tree)
-    doc = nest_nav2_params(doc)
+    doc, _ = load_params_file(source)
+    if doc is None:
+        doc = {}
+    if not isinstance(doc, dict):
+        raise ParamsFileError(f"{source}: top level must map node names to "
+                              "{ros__parameters: {...}}")
+    audit = audit_nav2_params(doc)
+    for warning in audit.warnings:
+        print(f"eddie nav: {source}: {warning}", file=sys.stderr)
+    doc = nest_nav2_params(audit.supported)
     if initial_pose is not None:
         amcl = doc.setdefault("amcl", {}).setdefault("ros__parameters", {})
         amcl["set_initial_pose"] = True

@@ -26,6 +26,7 @@ node allows undeclared ones); any error names file, line, node and key, and noth
 from __future__ import annotations
 
 import importlib
+import logging
 import os
 import re
 import signal
@@ -46,6 +47,8 @@ from eddiebot.core.parameters import (
     load_parameter_file,
     node_matches,
 )
+
+_log = logging.getLogger(__name__)
 
 
 class LaunchError(RuntimeErrorBase):
@@ -298,7 +301,8 @@ def build_nodes(
                     raise LaunchError(
                         f"{o.where}: node {node.fully_qualified_name} has no parameter {o.name!r}"
                     )
-        # every node entry of every file must name a launched node
+        # a node entry of a file that names no launched node is unused: say so once (a
+        # Nav2 user's nav2_params.yaml carries sections for servers this launch does not run)
         fqns = [n.fully_qualified_name for n in nodes]
         for path, pf in files.items():
             for pattern in pf.node_patterns:
@@ -306,8 +310,8 @@ def build_nodes(
                     continue
                 if not any(node_matches(pattern, q) for q in fqns):
                     line = next(o.where for o in pf.overrides if o.node_pattern == pattern)
-                    raise LaunchError(f"{line}: parameter file names node {pattern!r}, which is not launched "
-                                      f"(launched: {fqns})")
+                    _log.warning("%s: parameter file names node %r, which is not launched: "
+                                 "its parameters are not used", line, pattern)
     except (LaunchError, ParameterError):
         for n in nodes:
             n.destroy_node()
