@@ -42,6 +42,7 @@ import numpy as np
 import numpy.typing as npt
 import yaml
 
+from eddiebot.core.files import created_file_mode
 from eddiebot.maps.errors import LegacyMapWarning, MapFormatError, MapWriteError
 from eddiebot.maps.grid import OccupancyMap
 
@@ -263,6 +264,8 @@ def _atomic_write_bytes(path: Path, payload: bytes) -> None:
             handle.write(payload)
             handle.flush()
             os.fsync(handle.fileno())
+            # mkstemp made it 0600: give it the mode the user's umask gives new files
+            os.fchmod(handle.fileno(), created_file_mode())
         os.replace(tmp, path)
         tmp = ""
     except OSError as exc:

@@ -46,7 +46,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-import os
 import time
 from collections import deque
 from pathlib import Path
@@ -77,7 +76,6 @@ from eddiebot.msgs.slam_toolbox import (
     SerializePoseGraph,
 )
 from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
-from eddiebot.slam._files import created_file_mode
 from eddiebot.slam.config import SlamConfig, parameter_warnings
 from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning, warm_up
 from eddiebot.slam.scan import Scan
@@ -382,13 +380,7 @@ class SlamNode(Node):
         try:
             self.core.update_map()
             base = Path(name).expanduser()
-            yaml_path = save_map(self.core.occupancy_map(), base)
-            # the map writer renames a 0600 temporary file into place: give the files the
-            # mode the user's umask gives new files
-            mode = created_file_mode()
-            for written in {Path(yaml_path), base.with_suffix(".yaml"), base.with_suffix(".pgm")}:
-                if written.is_file():
-                    os.chmod(written, mode)
+            save_map(self.core.occupancy_map(), base)
             res.result = SaveMap.Response.RESULT_SUCCESS
             self.get_logger().info(f"saved the map to {name}.yaml / {name}.pgm")
         except Exception as exc:

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from eddiebot.slam._files import created_file_mode
+from eddiebot.core.files import created_file_mode
 from eddiebot.slam.config import SlamConfig
 from eddiebot.slam.errors import SessionError, SessionVersionError
 from eddiebot.slam.mapper import NodeRecord, SlamCore

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from eddiebot.slam._files import created_file_mode
+from eddiebot.core.files import created_file_mode
 
 __all__ = ["read_tum", "write_tum"]
 

@@ -1,4 +1,6 @@
-"""File modes for files written through a temporary file and a rename."""
+"""File modes for files written through a temporary file and a rename (maps, SLAM
+sessions, trajectories): a crash never leaves half a file, and the result is as readable as
+any other file the user writes."""
 
 from __future__ import annotations
 
