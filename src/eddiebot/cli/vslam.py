@@ -1,7 +1,8 @@
 """``eddie vslam``: RGB-D graph SLAM (rtabmap's role).
 
     eddie vslam [sim] --world office [--rate N | --fast] [--seed S] [--dashboard]
-                      [--database FILE] [--keep-database] [--localization] [--map-topic /map]
+                      [--database FILE] [--delete_db_on_start] [--localization]
+                      [--map-topic /map]
     eddie vslam replay DIR|BAG [-o OUT] [--max-frames N] [--set Group/Name=VALUE ...]
                       [--depth-scale UNITS_PER_M] [--fx FX --fy FY --cx CX --cy CY |
                        --camera-info FILE.yaml]
@@ -52,8 +53,11 @@ def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
                         help="Kinect resolution and rate, WxH@HZ (default 320x240@10)")
     parser.add_argument("--database", default="~/.local/share/eddiebot/rtabmap.db",
                         help="session database (default ~/.local/share/eddiebot/rtabmap.db)")
+    parser.add_argument("--delete_db_on_start", "--delete-db-on-start", action="store_true",
+                        help="erase the database before starting (rtabmap's -d); by default "
+                        "its map is continued in a new session")
     parser.add_argument("--keep-database", action="store_true",
-                        help="continue the database's map instead of deleting it (no -d)")
+                        help=argparse.SUPPRESS)  # the default now; kept for old scripts
     parser.add_argument("--localization", action="store_true",
                         help="localize in the database's map (Mem/IncrementalMemory false)")
     parser.add_argument("--map-topic", default="/rtabmap/map",
@@ -144,10 +148,24 @@ def _sim(args: argparse.Namespace) -> int:
     except ValueError:
         print(f"eddie vslam: --camera expects WxH@HZ, got {args.camera!r}", file=sys.stderr)
         return 2
+    from eddiebot.vslam.database import is_session_database
+    from eddiebot.vslam.errors import DatabaseError
+
+    database = Path(args.database).expanduser()
+    try:
+        foreign = database.exists() and not is_session_database(database)
+    except DatabaseError as exc:
+        print(f"eddie vslam: {exc}", file=sys.stderr)
+        return 1
+    if foreign:
+        print(f"eddie vslam: {database} is not an eddiebot vslam session database; not "
+              "touching it: choose another file with --database", file=sys.stderr)
+        return 1
+    delete = bool(args.delete_db_on_start) and not args.localization
     launch_args = {
         "world": args.world, "seed": str(args.seed), "camera_width": width,
         "camera_height": height, "camera_rate": rate, "database_path": args.database,
-        "delete_db_on_start": "false" if (args.keep_database or args.localization) else "true",
+        "delete_db_on_start": "true" if delete else "false",
         "localization": "true" if args.localization else "false",
         "map_topic": args.map_topic, "rtabmap_args": args.rtabmap_args,
     }
@@ -358,7 +376,7 @@ def database_info(path: Path) -> dict[str, Any]:
     from eddiebot.vslam.database import SessionDatabase
     from eddiebot.vslam.memory import LinkType
 
-    with SessionDatabase(path) as db:
+    with SessionDatabase(path, read_only=True) as db:
         nodes = db.nodes()
         links = db.links()
         opt = db.optimized_poses()
@@ -409,7 +427,7 @@ def _db_export(args: argparse.Namespace) -> int:
         print("eddie vslam db export: give --ply and/or --poses", file=sys.stderr)
         return 2
     try:
-        with SessionDatabase(args.file) as db:
+        with SessionDatabase(args.file, read_only=True) as db:
             params = db.last_parameters()
             # read-only use: load the map without starting a new session
             from eddiebot.vslam.parameters import RtabmapParameters

@@ -35,7 +35,7 @@ from eddiebot.vslam.occupancy import GlobalGrid, LocalGrid
 if TYPE_CHECKING:
     from eddiebot.vslam.rtabmap import FrameRecord, Rtabmap
 
-__all__ = ["SCHEMA_VERSION", "SessionDatabase"]
+__all__ = ["SCHEMA_VERSION", "SessionDatabase", "is_session_database"]
 
 SCHEMA_VERSION = 1
 _APPLICATION_ID = 0x45444456  # "EDDV"
@@ -154,14 +154,54 @@ def camera_from_json(s: str) -> CameraIntrinsics:
                             np.asarray(d["local_transform"], np.float64))
 
 
+def is_session_database(path: str | Path) -> bool:
+    """Whether `path` is an SQLite file carrying our application id (read-only look; an empty
+    file counts, as a database that was created and never written)."""
+    p = Path(path)
+    if not p.is_file():
+        return False
+    if p.stat().st_size == 0:
+        return True
+    try:
+        conn = sqlite3.connect(f"{p.resolve().as_uri()}?mode=ro", uri=True, timeout=0.0)
+    except sqlite3.Error:
+        return False
+    try:
+        return int(conn.execute("PRAGMA application_id").fetchone()[0]) == _APPLICATION_ID
+    except sqlite3.OperationalError as exc:
+        if "locked" in str(exc) or "busy" in str(exc):
+            raise DatabaseLockedError(f"{p}: locked by another process") from exc
+        return False
+    except sqlite3.Error:
+        return False
+    finally:
+        conn.close()
+
+
 class SessionDatabase:
     """One map's SQLite file. Use as a context manager or call `close()`."""
 
     def __init__(self, path: str | Path, *, delete_on_start: bool = False,
-                 image_format: str = ".jpg") -> None:
+                 image_format: str = ".jpg", read_only: bool = False) -> None:
+        """Open (or create) the map at `path`.
+
+        `delete_on_start` (RTAB-Map's ``delete_db_on_start``) erases an existing file first,
+        but only one of ours: anything else raises `DatabaseCorruptError` and stays as it is.
+        `read_only` opens an existing database without creating, locking for writing or
+        changing anything (a missing file raises `DatabaseError`).
+        """
         self.path = Path(path)
         self.image_format = image_format
+        self.read_only = read_only
+        if read_only and delete_on_start:
+            raise ValueError("a read-only database cannot be deleted on start")
+        if read_only and not self.path.is_file():
+            raise DatabaseError(f"{self.path}: no such database")
         if delete_on_start:
+            if self.path.exists() and not is_session_database(self.path):
+                raise DatabaseCorruptError(
+                    f"{self.path}: not an eddiebot vslam session database; refusing to delete "
+                    "it (choose another database path)")
             for suffix in ("", "-journal", "-wal", "-shm"):
                 p = Path(str(self.path) + suffix)
                 if p.exists():
@@ -172,11 +212,20 @@ class SessionDatabase:
     # -- opening ----------------------------------------------------------------------------
     def _open(self) -> sqlite3.Connection:
         existed = self.path.exists() and self.path.stat().st_size > 0
+        if self.read_only and not existed:
+            raise DatabaseCorruptError(f"{self.path}: empty file, not a session database")
         try:
-            conn = sqlite3.connect(str(self.path), timeout=0.0, isolation_level=None)
+            if self.read_only:
+                conn = sqlite3.connect(f"{self.path.resolve().as_uri()}?mode=ro", uri=True,
+                                       timeout=0.0, isolation_level=None)
+            else:
+                conn = sqlite3.connect(str(self.path), timeout=0.0, isolation_level=None)
         except sqlite3.Error as exc:
             raise DatabaseError(f"{self.path}: cannot open: {exc}") from exc
         try:
+            if self.read_only:
+                self._check(conn)
+                return conn
             conn.execute("PRAGMA locking_mode=EXCLUSIVE")
             version = self._check(conn) if existed else None
             conn.execute("PRAGMA synchronous=NORMAL")

@@ -292,13 +292,17 @@ class RtabmapNode(Node):
         self.db = None
         if self.database_path:
             path = Path(self.database_path).expanduser()
+            # The database is the user's map: a file that is not ours, damaged or locked stops
+            # the node instead of being replaced or silently mapped without.
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 self.db = SessionDatabase(path, delete_on_start=delete)
                 stored = self.db.last_parameters()
-            except (DatabaseError, OSError) as exc:
-                self.get_logger().error(f"database {path}: {exc}; running without a database")
-                self.db = None
+            except OSError as exc:
+                raise DatabaseError(f"database {path}: {exc}") from exc
+            except DatabaseError as exc:
+                self.get_logger().error(f"database {path}: {exc}")
+                raise
         params = RtabmapParameters.from_dict(self.effective_parameters(stored))
         core = Rtabmap(params, database=self.db)
         self.node_stamps = {n.id: n.stamp_ns for n in core.memory.nodes.values()}
