@@ -40,6 +40,7 @@ NODES: dict[str, str] = {
     "eddiebot.nav.behavior_server": "eddiebot.nav.nodes.behavior_server:BehaviorServer",
     "eddiebot.nav.bt_navigator": "eddiebot.nav.nodes.bt_navigator:BtNavigator",
     "eddiebot.nav.waypoint_follower": "eddiebot.nav.nodes.waypoint_follower:WaypointFollower",
+    "eddiebot.explore.explore": "eddiebot.explore.node:ExploreNode",
     # tools
     "eddiebot.viz.recorder": "eddiebot.viz.bag:RecorderNode",
 }

@@ -45,6 +45,7 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("sim", "eddiebot.cli.sim", "start the simulator with the bring-up stack"),
     ("teleop", "eddiebot.cli.teleop", "drive with the keyboard (teleop_twist_keyboard keys)"),
     ("slam", "eddiebot.cli.slam", "2D SLAM: live in the simulator, or replay a log"),
+    ("explore", "eddiebot.cli.explore", "explore and map a world by itself, then come home"),
     ("map", "eddiebot.cli.map", "save or show maps"),
     ("nav", "eddiebot.cli.nav", "navigation in a saved map (simulator or robot)"),
     ("goal", "eddiebot.cli.goal", "send a navigation goal X Y YAW"),

@@ -1,0 +1,409 @@
+"""explore_lite's node: frontiers from ``/map`` become ``navigate_to_pose`` goals.
+
+Subscribes ``/map`` (transient-local) and ``explore/resume`` (std_msgs/Bool: false pauses
+and cancels the goal, true resumes); reads the robot's pose from TF ``map`` →
+``robot_base_frame``; publishes ``explore/frontiers`` (visualization_msgs/MarkerArray) when
+``visualize``. Goals go through Nav2's ``navigate_to_pose``, so the planner, controller,
+recoveries, velocity smoother and collision monitor stay in charge of the motion; the
+look-around at the start is the behaviour server's ``spin`` (one full turn: the Kinect
+sees 57°). With no frontier left, or after ``time_limit``, the robot is sent back to where
+it started when ``return_to_init``. `stop` cancels everything at once and never sends the
+robot home (Ctrl-C).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from eddiebot.core.action import ActionClient
+from eddiebot.core.node import Node
+from eddiebot.core.qos import qos_profile_latched
+from eddiebot.core.tf import Buffer, TransformException, TransformListener
+from eddiebot.explore.config import ExploreConfig
+from eddiebot.explore.frontiers import Frontier, FrontierSearch, mark_swept, search_frontiers
+from eddiebot.explore.tracking import Blacklist, FrontierTracker, ProgressMonitor, choose_frontier
+from eddiebot.geometry import yaw_to_quaternion
+from eddiebot.maps import OccupancyMap, map_from_msg
+
+__all__ = ["ExploreNode", "ExploreState", "GoalRecord"]
+
+_SUCCEEDED, _CANCELED, _ABORTED = 4, 5, 6
+#: A kept target's goal is re-sent when its viewpoint moved this far (the frontier changed), m.
+_RESEND_DISTANCE = 0.5
+#: After an arrival the next plan waits for a map made since, at most this long (s).
+_MAP_WAIT_S = 10.0
+#: Goals sent to get home before giving up.
+_HOME_ATTEMPTS = 3
+#: Spacing of the points of the driven path the robot retraces when it cannot plan home, m.
+_BREADCRUMB_SPACING = 1.5
+
+
+class ExploreState(enum.Enum):
+    WAITING = "waiting"
+    LOOK_AROUND = "look_around"
+    EXPLORING = "exploring"
+    RETURNING = "returning"
+    DONE = "done"
+
+
+@dataclass
+class GoalRecord:
+    """One frontier goal: where (map frame, m/rad), when (s, node clock), how it ended."""
+
+    frontier_id: int
+    viewpoint: tuple[float, float, float]
+    centroid: tuple[float, float]
+    sent_s: float
+    outcome: str = "active"
+
+
+class ExploreNode(Node):
+    default_node_name = "explore_node"
+
+    def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        values = {f.name: self.declare_parameter(f.name, f.default).value
+                  for f in dataclasses.fields(ExploreConfig)}
+        self.config = ExploreConfig.from_mapping(values)
+        from eddiebot.msgs.nav2_msgs import NavigateToPose, Spin
+        from eddiebot.msgs.nav_msgs import OccupancyGrid
+        from eddiebot.msgs.std_msgs import Bool
+        from eddiebot.msgs.visualization_msgs import MarkerArray
+
+        self.tf_buffer = Buffer(node=self)
+        self.tf_listener = TransformListener(self.tf_buffer, self)
+        self.create_subscription(OccupancyGrid, "/map", self._on_map, qos_profile_latched)
+        self.create_subscription(Bool, "explore/resume", self._on_resume, 10)
+        self._marker_pub = (self.create_publisher(MarkerArray, "explore/frontiers", 10)
+                            if self.config.visualize else None)
+        self._nav = ActionClient(self, NavigateToPose, "navigate_to_pose")
+        self._spin = ActionClient(self, Spin, "spin")
+        self.grid: OccupancyMap | None = None
+        self.state = ExploreState.WAITING
+        self.paused = False
+        self.finish_reason = ""
+        self.initial_pose: tuple[float, float, float] | None = None
+        self.tracker = FrontierTracker(self.config.frontier_match_tolerance)
+        self.blacklist = Blacklist(self.config.blacklist_radius)
+        self.goals: list[GoalRecord] = []
+        self.last_search: FrontierSearch | None = None
+        self.returned_home: bool | None = None
+        self.searches = 0
+        self._progress = ProgressMonitor(self.config.progress_timeout)
+        self._target: int | None = None
+        self._goal_handle: Any = None
+        self._generation = 0
+        self._started_s: float | None = None
+        self._last_plan_s = -math.inf
+        self._replan = False
+        self._last_marker_count = 0
+        self._map_stamp_s = -math.inf
+        self._fresh_map_after: float | None = None
+        self.path: list[tuple[float, float, float]] = []
+        """The robot's positions (map frame, m) and times (s), every 0.1 m."""
+        self._home_attempts = 0
+        self.create_timer(0.1, self._tick)
+
+    # -- inputs -------------------------------------------------------------------------------
+    def _on_map(self, msg: Any) -> None:
+        self.grid = map_from_msg(msg)
+        stamp = msg.header.stamp
+        self._map_stamp_s = int(stamp.sec) + int(stamp.nanosec) * 1e-9
+
+    def _on_resume(self, msg: Any) -> None:
+        if bool(msg.data):
+            if self.paused:
+                self.get_logger().info("exploration resumed")
+            self.paused = False
+            self._replan = True
+        else:
+            if not self.paused:
+                self.get_logger().info("exploration paused")
+            self.paused = True
+            self._cancel_goal()
+
+    def _now_s(self) -> float:
+        return self.get_clock().now_ns() / 1e9
+
+    def robot_pose(self) -> tuple[float, float, float] | None:
+        """The robot in the map frame (m, rad), or None while TF cannot tell."""
+        frame = self.grid.frame_id if self.grid is not None else "map"
+        try:
+            return self.tf_buffer.lookup_pose2d(frame or "map", self.config.robot_base_frame, 0)
+        except TransformException:
+            return None
+
+    # -- the loop -----------------------------------------------------------------------------
+    def _tick(self) -> None:
+        if self.state is ExploreState.DONE or self.paused:
+            return
+        now = self._now_s()
+        if not self._replan and now - self._last_plan_s < 1.0 / self.config.planner_frequency:
+            return
+        pose = self.robot_pose()
+        if pose is None or self.grid is None:
+            return
+        self._replan = False
+        self._last_plan_s = now
+        if not self.path or math.hypot(pose[0] - self.path[-1][0], pose[1] - self.path[-1][1]) > 0.1:
+            self.path.append((pose[0], pose[1], now))
+        if self.initial_pose is None:
+            self.initial_pose = pose
+        if self.state is ExploreState.WAITING:
+            if not self._nav.server_is_ready():
+                return
+            self._started_s = now
+            if self.config.look_around and self._spin.server_is_ready():
+                self._look_around()
+            else:
+                self.state = ExploreState.EXPLORING
+        if self.state is ExploreState.EXPLORING:
+            assert self._started_s is not None
+            if self.config.time_limit > 0 and now - self._started_s >= self.config.time_limit:
+                self._finish("time limit", pose)
+                return
+            if self._fresh_map_after is not None:
+                # judge a frontier just looked at on a map made after the look
+                waited = now - self._fresh_map_after
+                if self._map_stamp_s <= self._fresh_map_after and waited < _MAP_WAIT_S:
+                    self._replan = True
+                    return
+                self._fresh_map_after = None
+            self._explore(pose, now)
+
+    def _look_around(self) -> None:
+        from eddiebot.msgs.builtin_interfaces import Duration
+        from eddiebot.msgs.nav2_msgs import Spin
+
+        self.state = ExploreState.LOOK_AROUND
+        goal = Spin.Goal(target_yaw=2 * math.pi, time_allowance=Duration(sec=30, nanosec=0))
+        self.get_logger().info("looking around: one full turn in place")
+        self._generation += 1
+        generation = self._generation
+
+        def done(result: Any) -> None:
+            if generation == self._generation and self.state is ExploreState.LOOK_AROUND:
+                self.state = ExploreState.EXPLORING
+                self._replan = True
+
+        self._send(self._spin, goal, done)
+
+    def _explore(self, pose: tuple[float, float, float], now: float) -> None:
+        assert self.grid is not None
+        swept = mark_swept(self.grid, [(x, y) for x, y, _ in self.path], self.config.robot_radius)
+        search = search_frontiers(swept, pose, self.config)
+        self.last_search = search
+        self.searches += 1
+        ids = self.tracker.update([f.centroid for f in search.frontiers])
+        for f, tid in zip(search.frontiers, ids, strict=True):
+            track = self.tracker.tracks[tid]
+            if track.visits >= self.config.max_visits and not self.blacklist.contains(f.centroid):
+                self._abandon(f.centroid, f"unproductive: reached {track.visits} times, still there")
+        if self._target is not None and self._goal_handle is not None:
+            goal = self.goals[-1].viewpoint
+            if self._progress.update(math.hypot(goal[0] - pose[0], goal[1] - pose[1]), now):
+                self._abandon(self.goals[-1].centroid,
+                              f"no progress for {self.config.progress_timeout:.0f} s")
+                self.goals[-1].outcome = "no progress"
+                self._cancel_goal()
+        if self._target is not None and self._target not in ids:
+            self._target = None  # its frontier is gone: explored on the way
+            if self.goals:
+                self.goals[-1].outcome = "explored on the way"
+        choice = choose_frontier(search.frontiers, ids, self.blacklist, self._target, self.config)
+        self._publish_markers(search.frontiers, ids)
+        if choice is None:
+            self._finish("no frontier left", pose)
+            return
+        frontier, tid = choice
+        if tid == self._target and self._goal_handle is not None:
+            old = self.goals[-1].viewpoint
+            if math.hypot(old[0] - frontier.viewpoint[0], old[1] - frontier.viewpoint[1]) \
+                    < _RESEND_DISTANCE:
+                return
+        self._go_to(frontier, tid, now)
+
+    def _go_to(self, frontier: Frontier, tid: int, now: float) -> None:
+        from eddiebot.msgs.nav2_msgs import NavigateToPose
+
+        if tid != self._target:
+            self._progress.reset(now)
+        self._target = tid
+        record = GoalRecord(tid, frontier.viewpoint, frontier.centroid, now)
+        if self.goals and self.goals[-1].outcome == "active":
+            self.goals[-1].outcome = "replaced"
+        self.goals.append(record)
+        x, y, yaw = frontier.viewpoint
+        self.get_logger().info(
+            f"frontier {tid}: {frontier.size:.1f} m at ({frontier.centroid[0]:.2f}, "
+            f"{frontier.centroid[1]:.2f}), viewpoint ({x:.2f}, {y:.2f}), path {frontier.distance:.1f} m, "
+            f"gain {frontier.gain:.1f} m², cost {frontier.cost:.2f}")
+        self._generation += 1
+        generation = self._generation
+
+        def done(result: Any) -> None:
+            if generation != self._generation:
+                return
+            status = int(getattr(result, "status", 0))
+            code = int(getattr(getattr(result, "result", None), "error_code", 0))
+            self._goal_handle = None
+            if status == _SUCCEEDED:
+                record.outcome = "reached"
+                self._fresh_map_after = self._now_s()
+                track = self.tracker.tracks.get(tid)
+                if track is not None:
+                    track.visits += 1
+            else:
+                record.outcome = f"failed ({status}, code {code})"
+                self._abandon(frontier.centroid, f"navigation failed (status {status}, code {code})")
+            self._target = None
+            self._replan = True
+
+        self._send(self._nav, NavigateToPose.Goal(pose=self._pose_stamped(x, y, yaw)), done)
+
+    def _abandon(self, point: tuple[float, float], reason: str) -> None:
+        self.get_logger().info(f"abandoning the frontier at ({point[0]:.2f}, {point[1]:.2f}): {reason}")
+        self.blacklist.add(point, reason)
+
+    def _finish(self, reason: str, pose: tuple[float, float, float]) -> None:
+        self._cancel_goal()
+        self.finish_reason = reason
+        self.get_logger().info(f"exploration finished: {reason}")
+        if not self.config.return_to_init or self.initial_pose is None:
+            self.state = ExploreState.DONE
+            return
+        self.state = ExploreState.RETURNING
+        self._go_home()
+
+    def _go_home(self, via: list[tuple[float, float]] | None = None) -> None:
+        """Send the robot to its start; when that fails, retrace its own path (breadcrumbs
+        every ``_BREADCRUMB_SPACING`` m, newest first), where it has driven before."""
+        from eddiebot.msgs.nav2_msgs import NavigateToPose
+
+        assert self.initial_pose is not None
+        if via:
+            x, y = via[0]
+            yaw = 0.0
+            if len(via) > 1:
+                yaw = math.atan2(via[1][1] - y, via[1][0] - x)
+            self.get_logger().info(f"retracing the path home: via ({x:.2f}, {y:.2f})")
+        else:
+            x, y, yaw = self.initial_pose
+            self._home_attempts += 1
+            self.get_logger().info(f"returning to the start ({x:.2f}, {y:.2f}), "
+                                   f"attempt {self._home_attempts}")
+        self._generation += 1
+        generation = self._generation
+
+        def done(result: Any) -> None:
+            if generation != self._generation:
+                return
+            self._goal_handle = None
+            ok = result is not None and int(getattr(result, "status", 0)) == _SUCCEEDED
+            if via:
+                self._go_home(via[1:])
+                return
+            self.returned_home = ok
+            if not ok and self._home_attempts < _HOME_ATTEMPTS:
+                self._go_home(self._breadcrumbs())
+                return
+            self.state = ExploreState.DONE
+
+        self._send(self._nav, NavigateToPose.Goal(pose=self._pose_stamped(x, y, yaw)), done)
+
+    def _breadcrumbs(self) -> list[tuple[float, float]]:
+        """Points of the driven path back towards the start, newest first."""
+        crumbs: list[tuple[float, float]] = []
+        travelled = 0.0
+        for (x0, y0, _), (x1, y1, _) in zip(self.path[::-1], self.path[-2::-1], strict=False):
+            travelled += math.hypot(x1 - x0, y1 - y0)
+            if travelled >= _BREADCRUMB_SPACING:
+                crumbs.append((x1, y1))
+                travelled = 0.0
+        return crumbs
+
+    def stop(self, reason: str = "stopped") -> None:
+        """Cancel the running goal and explore no more; the robot is not sent home."""
+        self._cancel_goal()
+        if self.state is not ExploreState.DONE:
+            self.finish_reason = self.finish_reason or reason
+        self.state = ExploreState.DONE
+
+    # -- plumbing -----------------------------------------------------------------------------
+    def _pose_stamped(self, x: float, y: float, yaw: float) -> Any:
+        from eddiebot.msgs.geometry_msgs import PoseStamped
+
+        msg = PoseStamped()
+        msg.header.frame_id = self.grid.frame_id if self.grid is not None else "map"
+        msg.pose.position.x, msg.pose.position.y = float(x), float(y)
+        q = yaw_to_quaternion(yaw)
+        o = msg.pose.orientation
+        o.x, o.y, o.z, o.w = (float(v) for v in q)
+        return msg
+
+    def _send(self, client: ActionClient, goal: Any, on_result: Any) -> None:
+        generation = self._generation
+        future = client.send_goal_async(goal)
+
+        def accepted(f: Any) -> None:
+            handle = f.result() if f.exception() is None else None
+            if generation != self._generation:
+                if handle is not None and handle.accepted:
+                    handle.cancel_goal_async()
+                return
+            if handle is None or not handle.accepted:
+                on_result(None)
+                return
+            self._goal_handle = handle
+            handle.get_result_async().add_done_callback(
+                lambda r: on_result(r.result() if r.exception() is None else None))
+
+        future.add_done_callback(accepted)
+
+    def _cancel_goal(self) -> None:
+        self._generation += 1
+        if self._goal_handle is not None:
+            self._goal_handle.cancel_goal_async()
+        self._goal_handle = None
+        self._target = None
+
+    def _publish_markers(self, frontiers: tuple[Frontier, ...], ids: list[int]) -> None:
+        if self._marker_pub is None:
+            return
+        from eddiebot.msgs.geometry_msgs import Point
+        from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
+
+        frame = self.grid.frame_id if self.grid is not None else "map"
+        stamp = self.get_clock().now().to_msg()
+        markers = []
+        for k, (f, tid) in enumerate(zip(frontiers, ids, strict=True)):
+            abandoned = self.blacklist.contains(f.centroid)
+            cells = Marker(ns="frontiers", id=2 * k, type=Marker.POINTS, action=Marker.ADD)
+            cells.header.frame_id, cells.header.stamp = frame, stamp
+            assert self.grid is not None
+            res = self.grid.resolution
+            cells.scale.x = cells.scale.y = res
+            cells.color.r, cells.color.g, cells.color.b, cells.color.a = \
+                (1.0, 0.0, 0.0, 1.0) if abandoned else (0.0, 0.0, 1.0, 1.0)
+            cells.pose.orientation.w = 1.0
+            ox, oy = self.grid.origin[0], self.grid.origin[1]
+            cells.points = [Point(x=ox + (c + 0.5) * res, y=oy + (r + 0.5) * res, z=0.0)
+                            for c, r in f.cells]
+            dot = Marker(ns="frontiers", id=2 * k + 1, type=Marker.SPHERE, action=Marker.ADD)
+            dot.header.frame_id, dot.header.stamp = frame, stamp
+            dot.pose.position.x, dot.pose.position.y = f.centroid
+            dot.pose.orientation.w = 1.0
+            size = 0.3 if tid == self._target else 0.15
+            dot.scale.x = dot.scale.y = dot.scale.z = size
+            dot.color.g, dot.color.a = 1.0, 1.0
+            markers += [cells, dot]
+        for k in range(2 * len(frontiers), self._last_marker_count):
+            gone = Marker(ns="frontiers", id=k, action=Marker.DELETE)
+            gone.header.frame_id = frame
+            markers.append(gone)
+        self._last_marker_count = 2 * len(frontiers)
+        self._marker_pub.publish(MarkerArray(markers=markers))

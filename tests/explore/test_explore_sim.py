@@ -1,0 +1,60 @@
+"""A whole exploration of a two-room world in the simulator, and the CLI's refusals."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from eddiebot.cli.main import main
+from eddiebot.explore.mission import run_exploration
+from eddiebot.explore.report import write_report
+
+TWO_ROOMS = """
+name: two_rooms
+description: two 3 x 3.5 m rooms joined by a 1 m doorway
+floor: {texture: wood}
+ceiling: {height: 2.5, texture: ceiling}
+start: {x: 1.0, y: 1.5, theta: 0.0}
+walls:
+  - {points: [[0, 0], [6.4, 0], [6.4, 3.5], [0, 3.5], [0, 0]], thickness: 0.15, texture: brick}
+  - {points: [[3.2, 0], [3.2, 1.2]], thickness: 0.12, texture: plaster}
+  - {points: [[3.2, 2.2], [3.2, 3.5]], thickness: 0.12, texture: plaster}
+boxes:
+  - {center: [5.2, 2.8], size: [0.8, 0.5], height: 0.9, texture: wood, name: cabinet}
+"""
+
+
+@pytest.fixture
+def world_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    monkeypatch.setenv("EDDIE_CACHE_DIR", str(tmp_path / "cache"))
+    path = tmp_path / "two_rooms.yaml"
+    path.write_text(TWO_ROOMS)
+    return path
+
+
+def test_explores_two_rooms_and_comes_home(world_file: Path, tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    result = run_exploration(out, world=str(world_file), time_limit=240.0,
+                             camera=(160, 120, 10.0), wall_timeout_s=240.0)
+    write_report(result, out)
+    assert result.collisions == 0
+    assert result.coverage >= 0.85, result.summary()
+    assert result.map_agreement >= 0.9
+    assert result.returned_home, result.summary()
+    assert result.reason in ("no frontier left", "time limit")
+    assert result.sim_time_s < 240.0 + 300.0 + 61.0
+    for name in ("map.yaml", "map.pgm", "report.json", "report.md", "exploration.png"):
+        assert (out / name).is_file(), name
+    figures = json.loads((out / "report.json").read_text())
+    for key in ("coverage", "map_agreement", "ate_m", "distance_m", "sim_time_s", "collisions",
+                "returned_home", "frontiers_abandoned", "map_to_world"):
+        assert key in figures
+    assert figures["map_to_world"] == [1.0, 1.5, 0.0]
+
+
+def test_without_a_world_it_says_attaching_is_not_supported(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["explore"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not supported yet" in err[0]

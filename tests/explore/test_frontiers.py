@@ -1,0 +1,181 @@
+"""The exploration core on synthetic grids: frontiers, path lengths, gain, cost, choice."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from eddiebot.explore import (
+    Blacklist,
+    ExploreConfig,
+    ExploreConfigError,
+    FrontierTracker,
+    ProgressMonitor,
+    choose_frontier,
+    distance_field,
+    frontier_cells,
+    frontier_cost,
+    information_gain,
+    reachable_mask,
+    search_frontiers,
+)
+from eddiebot.explore.frontiers import mark_swept
+from eddiebot.maps import OccupancyMap
+
+RES = 0.05
+
+
+def room(width_cells: int = 90, height_cells: int = 60, open_east: bool = True) -> OccupancyMap:
+    """A known room (walls on three sides, or four) in an unknown 200 x 100 grid; room
+    interior columns 11..99, rows 21..78; with ``open_east`` the east side (column 100)
+    is unknown: one straight frontier 58 cells (2.9 m) long."""
+    d = np.full((100, 200), -1, np.int8)
+    d[20:20 + height_cells, 10:10 + width_cells] = 0
+    d[20, 10:10 + width_cells] = 100
+    d[19 + height_cells, 10:10 + width_cells] = 100
+    d[20:20 + height_cells, 10] = 100
+    if not open_east:
+        d[20:20 + height_cells, 9 + width_cells] = 100
+    return OccupancyMap(d, RES, (0.0, 0.0, 0.0))
+
+
+def test_frontier_cells_are_unknown_cells_beside_free_ones() -> None:
+    cells = frontier_cells(room(), ExploreConfig())
+    rows, cols = np.nonzero(cells)
+    assert set(cols) == {100}
+    assert (rows.min(), rows.max()) == (21, 78)  # not beside the wall cells of rows 20, 79
+    assert frontier_cells(room(open_east=False), ExploreConfig()).sum() == 0
+
+
+def test_one_frontier_with_its_size_centroid_viewpoint_and_gain() -> None:
+    config = ExploreConfig()
+    search = search_frontiers(room(), (1.0, 2.5, 0.0), config)
+    assert len(search.frontiers) == 1
+    f = search.frontiers[0]
+    assert f.size == pytest.approx(58 * RES)
+    assert f.centroid == pytest.approx((5.025, 2.5), abs=1e-6)
+    # the viewpoint stands back by the standoff (0.9 m) and faces the frontier
+    assert 5.025 - f.viewpoint[0] == pytest.approx(config.standoff, abs=2 * RES)
+    assert abs(f.viewpoint[2]) < 0.05
+    # path length from x = 1.0 to the viewpoint, straight along the room
+    assert f.distance == pytest.approx(f.viewpoint[0] - 1.0, abs=0.1)
+    # the whole 57° cone from 0.5 to 4.5 m lies beyond the frontier... minus the 0.9 m in the room:
+    # unknown area seen is the cone between 0.9 and 4.5 m (clipped by the grid's east edge)
+    cone = config.sensor_fov / 2 * (4.5**2 - 0.9**2)
+    assert 0.8 * cone < f.gain < 1.05 * cone
+    assert f.cost == pytest.approx(frontier_cost(f.distance, f.turn, f.gain, config))
+
+
+def test_small_and_unreachable_frontiers_are_dropped() -> None:
+    g = room()
+    d = g.data.copy()
+    d[40:45, 30] = -1  # a 5-cell hole (0.25 m) inside the room: too small by default 0.5 m
+    search = search_frontiers(OccupancyMap(d, RES), (1.0, 2.5, 0.0), ExploreConfig())
+    assert search.too_small == 1 and len(search.frontiers) == 1
+    # a wall across the room cuts the robot off from the east frontier
+    d = g.data.copy()
+    d[20:80, 60] = 100
+    search = search_frontiers(OccupancyMap(d, RES), (1.0, 2.5, 0.0), ExploreConfig())
+    assert search.unreachable == 1 and not search.frontiers
+
+
+def test_wavefront_measures_path_length_around_walls_not_straight_lines() -> None:
+    passable = np.ones((60, 60), bool)
+    passable[0:50, 30] = False  # a wall with a gap at rows 50..59
+    dist = distance_field(passable, (10, 10), 0.1)
+    assert dist[10, 10] == 0.0
+    assert dist[10, 20] == pytest.approx(1.0)
+    # (10, 10) → (50, 10) is 4 m as the crow flies; the path goes round the wall through the
+    # gap at row 50: 20 diagonal + 20 straight steps there and as many back
+    assert dist[10, 50] == pytest.approx(2 * (20 * math.sqrt(2) + 20) * 0.1)
+    assert math.isinf(distance_field(np.zeros((5, 5), bool), (2, 2), 0.1)[0, 0])
+
+
+def test_reachable_space_keeps_the_robot_radius_from_walls() -> None:
+    config = ExploreConfig(robot_radius=0.23)
+    mask = reachable_mask(room(), config)
+    # row 20 is the wall: rows 21..24 are within 0.23 m (centres 0.05..0.20 m), row 25 is not
+    assert not mask[24, 50] and mask[25, 50]
+
+
+def test_gain_counts_only_what_the_camera_can_see() -> None:
+    config = ExploreConfig()
+    d = np.full((200, 200), -1, np.int8)
+    g = OccupancyMap(d, RES, (-5.0, -5.0, 0.0))
+    full = information_gain(g, (0.0, 0.0, 0.0), config)
+    cone = config.sensor_fov / 2 * (config.sensor_max_range**2 - config.sensor_min_range**2)
+    assert full == pytest.approx(cone, rel=0.1)
+    d2 = d.copy()
+    d2[:, 120] = 100  # a wall 1 m ahead stops every ray
+    walled = information_gain(OccupancyMap(d2, RES, (-5.0, -5.0, 0.0)), (0.0, 0.0, 0.0), config)
+    assert walled < 0.1 * full
+    # looking at known free space gains nothing
+    assert information_gain(OccupancyMap(np.zeros((200, 200), np.int8), RES, (-5.0, -5.0, 0.0)),
+                            (0.0, 0.0, 0.0), config) == 0.0
+
+
+def test_cost_trades_path_turning_and_gain() -> None:
+    config = ExploreConfig(potential_scale=1.0, orientation_scale=0.5, gain_scale=0.3)
+    assert frontier_cost(4.0, math.pi, 10.0, config) == pytest.approx(4.0 + 0.5 * math.pi - 3.0)
+    # the frontier ahead wins over an equal one behind the robot when turning counts
+    d = np.full((100, 300), -1, np.int8)
+    d[20:80, 100:200] = 0
+    d[20, 100:200] = d[79, 100:200] = 100
+    g = OccupancyMap(d, RES)
+    facing_east = search_frontiers(g, (7.5, 2.5, 0.0), config).frontiers
+    assert len(facing_east) == 2
+    assert facing_east[0].centroid[0] > 7.5 and facing_east[0].turn < facing_east[1].turn
+    facing_west = search_frontiers(g, (7.5, 2.5, math.pi), config).frontiers
+    assert facing_west[0].centroid[0] < 7.5
+
+
+def test_swept_cells_are_free() -> None:
+    g = OccupancyMap(np.full((40, 40), -1, np.int8), RES)
+    swept = mark_swept(g, [(1.0, 1.0)], 0.23)
+    # cells whose centres lie within 0.23 m of (1, 1): 4 cells either side, not 5
+    assert swept.data[20, 20] == 0 and swept.data[20, 24] == 0 and swept.data[20, 25] == -1
+    assert (swept.data == 0).sum() == np.sum(np.hypot(*np.mgrid[-4:5, -4:5]) <= 4.5)
+
+
+def test_tracker_keeps_identity_of_a_flickering_frontier() -> None:
+    t = FrontierTracker(tolerance=0.75, memory=2)
+    a = t.update([(1.0, 1.0), (5.0, 5.0)])
+    b = t.update([(5.3, 5.1), (1.2, 0.9)])  # moved a little, other order
+    assert b == [a[1], a[0]]
+    t.update([(5.3, 5.1)])  # (1, 1) flickers out for one search ...
+    c = t.update([(1.1, 1.0), (5.3, 5.1)])  # ... and comes back: the same frontier
+    assert c == [a[0], a[1]]
+    d = t.update([(3.0, 3.0)])  # too far from both: new
+    assert d[0] not in a
+
+
+def test_blacklist_and_choice() -> None:
+    config = ExploreConfig()
+    frontiers = search_frontiers(room(), (1.0, 2.5, 0.0), config).frontiers
+    ids = [7]
+    bl = Blacklist(radius=0.6)
+    assert choose_frontier(frontiers, ids, bl, None, config) == (frontiers[0], 7)
+    bl.add((5.2, 2.6), "navigation failed")
+    assert bl.contains(frontiers[0].centroid)
+    assert choose_frontier(frontiers, ids, bl, None, config) is None
+    assert len(bl) == 1
+
+
+def test_progress_monitor_times_out_without_getting_closer() -> None:
+    m = ProgressMonitor(timeout=30.0)
+    m.reset(0.0)
+    assert not m.update(5.0, 0.0)
+    assert not m.update(4.0, 20.0)  # closer: progress
+    assert not m.update(4.0, 49.0)
+    assert m.update(3.99, 50.5)  # 1 cm is not progress; 30.5 s since the last
+
+
+def test_config_validates() -> None:
+    assert ExploreConfig().potential_scale == 1e-3  # explore_lite's default
+    with pytest.raises(ExploreConfigError):
+        ExploreConfig(planner_frequency=0.0)
+    with pytest.raises(ExploreConfigError):
+        ExploreConfig.from_mapping({"potential_scal": 1.0})
+    assert ExploreConfig.from_mapping({"min_frontier_size": 1}).min_frontier_size == 1.0
