@@ -109,7 +109,10 @@ class AmclNode(NavServer):
     default_node_name = "amcl"
     PARAMETERS = {k: v for k, v in AmclConfig().__dict__.items() if not k.startswith("initial_pose_")}
     PARAMETERS.update({"initial_pose.x": 0.0, "initial_pose.y": 0.0, "initial_pose.z": 0.0,
-                       "initial_pose.yaw": 0.0, "random_seed": -1})
+                       "initial_pose.yaw": 0.0,
+                       # nav2_amcl samples with drand48, which it never seeds, so every run
+                       # repeats the same draws: 0 does the same here (-1 draws from entropy)
+                       "random_seed": 0})
 
     def __init__(self, node_name: str = "amcl", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
