@@ -348,3 +348,58 @@ def test_routes_follow_publishers_away(ours: Any, ros_peer: RosPeer, bridge: Pro
     assert _wait(lambda: bool(transport.cache.publishers(f"{PREFIX}/gone"))), bridge.stderr
     writer.__del__()
     assert _wait(lambda: not transport.cache.publishers(f"{PREFIX}/gone")), bridge.stderr
+
+
+def test_ros2_client_on_dds_calls_a_service_of_our_graph(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    """rmw_cyclonedds's request/reply: ``rq/<name>Request`` / ``rr/<name>Reply``, the CDR
+    body after the client's {uint64 guid; int64 seq}, which the reply carries back."""
+    import struct
+
+    from eddiebot.msgs.std_srvs import SetBool
+    from eddiebot.transport.keys import service_type_hash
+
+    _ctx, node, _t = ours
+    name = f"{PREFIX}/set_led"
+    calls: list[bool] = []
+
+    def serve(request: Any, response: Any) -> Any:
+        calls.append(bool(request.data))
+        response.success = True
+        response.message = f"led {'on' if request.data else 'off'}"
+        return response
+
+    node.create_service(SetBool, name, serve)
+    # rmw_cyclonedds sends no XTypes type information, so a ROS 2 peer matches on the type
+    # name alone; this Python peer does send it, so it spells the header as the bridge does
+    header = {"rmw_request_guid": idl.uint64, "rmw_request_seq": idl.int64}
+    req_t = make_idl_struct("SetBool_Request_", "std_srvs::srv::dds_::SetBool_Request_",
+                            {**header, "data": bool})
+    res_t = make_idl_struct("SetBool_Response_", "std_srvs::srv::dds_::SetBool_Response_",
+                            {**header, "success": bool, "message": str})
+    qos = Qos(Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+              Policy.History.KeepLast(10),
+              Policy.DataRepresentation(use_cdrv0_representation=True),
+              Policy.Userdata(f"typehash={service_type_hash('std_srvs/srv/SetBool')};".encode()))
+    dds_name = name.lstrip("/")
+    request_writer = DataWriter(ros_peer.participant, Topic(
+        ros_peer.participant, f"rq/{dds_name}Request", req_t), qos=qos)
+    reply_reader = DataReader(ros_peer.participant, Topic(
+        ros_peer.participant, f"rr/{dds_name}Reply", res_t), qos=qos)
+    assert _wait(lambda: bool(ros_peer.publications_on(f"rr/{dds_name}Reply"))), bridge.stderr
+    # as rmw's service_is_ready: the request writer and the reply reader both matched
+    assert _wait(lambda: request_writer.get_publication_matched_status().current_count > 0
+                 and reply_reader.get_subscription_matched_status().current_count > 0)
+
+    guid = 0x0110ABCDEF123456
+    body = serialize(SetBool.Request(data=True))
+    ddspy_write(request_writer._ref, body[:4] + struct.pack("<Qq", guid, 7) + body[4:])
+    replies: list[bytes] = []
+    assert _wait(lambda: bool(replies.extend(
+        bytes(d) for d, info in ddspy_take(reply_reader._ref, _ANY, 10) if info.valid_data)
+        or replies)), bridge.stderr
+    raw = replies[0]
+    assert struct.unpack_from("<Qq", raw, 4) == (guid, 7)
+    response = TYPESTORE.deserialize_cdr(raw[:4] + raw[20:], "std_srvs/srv/SetBool_Response")
+    assert (response.success, response.message) == (True, "led on")
+    assert calls == [True]

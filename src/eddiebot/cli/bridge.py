@@ -4,8 +4,9 @@ The process joins our graph through the Zenoh transport and DDS domain ``--domai
 ``ROS_DOMAIN_ID``) through Cyclone DDS, and mirrors topics both ways as a ROS 2 node on
 ``rmw_cyclonedds`` sees them (``rt/<name>``, ``<pkg>::msg::dds_::<Type>_``, raw CDR); see
 `eddiebot.transport.dds`. Loopback only unless ``EDDIE_NETWORK=lan``: a ROS 2 node on the
-same machine then needs ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``. Services are not bridged
-yet. Ctrl-C (or SIGTERM) stops it cleanly.
+same machine then needs ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``. Services of our graph
+are offered to ROS 2 clients on Cyclone DDS (not to Fast DDS ones). Ctrl-C (or SIGTERM) stops
+it cleanly.
 """
 
 from __future__ import annotations

@@ -26,7 +26,12 @@ multicast on it and unicast to localhost). A ROS 2 node on the same machine ther
 loopback bridge when it runs with ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (or
 ``CYCLONEDDS_URI`` naming the loopback interface); with its default range use ``lan``.
 
-Services are not bridged yet.
+Services: a service served in our graph is offered to ROS 2 clients on ``rmw_cyclonedds``
+(``rq/<name>Request`` / ``rr/<name>Reply``, types ``<pkg>::srv::dds_::<T>_Request_`` /
+``_Response_``, the client's ``{uint64 guid; int64 seq}`` between the encapsulation header
+and the body, carried back in the reply). Not yet: services served on DDS for our clients.
+Fast DDS peers put that correlation in RTPS inline QoS instead, so cross-vendor services
+cannot work; their topics do.
 """
 
 from __future__ import annotations
@@ -221,19 +226,33 @@ def idl_type(ros_type: str) -> Any:
 
 @functools.cache
 def _dds_type(ros_type: str) -> Any:
-    """:func:`idl_type`, or a keyless struct with only the right name if the definition
-    cannot be expressed (matching then rests on the type name alone)."""
-    from cyclonedds.idl import make_idl_struct
+    """:func:`idl_type`, its type information computed. Cyclone normalizes every sample
+    against its type as it is written and received (bools to 0/1, lengths checked), so a
+    type that only bears the right name could not carry the data: a type rosbags cannot
+    describe is not bridged."""
+    cls = idl_type(ros_type)
+    cls.__idl__.populate()
+    cls.__idl__.fill_type_data()
+    return cls
 
-    try:
-        cls = idl_type(ros_type)
-        cls.__idl__.populate()
-        cls.__idl__.fill_type_data()
-        return cls
-    except Exception as exc:
-        log.warning("type %s: no faithful DDS type (%s); using its name only", ros_type, exc)
-        return make_idl_struct(ros_type.rsplit("/", 1)[-1] + "_", dds_type_name(ros_type),
-                               {"structure_needs_at_least_one_member": bytes})
+
+@functools.cache
+def _service_dds_type(ros_type: str) -> Any:
+    """The DDS type of a request or reply as rmw_cyclonedds puts it on the wire: the
+    client's ``{uint64 guid; int64 seq}`` before the fields (Cyclone normalizes samples
+    against their type, so the correlation must be part of it)."""
+    from cyclonedds.idl import make_idl_struct
+    from cyclonedds.idl import types as t
+
+    name = normalize_type_name(ros_type)
+    _consts, fields = TYPESTORE.fielddefs[name]
+    members: dict[str, Any] = {"rmw_request_guid": t.uint64, "rmw_request_seq": t.int64}
+    for fname, desc in fields:
+        members[fname] = _idl_field(desc)
+    cls = make_idl_struct(name.rsplit("/", 1)[-1] + "_", dds_type_name(name), members)
+    cls.__idl__.populate()
+    cls.__idl__.fill_type_data()
+    return cls
 
 
 def _known(ros_type: str) -> bool:
@@ -414,9 +433,10 @@ class DdsBridge:
         for key, route in wanted.items():
             if key in current or self._closed:
                 continue
+            opener = {"to_dds": self._open_to_dds, "from_dds": self._open_from_dds,
+                      "service": self._open_service}[route.direction]
             try:
-                live = (self._open_to_dds(route) if route.direction == "to_dds"
-                        else self._open_from_dds(route))
+                live = opener(route)
             except Exception as exc:
                 log.warning("cannot bridge %s [%s] %s: %s", route.topic, route.type_name,
                             route.direction, exc)
@@ -459,6 +479,11 @@ class DdsBridge:
         for (topic, ros_type), profiles in theirs.items():
             wanted[(topic, ros_type, "from_dds")] = Route(topic, ros_type, "from_dds",
                                                           _merge_publisher_qos(profiles))
+        # services served in our graph, for ROS 2 clients on DDS
+        for e in self.transport.cache.services():
+            if self.config.admits(e.name) and _known(e.type_name + "_Request"):
+                wanted[(e.name, e.type_name, "service")] = Route(
+                    e.name, e.type_name, "service", QoSProfile(depth=10))
         return wanted
 
     def _dds_publications(self) -> list[Any]:
@@ -473,13 +498,14 @@ class DdsBridge:
                 self._dds_pubs.pop(key, None)
         return list(self._dds_pubs.values())
 
-    def _topic(self, topic: str, type_name: str) -> Any:
+    def _topic(self, topic: str, type_name: str, dds_name: str | None = None) -> Any:
         from cyclonedds.topic import Topic
 
-        key = (topic, type_name)
+        name = dds_name or dds_topic_name(topic)
+        key = (name, type_name)
         if key not in self._topics:
-            self._topics[key] = Topic(self.participant, dds_topic_name(topic),
-                                      _dds_type(type_name))
+            cls = _dds_type(type_name) if dds_name is None else _service_dds_type(type_name)
+            self._topics[key] = Topic(self.participant, name, cls)
         return self._topics[key]
 
     def _user_data(self, type_name: str) -> bytes:
@@ -550,6 +576,64 @@ class DdsBridge:
             state["ref"] = None
             _delete(reader)
             zpub.close()
+
+        live.close = close
+        return live
+
+
+    def _open_service(self, route: Route) -> _Live:
+        """A service of our graph for ROS 2 clients on rmw_cyclonedds: requests on
+        ``rq/<name>Request``, replies on ``rr/<name>Reply``, each CDR body preceded (after
+        the encapsulation header) by the client's ``{uint64 guid; int64 seq}``, which the
+        reply carries back. (rmw_fastrtps correlates in RTPS inline QoS instead, so Fast DDS
+        clients cannot be served this way.)"""
+        from cyclonedds._clayer import ddspy_take, ddspy_write
+        from cyclonedds.core import InstanceState, Listener, SampleState, ViewState
+        from cyclonedds.pub import DataWriter
+        from cyclonedds.sub import DataReader
+
+        from eddiebot.transport.keys import service_type_hash
+
+        name = route.topic.lstrip("/")
+        user_data = f"typehash={service_type_hash(route.type_name)};".encode()
+        qos = dds_qos(route.qos, user_data)
+        writer = DataWriter(self._publisher, self._topic(
+            route.topic, route.type_name + "_Response", f"rr/{name}Reply"), qos=qos)
+        writer_ref = writer._ref
+        live = _Live(route, lambda: None)
+        mask = SampleState.Any | ViewState.Any | InstanceState.Any
+        state: dict[str, Any] = {"ref": None}
+        call = self._zenoh.caller(route.topic, route.type_name)
+
+        def answer(correlation: bytes, reply: bytes) -> None:
+            if self._closed or len(reply) < 4:
+                return
+            if ddspy_write(writer_ref, _padded(reply[:4] + correlation + reply[4:])) < 0:
+                log.warning("could not send a reply of %s to its DDS client", route.topic)
+            else:
+                live.stats["samples"] += 1
+
+        def on_request(_reader: Any = None) -> None:
+            ref = state["ref"]
+            if ref is None or self._closed:
+                return
+            for data, info in ddspy_take(ref, mask, _TAKE_BATCH):
+                raw = bytes(data)
+                if not info.valid_data or len(raw) < 20:
+                    continue
+                correlation = raw[4:20]
+                call(raw[:4] + raw[20:], functools.partial(answer, correlation))
+
+        reader = DataReader(self._subscriber, self._topic(
+            route.topic, route.type_name + "_Request", f"rq/{name}Request"), qos=qos,
+            listener=Listener(on_data_available=on_request))
+        state["ref"] = reader._ref
+        on_request()
+
+        def close() -> None:
+            state["ref"] = None
+            _delete(reader)
+            _delete(writer)
 
         live.close = close
         return live
@@ -633,6 +717,36 @@ class _ZenohSide:
                                                    allowed_origin=zenoh.Locality.REMOTE)
         token, _ = self._entity("MS", topic, type_name, qos)
         return _ZenohSubscriber(zsub, token)
+
+
+    def caller(self, name: str, srv_type: str) -> Callable[[bytes, Callable[[bytes], None]], None]:
+        """``call(request_cdr, on_reply)``: a raw call of the service ``name`` (a Zenoh get
+        on its queryable); ``on_reply`` gets the response's CDR, nothing on an error."""
+        import zenoh
+
+        key = topic_key(self.transport.domain, name, srv_type, service=True)
+        gid = entity_gid(f"{self.transport.zid}/dds-bridge/{name}")
+        clock = self.transport.context.system_clock
+        seq = [0]
+
+        def call(request: bytes, on_reply: Callable[[bytes], None]) -> None:
+            seq[0] += 1
+
+            def handle(reply: Any) -> None:
+                try:
+                    if reply.ok is not None:
+                        on_reply(reply.ok.payload.to_bytes())
+                    else:
+                        log.warning("service %s answered a DDS client with an error: %s",
+                                    name, reply.err.payload.to_string())
+                except Exception:
+                    log.exception("passing a reply of %s to DDS", name)
+
+            self.session.get(key, handle, payload=request,
+                             attachment=encode_attachment(seq[0], clock.now_ns(), gid),
+                             target=zenoh.QueryTarget.ALL_COMPLETE, timeout=60.0)
+
+        return call
 
 
 class _ZenohPublisher:
