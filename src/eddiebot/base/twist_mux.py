@@ -13,6 +13,11 @@ The highest-priority source whose last command is younger than its timeout drive
 timeout is positive) mutes every source of lower or equal priority. Unlike twist_mux,
 when the selected source goes stale the mux publishes one zero Twist at once, so the robot
 stops without waiting for the base's own stale-command timeout.
+
+While a source keeps sending but a higher-priority one holds the mux (navigation's
+commands under a teleop that has not gone quiet), the node logs once which source holds it
+(``navigation overridden by teleop (cmd_vel_teleop) ...``); the line is logged again only
+after that source has driven again or the holder changed.
 """
 
 from __future__ import annotations
@@ -84,6 +89,8 @@ class TwistMuxNode(Node):
         locks = self._inputs("locks", DEFAULT_LOCKS)
         self.mux = TwistMux(sources, locks)
         self.active: MuxInput | None = None
+        #: source name → the source that overrode it, logged once per episode
+        self._overridden: dict[str, str] = {}
         self.pub = self.create_publisher(Twist, "cmd_vel", 10)
         for src in sources:
             self.create_subscription(Twist, src.topic, self._make_cb(src), 10)
@@ -113,9 +120,29 @@ class TwistMuxNode(Node):
             chosen = self.mux.select(src.last_ns)
             self._switch(chosen)
             if chosen is src:
+                self._overridden.pop(src.name, None)
                 self.pub.publish(msg)
+            else:
+                self._note_override(src, chosen)
 
         return cb
+
+    def _note_override(self, src: MuxInput, holder: MuxInput | None) -> None:
+        """Log once that ``src``'s commands are dropped, and who holds the mux."""
+        if holder is None:
+            who = "a lock (" + ", ".join(
+                f"{lock.name} on {lock.topic}" for lock in self.mux.locks) + ")"
+        else:
+            who = f"{holder.name} ({holder.topic}, priority {holder.priority})"
+        if self._overridden.get(src.name) == who:
+            return
+        self._overridden[src.name] = who
+        if holder is None:
+            self.get_logger().warning(f"{src.name} ({src.topic}) is muted by {who}")
+            return
+        self.get_logger().warning(
+            f"{src.name} ({src.topic}) overridden by {who}: its commands are dropped until "
+            f"{holder.name} has been quiet for {holder.timeout_ns / 1e9:g} s")
 
     def _make_lock_cb(self, lock: MuxInput) -> Any:
         def cb(msg: Any) -> None:
