@@ -25,6 +25,7 @@ from eddiebot.maps.grid import (
 from eddiebot.maps.io import (
     DEFAULT_FREE_THRESH,
     DEFAULT_OCCUPIED_THRESH,
+    MapAnchor,
     MapMode,
     MapYaml,
     image_to_map,
@@ -42,6 +43,7 @@ __all__ = [
     "OCCUPIED",
     "UNKNOWN",
     "LegacyMapWarning",
+    "MapAnchor",
     "MapError",
     "MapFormatError",
     "MapMode",

@@ -23,6 +23,12 @@ as *free* (slam_toolbox issue #587). Files that eddiebot wrote with that default
 thresholds 0.25 / 0.65, only the pixels 0 / 205 / 254) load with 205 as unknown and one
 `LegacyMapWarning` asking to save them again; every other file loads exactly as
 map_server reads it.
+
+Where the robot is in the map: a map saved from a running SLAM session carries two keys
+of eddiebot's beside nav2's (map_server reads only its own keys and ignores these):
+``map_to_odom: [x, y, yaw]``, the map → odom transform when the map was saved, and
+``odom_session``, the odometry that odom frame belongs to (`MapAnchor`). While that same
+odometry still runs, the robot's pose in the map is ``map_to_odom ∘ odom → base``.
 """
 
 from __future__ import annotations
@@ -49,6 +55,7 @@ from eddiebot.maps.grid import OccupancyMap
 __all__ = [
     "DEFAULT_FREE_THRESH",
     "DEFAULT_OCCUPIED_THRESH",
+    "MapAnchor",
     "MapMode",
     "MapYaml",
     "image_to_map",
@@ -78,6 +85,21 @@ class MapMode(str, enum.Enum):
 
 
 @dataclass(frozen=True)
+class MapAnchor:
+    """Where a map's frame stood against odometry when it was saved (eddiebot's keys)."""
+
+    map_to_odom: tuple[float, float, float]
+    """The map → odom transform (x, y, yaw) at saving time."""
+    odom_session: str
+    """The odometry it belongs to: the ``/odom`` publisher's process and node."""
+
+    def yaml_keys(self) -> dict[str, Any]:
+        x, y, yaw = self.map_to_odom
+        return {"map_to_odom": [float(x), float(y), float(yaw)],
+                "odom_session": self.odom_session}
+
+
+@dataclass(frozen=True)
 class MapYaml:
     """The contents of a map YAML file, validated; ``image`` resolved against its folder."""
 
@@ -88,6 +110,30 @@ class MapYaml:
     occupied_thresh: float = DEFAULT_OCCUPIED_THRESH
     free_thresh: float = DEFAULT_FREE_THRESH
     mode: MapMode = MapMode.TRINARY
+    anchor: MapAnchor | None = None
+    """eddiebot's ``map_to_odom`` + ``odom_session`` keys, when the file has them."""
+
+
+def _anchor(doc: dict[str, Any], path: Path) -> MapAnchor | None:
+    if "map_to_odom" not in doc and "odom_session" not in doc:
+        return None
+    for key in ("map_to_odom", "odom_session"):
+        if key not in doc:
+            raise MapFormatError(f"{path}: key '{key}' missing (it goes with "
+                                 f"'{'odom_session' if key == 'map_to_odom' else 'map_to_odom'}')")
+    raw = doc["map_to_odom"]
+    if (
+        not isinstance(raw, (list, tuple))
+        or len(raw) != 3
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in raw)
+        or not all(math.isfinite(float(v)) for v in raw)
+    ):
+        raise MapFormatError(f"{path}: key 'map_to_odom' must be [x, y, yaw], got {raw!r}")
+    session = doc["odom_session"]
+    if not isinstance(session, str) or not session:
+        raise MapFormatError(f"{path}: key 'odom_session' must be a non-empty string, "
+                             f"got {session!r}")
+    return MapAnchor((float(raw[0]), float(raw[1]), float(raw[2])), session)
 
 
 def _number(doc: dict[str, Any], key: str, path: Path) -> float:
@@ -162,7 +208,8 @@ def read_map_yaml(yaml_path: str | os.PathLike[str]) -> MapYaml:
         raise MapFormatError(
             f"{path}: key 'mode' must be one of trinary, scale, raw; got {mode_raw!r}"
         ) from None
-    return MapYaml(image_path, resolution, origin, negate, occupied, free, mode)
+    return MapYaml(image_path, resolution, origin, negate, occupied, free, mode,
+                   _anchor(doc, path))
 
 
 def image_to_map(
@@ -303,8 +350,10 @@ def save_map(
     occupied_thresh: float = DEFAULT_OCCUPIED_THRESH,
     free_thresh: float = DEFAULT_FREE_THRESH,
     negate: bool = False,
+    anchor: MapAnchor | None = None,
 ) -> Path:
-    """Write ``<path>.<image_format>`` and ``<path>.yaml`` as nav2's map_saver does.
+    """Write ``<path>.<image_format>`` and ``<path>.yaml`` as nav2's map_saver does
+    (plus ``anchor``'s keys when given).
 
     Each file is written to a temporary file and renamed over the target, image first, so a
     failure leaves any previous map intact. Returns the YAML path. Scale mode stores unknown
@@ -351,6 +400,10 @@ def save_map(
         f"occupied_thresh: {_threshold_text(occupied_thresh)}\n"
         f"free_thresh: {_threshold_text(free_thresh)}\n"
     )
+    if anchor is not None:
+        ax, ay, ayaw = (float(v) for v in anchor.map_to_odom)
+        text += (f"map_to_odom: [{ax!r}, {ay!r}, {ayaw!r}]\n"
+                 f"odom_session: {yaml.safe_dump(anchor.odom_session).splitlines()[0]}\n")
     _atomic_write_bytes(yaml_path, text.encode("utf-8"))
     return yaml_path
 
