@@ -32,5 +32,9 @@ def test_show_writes_png_and_maps(tmp_path, capsys):
 
 
 def test_show_unknown_world(capsys):
-    assert _run(["show", "atlantis"]) == 2
-    assert "no built-in world 'atlantis'" in capsys.readouterr().err
+    from eddiebot.cli.main import main
+
+    assert main(["world", "show", "atlantis"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no built-in world 'atlantis'" in err[0]
+    assert "Traceback" not in err[0]

@@ -57,7 +57,7 @@ from eddiebot.robot._freenect import (
     Led,
     load_library,
 )
-from eddiebot.sim.camera import (
+from eddiebot.robot.kinect_model import (
     DEPTH_OPTICAL_FRAME,
     KINECT_DEPTH,
     KINECT_RGB,

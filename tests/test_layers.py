@@ -1,0 +1,73 @@
+"""The layer rule of docs/architecture.md, read from the imports: a package never imports a
+package of a higher tier (same tier is allowed between packages that do not import each
+other both ways). Imports inside functions count too."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "eddiebot"
+
+#: lowest first; packages in one tuple share a tier
+TIERS: tuple[tuple[str, ...], ...] = (
+    ("geometry",),
+    ("msgs",),
+    ("core",),
+    ("transport", "maps", "perception"),
+    ("robot",),
+    ("base", "sim"),
+    ("slam", "nav", "vslam"),
+    ("registry",),
+    ("viz",),
+    ("demo",),
+    ("explore",),
+    ("cli",),
+)
+TIER = {pkg: i for i, tier in enumerate(TIERS) for pkg in tier}
+
+#: known exceptions, each with the reason it is still here; the test fails once one is gone
+#: so the list can only shrink
+ALLOWED: dict[tuple[str, str], str] = {
+    ("demo/nav_stage.py", "cli"): "default_params/resolve_params still live in cli/nav.py",
+    ("core/launch.py", "transport"): "connect_transport still reaches the transport by name",
+}
+
+
+def _imports(path: Path) -> set[str]:
+    names: list[str] = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names.append(node.module)
+        elif isinstance(node, ast.Import):
+            names.extend(a.name for a in node.names)
+        elif (isinstance(node, ast.Call) and getattr(node.func, "attr", "") == "import_module"
+              and node.args and isinstance(node.args[0], ast.Constant)):
+            names.append(str(node.args[0].value))
+    return {n.split(".")[1] for n in names if n.startswith("eddiebot.") and "." in n}
+
+
+def test_every_package_has_a_tier():
+    packages = {p.name for p in SRC.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    packages |= {p.stem for p in SRC.glob("*.py") if p.stem != "__init__"}
+    assert packages <= set(TIER), f"packages without a tier: {sorted(packages - set(TIER))}"
+
+
+def test_lower_never_imports_higher():
+    found: set[tuple[str, str]] = set()
+    violations = []
+    for path in SRC.rglob("*.py"):
+        rel = path.relative_to(SRC)
+        pkg = rel.parts[0] if len(rel.parts) > 1 else rel.stem
+        if pkg not in TIER:
+            continue
+        for target in _imports(path):
+            if target == pkg or target not in TIER or TIER[target] <= TIER[pkg]:
+                continue
+            key = (rel.as_posix(), target)
+            if key in ALLOWED:
+                found.add(key)
+            else:
+                violations.append(f"{rel.as_posix()} ({pkg}) imports eddiebot.{target}")
+    assert not violations, "\n".join(sorted(violations))
+    assert found == set(ALLOWED), f"no longer needed, remove from ALLOWED: {set(ALLOWED) - found}"
