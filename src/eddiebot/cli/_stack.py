@@ -1,6 +1,9 @@
 """Running a launch description in the foreground: executor, /clock, transport, dashboard.
 
-Shared by ``eddie sim``, ``eddie slam``, ``eddie vslam`` and ``eddie nav``. Whatever stops
+Shared by ``eddie sim``, ``eddie slam``, ``eddie vslam`` and ``eddie nav``. The process
+joins the graph before it builds anything: one that would publish ``/clock`` (it runs the
+simulator) refuses to start when another process on the same ROS_DOMAIN_ID publishes it
+already (`eddiebot.cli._attach`). Whatever stops
 the start (a misspelt world, a parameter file error, a busy dashboard port, a lifecycle
 manager that cannot bring its nodes up) is raised as a typed error after every node built
 so far is destroyed; ``eddie``'s main prints it as one line.
@@ -70,9 +73,12 @@ def run_stack(args: argparse.Namespace, launch: str, launch_args: dict[str, str]
 
 
 def run_nodes(args: argparse.Namespace, context: Context, build: Callable[[], list[Node]], *,
-              real_time_factor: float | None = None, owns_sim_clock: bool | None = None) -> int:
-    """Build the nodes, join the graph (unless ``--no-transport``), serve the dashboard
-    (``--dashboard``), and spin until interrupted or ``--duration`` is over.
+              real_time_factor: float | None = None, owns_sim_clock: bool | None = None,
+              connected: bool = False) -> int:
+    """Join the graph (unless ``--no-transport`` or ``connected``: the caller joined it),
+    build the nodes, serve the dashboard (``--dashboard``), and spin until interrupted or
+    ``--duration`` is over. With ``owns_sim_clock`` the run stops first, with a
+    `CliError`, when another process on the domain publishes ``/clock``.
 
     Nothing is left running when a step fails: the nodes are destroyed and the context
     shut down before the error propagates.
@@ -81,9 +87,13 @@ def run_nodes(args: argparse.Namespace, context: Context, build: Callable[[], li
     try:
         if getattr(args, "dashboard", False):
             _check_port_free(args.dashboard_port)  # before minutes of start-up, not after
-        nodes = build()
-        if not args.no_transport:
+        if not args.no_transport and not connected:
             connect_transport(context)
+            if owns_sim_clock:
+                from eddiebot.cli._attach import refuse_second_simulator
+
+                refuse_second_simulator(context, f"eddie {getattr(args, 'command', None) or 'sim'}")
+        nodes = build()
         if getattr(args, "dashboard", False):
             dashboard = _start_dashboard(context, args.dashboard_port)
         for node in nodes:

@@ -1,12 +1,26 @@
 """``eddie slam``: 2D SLAM.
 
-    eddie slam --world office [--rate N | --fast] [--seed S] [--dashboard]
+    eddie slam [--world office] [--output DIR] [--session FILE [--start-pose X Y YAW]]
+               [--rate N | --fast] [--seed S] [--dashboard]
     eddie slam replay FILE [--mode sync|async] [-o DIR] [--params YAML] [--strict]
                       [--scan-topic /scan] [--odom-topic /odom]
 
-Without a sub-command it runs the simulator, Eddie's base stack, depthimage_to_laserscan and
-the SLAM node (slam_toolbox's parameters from ``config/slam.yaml``), ready for ``eddie
-teleop`` in another terminal; ``eddie map save NAME`` saves the map.
+Without a sub-command it runs live SLAM (slam_toolbox's parameters from
+``config/slam.yaml``), ready for ``eddie teleop`` in another terminal; ``eddie map save
+NAME`` saves the map. Without ``--world`` it attaches to the simulator (``eddie sim``) or
+the real robot's bring-up already running on the same ROS_DOMAIN_ID (a ``/clock`` or
+``/odom`` publisher within ``--attach-timeout`` seconds, default 10) and runs the SLAM node
+alone (launch ``mapping``), following ``/clock``; stopping it leaves the robot running. With
+``--world`` it brings its own simulator, Eddie's base stack and depthimage_to_laserscan
+(launch ``slam``).
+
+Stopping live SLAM (Ctrl-C, SIGTERM, SIGHUP, or the end of ``--duration``) saves the session
+(``session.eslam``) and the map (``map.yaml`` + ``map.pgm``), each file atomically, to
+``--output`` (default ``out/slam/<time>/``) and prints where. The map YAML and the
+session's sidecar (``session.eslam.anchor.yaml``) record the map → odom transform and the
+odometry they belong to. ``--session FILE`` continues a saved session: where the robot is
+in it when attached to the same running odometry, else at ``--start-pose X Y YAW`` (which
+also overrides the former); the run says which.
 
 ``replay`` runs the SLAM core over a CARMEN log (``.clf``, ``.log``, ``.log.gz``; with
 slam_toolbox's sample parameters, ``config/slam_defaults.yaml``, unless ``--params`` names
@@ -40,8 +54,19 @@ HELP = "2D SLAM: live in the simulator, or replay a CARMEN log or rosbag2 into a
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     from eddiebot.cli._stack import add_run_arguments
 
-    parser.add_argument("--world", default="office",
-                        help="simulator world for live SLAM (eddie world list), or a world file")
+    parser.add_argument("--world", default=None,
+                        help="bring a simulator in this world (eddie world list, or a world "
+                        "file); without it, attach to the simulator or robot already running")
+    parser.add_argument("--output", dest="live_output", type=Path, default=None,
+                        help="where stopping saves the session and the map "
+                        "(default out/slam/<time>/)")
+    parser.add_argument("--session", dest="live_session", type=Path, default=None,
+                        help="continue this saved session (session.eslam)")
+    parser.add_argument("--start-pose", type=float, nargs=3, metavar=("X", "Y", "YAW"),
+                        default=None, help="where the robot is in --session's map frame")
+    parser.add_argument("--attach-timeout", type=float, default=None,
+                        help="without --world: how long to wait for a simulator or robot, s "
+                        "(default 10)")
     parser.add_argument("--camera", default="320x240@10",
                         help="Kinect resolution and rate, WxH@HZ (default 320x240@10)")
     parser.add_argument("--params", dest="live_params", type=Path, default=None,
@@ -257,16 +282,164 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _live(args: argparse.Namespace) -> int:
-    from eddiebot.cli._stack import run_stack
+    import time as _time
+
+    from eddiebot.cli._attach import ATTACH_WAIT_S, odom_pose, wait_for_robot
+    from eddiebot.cli._stack import check_world, run_nodes
+    from eddiebot.cli.errors import CliError
     from eddiebot.cli.sim import camera_args
+    from eddiebot.core.context import Context
+    from eddiebot.core.launch import (
+        build_nodes,
+        connect_transport,
+        find_launch_file,
+        parse_launch_file,
+    )
+    from eddiebot.registry import NODES
+    from eddiebot.slam.node import SlamNode
 
-    launch_args = {"world": args.world, "seed": str(args.seed), **camera_args(args.camera)}
-    if args.live_params is not None:
-        from eddiebot.cli._params import load_params_file
+    if args.world is not None:
+        check_world(args.world)
+    source = args.live_params or _default_params()
+    if source is None:
+        raise CliError("eddie slam: config/slam.yaml not found; give --params")
+    from eddiebot.cli._params import load_params_file
 
-        load_params_file(args.live_params)  # unreadable or not YAML: say so before the build
-        launch_args["slam_params"] = str(args.live_params)
-    return run_stack(args, "slam", launch_args)
+    doc, _ = load_params_file(source)  # unreadable or not YAML: say so before the build
+    anchor = _session_anchor(args.live_session) if args.live_session is not None else None
+    out_dir = args.live_output or Path("out") / "slam" / _time.strftime("%Y%m%d-%H%M%S")
+    context = Context(use_sim_time=True)
+    overrides: dict[str, object] = {}
+    robot = None
+    try:
+        if args.world is None:
+            if not args.no_transport:
+                connect_transport(context)
+            wait = ATTACH_WAIT_S if args.attach_timeout is None else args.attach_timeout
+            robot = wait_for_robot(context, "eddie slam", wait)
+            context.use_sim_time = robot.simulated
+            print(f"attached to {robot.what}", flush=True)
+            if robot.odom_session:
+                overrides["odom_session"] = robot.odom_session
+        if args.live_session is not None:
+            pose, why = _start_pose(args, anchor, robot, lambda: odom_pose(context))
+            overrides["map_file_name"] = str(args.live_session.resolve())
+            overrides["map_start_pose"] = [float(v) for v in pose]
+            print(f"continuing session {args.live_session} at ({pose[0]:.2f}, {pose[1]:.2f}, "
+                  f"{pose[2]:.2f}): {why}", flush=True)
+    except BaseException:
+        context.shutdown()
+        raise
+    slam: list[SlamNode] = []
+
+    def build() -> list:  # type: ignore[type-arg]
+        if robot is None:  # its own odometry: named after this process's graph session
+            overrides["odom_session"] = _own_odom_session(context)
+        params = _write_params(doc, source, out_dir, overrides)
+        if robot is None:
+            launch_args = {"world": args.world, "seed": str(args.seed),
+                           **camera_args(args.camera), "slam_params": str(params)}
+            desc = parse_launch_file(find_launch_file("slam"), launch_args)
+        else:
+            desc = parse_launch_file(find_launch_file("mapping"), {
+                "slam_params": str(params),
+                "use_sim_time": "true" if robot.simulated else "false"})
+        nodes = build_nodes(desc, context, NODES)
+        slam.extend(n for n in nodes if isinstance(n, SlamNode))
+        return nodes
+
+    try:
+        if robot is None:
+            return run_nodes(args, context, build, owns_sim_clock=True,
+                             real_time_factor=None if args.fast else args.rate)
+        return run_nodes(args, context, build, owns_sim_clock=False, connected=True)
+    finally:
+        if slam:
+            _save_outputs(slam[0], out_dir)
+
+
+def _session_anchor(session: Path) -> object:
+    """The session's sidecar anchor (`eddiebot.maps.MapAnchor`), or None."""
+    from eddiebot.cli.errors import CliError
+    from eddiebot.maps import read_anchor
+
+    if not session.is_file():
+        raise CliError(f"eddie slam: --session {session}: no such file")
+    side = session.with_name(session.name + ".anchor.yaml")
+    return read_anchor(side) if side.is_file() else None
+
+
+def _start_pose(args: argparse.Namespace, anchor: object, robot: object,
+                read_odom: Callable[[], tuple[float, float, float] | None]
+                ) -> tuple[tuple[float, float, float], str]:
+    """Where the robot is in ``--session``'s map, and why it is known."""
+    from eddiebot.cli.errors import CliError
+    from eddiebot.geometry import se2_compose
+
+    if args.start_pose is not None:
+        return tuple(args.start_pose), "--start-pose"  # type: ignore[return-value]
+    session = getattr(robot, "odom_session", None)
+    saved = getattr(anchor, "odom_session", None)
+    if session is not None and saved == session:
+        odom = read_odom()
+        if odom is not None:
+            x, y, th = (float(v) for v in se2_compose(anchor.map_to_odom, odom))  # type: ignore[attr-defined]
+            return (x, y, th), "where the robot is in it (the same running odometry)"
+    why = ("the session was saved on an odometry that no longer runs" if anchor is not None
+           else "the session has no anchor file beside it")
+    raise CliError(f"eddie slam: cannot know where the robot is in {args.live_session} ({why}); "
+                   "give --start-pose X Y YAW (0 0 0 if it stands where that session began)")
+
+
+def _own_odom_session(context: object) -> str:
+    """This process's odometry, named by its graph session (random without transport)."""
+    import uuid
+
+    for transport in getattr(context, "transports", []):
+        graph = getattr(transport, "graph", None)
+        if graph is not None:
+            return f"{graph()['zid']}/eddie_odom"
+    return f"local-{uuid.uuid4().hex}/eddie_odom"
+
+
+def _write_params(doc: object, source: Path, out_dir: Path, overrides: dict[str, object]) -> Path:
+    """``<out>/slam_params.yaml``: the parameters file with ``overrides`` for slam_toolbox."""
+    import yaml
+
+    from eddiebot.cli.errors import ParamsFileError
+
+    if doc is None:
+        doc = {}
+    if not isinstance(doc, dict):
+        raise ParamsFileError(f"{source}: top level must map node names to "
+                              "{ros__parameters: {...}}")
+    merged = dict(doc)
+    if overrides:
+        section = dict(merged.get("slam_toolbox") or {})
+        params = dict(section.get("ros__parameters") or {})
+        params.update(overrides)
+        section["ros__parameters"] = params
+        merged["slam_toolbox"] = section
+    out_dir.mkdir(parents=True, exist_ok=True)
+    out = out_dir / "slam_params.yaml"
+    tmp = out.with_name(out.name + ".tmp")
+    tmp.write_text(f"# resolved from {source}\n" + yaml.safe_dump(merged, sort_keys=False))
+    tmp.replace(out)
+    return out
+
+
+def _save_outputs(node: object, out_dir: Path) -> None:
+    """Save the session and the map; say where (a closed terminal is no reason to fail)."""
+    try:
+        paths = node.save_outputs(out_dir)  # type: ignore[attr-defined]
+    except Exception as exc:
+        print(f"eddie slam: could not save the session to {out_dir}: {exc}", file=sys.stderr)
+        return
+    names = ", ".join(p.name for p in paths.values())
+    try:
+        print(f"saved the session and the map to {out_dir}/ ({names})", flush=True)
+    except OSError:
+        pass
 
 
 def run(args: argparse.Namespace) -> int:

@@ -61,7 +61,9 @@ __all__ = [
     "image_to_map",
     "load_map",
     "map_to_image",
+    "read_anchor",
     "read_map_yaml",
+    "save_anchor",
     "save_map",
     "write_image",
 ]
@@ -134,6 +136,29 @@ def _anchor(doc: dict[str, Any], path: Path) -> MapAnchor | None:
         raise MapFormatError(f"{path}: key 'odom_session' must be a non-empty string, "
                              f"got {session!r}")
     return MapAnchor((float(raw[0]), float(raw[1]), float(raw[2])), session)
+
+
+def save_anchor(path: str | os.PathLike[str], anchor: MapAnchor) -> Path:
+    """Write ``anchor``'s keys alone to the YAML file ``path`` (atomically): the sidecar of
+    a saved SLAM session."""
+    target = Path(path)
+    _atomic_write_bytes(target, yaml.safe_dump(anchor.yaml_keys(), sort_keys=False).encode())
+    return target
+
+
+def read_anchor(path: str | os.PathLike[str]) -> MapAnchor | None:
+    """The `MapAnchor` of a YAML file holding its keys (a sidecar or a map YAML), or None
+    when the file has none; `MapFormatError` names the file for a malformed one."""
+    target = Path(path)
+    try:
+        doc = yaml.safe_load(target.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise MapFormatError(f"{target}: cannot read: {exc.strerror or exc}") from exc
+    except yaml.YAMLError as exc:
+        raise MapFormatError(f"{target}: not valid YAML: {exc}") from exc
+    if not isinstance(doc, dict):
+        raise MapFormatError(f"{target}: must be a mapping of keys")
+    return _anchor(doc, target)
 
 
 def _number(doc: dict[str, Any], key: str, path: Path) -> float:

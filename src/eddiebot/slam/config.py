@@ -475,7 +475,7 @@ CERES_PARAMETERS = (
 )
 
 #: The node's own parameters, not `SlamConfig` fields.
-NODE_PARAMETERS = ("processing", "use_sim_time")
+NODE_PARAMETERS = ("processing", "use_sim_time", "odom_session")
 
 
 _Rule = Callable[["SlamConfig", Any], "str | None"]

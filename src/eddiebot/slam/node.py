@@ -26,6 +26,12 @@ nav2 map_server files), ``~/serialize_map`` and ``~/deserialize_map`` (the sessi
 ``~/pause_new_measurements`` (toggle), ``~/reset``, ``~/clear_queue``. The graph is published
 as markers on ``~/graph_visualization``.
 
+``odom_session`` (eddiebot) names the odometry the node maps on (the ``/odom`` publisher's
+process and node, set by ``eddie slam``); with it, a map written by ``~/save_map`` or
+`SlamNode.save_outputs` records the map → odom transform and that name as the map YAML's
+``map_to_odom`` / ``odom_session`` keys (`eddiebot.maps.MapAnchor`), so navigation on the
+same running robot starts where the robot is.
+
 A scan is processed when the robot moved ``minimum_travel_distance`` **or** turned
 ``minimum_travel_heading`` — in every mode (upstream's sync and localization modes ignore
 pure rotation; with a 57° Kinect scan, turning in place is how Eddie sees a room).
@@ -63,7 +69,7 @@ from eddiebot.core.qos import (
 from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, make_transform_2d
 from eddiebot.core.time import stamp_to_ns
 from eddiebot.geometry import yaw_to_quaternion
-from eddiebot.maps import map_to_msg, save_map
+from eddiebot.maps import MapAnchor, map_to_msg, save_anchor, save_map
 from eddiebot.msgs.geometry_msgs import Point
 from eddiebot.msgs.nav_msgs import MapMetaData, OccupancyGrid
 from eddiebot.msgs.sensor_msgs import LaserScan
@@ -102,6 +108,7 @@ class SlamNode(Node):
             default = f.default if f.default is not dataclasses.MISSING else None
             values[f.name] = self.declare_parameter(f.name, default).value
         self.processing = str(self.declare_parameter("processing", "async").value)
+        self.odom_session = str(self.declare_parameter("odom_session", "").value)
         if self.processing not in ("sync", "async"):
             raise ValueError(f"{self.fully_qualified_name}: processing must be sync or async")
         # slam_toolbox keys that are no field (and unknown keys) are declared, so a user's
@@ -380,13 +387,37 @@ class SlamNode(Node):
         try:
             self.core.update_map()
             base = Path(name).expanduser()
-            save_map(self.core.occupancy_map(), base)
+            save_map(self.core.occupancy_map(), base, anchor=self.map_anchor())
             res.result = SaveMap.Response.RESULT_SUCCESS
             self.get_logger().info(f"saved the map to {name}.yaml / {name}.pgm")
         except Exception as exc:
             self.get_logger().error(f"save_map {name!r} failed: {exc}")
             res.result = SaveMap.Response.RESULT_UNDEFINED_FAILURE
         return res
+
+    def map_anchor(self) -> MapAnchor | None:
+        """Where the map frame stands against the odometry now (None without
+        ``odom_session``)."""
+        if not self.odom_session:
+            return None
+        x, y, th = (float(v) for v in self.core.map_to_odom)
+        return MapAnchor((x, y, th), self.odom_session)
+
+    def save_outputs(self, folder: Path) -> dict[str, Path]:
+        """Write the session (``session.eslam``, with the anchor beside it as
+        ``session.eslam.anchor.yaml``) and the map (``map.yaml`` + ``map.pgm``) into
+        ``folder``, each file atomically; returns them by kind (only the session while no
+        scan is processed yet)."""
+        folder.mkdir(parents=True, exist_ok=True)
+        out = {"session": save_session(self.core, folder / "session.eslam")}
+        anchor = self.map_anchor()
+        if anchor is not None:
+            side = folder / "session.eslam.anchor.yaml"
+            out["anchor"] = save_anchor(side, anchor)
+        if len(self.core.nodes):
+            self.core.update_map()
+            out["map"] = save_map(self.core.occupancy_map(), folder / "map", anchor=anchor)
+        return out
 
     def _serialize(self, req: Any, res: Any) -> Any:
         try:

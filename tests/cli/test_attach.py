@@ -1,0 +1,124 @@
+"""One simulator per graph, and SLAM attached to it: ``eddie`` processes on a private router.
+
+Each test runs ``eddie`` as programs against a router of its own on a random loopback port
+and a ROS_DOMAIN_ID of its own, with subprocess timeouts, so a hang fails the test.
+"""
+
+from __future__ import annotations
+
+import itertools
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "transport"))
+from _procs import Proc, free_port, session_env, start_router, stop
+
+EDDIE = [sys.executable, "-m", "eddiebot.cli.main"]
+SIM = [*EDDIE, "sim", "--world", "office", "--camera", "160x120@5"]
+_domains = itertools.count(150)
+
+
+@pytest.fixture(scope="module")
+def graph_env() -> Iterator[dict[str, str]]:
+    port = free_port()
+    env = session_env(port)
+    router = start_router(env, port)
+    if router is None:
+        pytest.skip("could not start a Zenoh router")
+    try:
+        yield env
+    finally:
+        stop(router)
+
+
+@pytest.fixture
+def env(graph_env: dict[str, str]) -> dict[str, str]:
+    return {**graph_env, "ROS_DOMAIN_ID": str(next(_domains))}
+
+
+@pytest.fixture
+def sim(env: dict[str, str]) -> Iterator[Proc]:
+    """``eddie sim`` on the test's domain, once it spins (its board answered)."""
+    proc = Proc(SIM, env)
+    deadline = time.monotonic() + 60
+    while "board on emulator" not in proc.stderr:
+        if proc.popen.poll() is not None or time.monotonic() > deadline:
+            proc.popen.kill()
+            pytest.fail(f"eddie sim did not start: {proc.stderr}")
+        time.sleep(0.1)
+    time.sleep(1.0)  # the clock publisher is announced once the executor spins
+    yield proc
+    proc.popen.send_signal(signal.SIGINT)
+    proc.finish(timeout=15)
+
+
+def _error_lines(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if line.startswith("eddie: error:")]
+
+
+def test_a_second_simulator_is_refused_within_seconds(sim: Proc, env: dict[str, str]) -> None:
+    domain = env["ROS_DOMAIN_ID"]
+    t0 = time.monotonic()
+    second = subprocess.run([*SIM, "--fast", "--duration", "1"], env=env, capture_output=True,
+                            text=True, timeout=30)
+    assert second.returncode == 2, second.stderr
+    assert time.monotonic() - t0 < 8.0
+    lines = _error_lines(second.stderr)
+    assert len(lines) == 1, second.stderr
+    line = lines[0]
+    assert f"a simulator already runs on ROS_DOMAIN_ID {domain}" in line
+    assert "/sim_clock beside /simulator" in line
+    assert f"ROS_DOMAIN_ID={int(domain) + 1} eddie sim" in line
+    # slam with its own simulator would publish /clock too
+    slam = subprocess.run([*EDDIE, "slam", "--world", "office", "--duration", "1"], env=env,
+                          capture_output=True, text=True, timeout=30)
+    assert slam.returncode == 2, slam.stderr
+    assert "eddie slam: a simulator already runs" in slam.stderr
+    assert sim.popen.poll() is None  # the first one runs on
+
+
+def test_slam_without_a_simulator_says_what_it_looked_for(env: dict[str, str]) -> None:
+    domain = env["ROS_DOMAIN_ID"]
+    t0 = time.monotonic()
+    run = subprocess.run([*EDDIE, "slam", "--attach-timeout", "1.5"], env=env,
+                         capture_output=True, text=True, timeout=30)
+    assert run.returncode == 2, run.stderr
+    assert time.monotonic() - t0 < 10.0
+    lines = _error_lines(run.stderr)
+    assert len(lines) == 1, run.stderr
+    line = lines[0]
+    assert f"no simulator or robot on ROS_DOMAIN_ID {domain}" in line
+    assert "/clock or /odom publisher within 1.5 s" in line
+    assert "eddie sim --world" in line and "--world office" in line
+
+
+def test_slam_attaches_and_ctrl_c_saves_the_map(sim: Proc, env: dict[str, str],
+                                                tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    slam = Proc([*EDDIE, "slam", "--output", str(out)], env)
+    assert slam.wait_for("attached to the simulator", timeout=30), slam.stderr
+    deadline = time.monotonic() + 60
+    while "slam in mapping mode" not in slam.stderr and time.monotonic() < deadline:
+        time.sleep(0.1)
+    time.sleep(3.0)  # a few scans
+    slam.popen.send_signal(signal.SIGINT)
+    assert slam.popen.wait(timeout=30) == 0, slam.stderr
+    assert any(f"saved the session and the map to {out}/" in line for line in slam.lines)
+    assert (out / "session.eslam").is_file()
+    doc = yaml.safe_load((out / "map.yaml").read_text())
+    assert doc["odom_session"].endswith("/eddie_odom")
+    assert len(doc["map_to_odom"]) == 3
+    assert sim.popen.poll() is None  # stopping SLAM left the simulator running
+    # the same running odometry: the session continues where the robot is
+    again = subprocess.run([*EDDIE, "slam", "--session", str(out / "session.eslam"),
+                            "--output", str(tmp_path / "again"), "--duration", "1"],
+                           env=env, capture_output=True, text=True, timeout=60)
+    assert again.returncode == 0, again.stderr
+    assert "where the robot is in it (the same running odometry)" in again.stdout
