@@ -86,10 +86,11 @@ def _stage_mapping(out: Path, report: Report, seed: int) -> bool:
           f"({100 * r.agreement_tolerant:.1f} % within one cell); saved {r.map_yaml}")
     pictures = []
     if r.grid is not None:
-        trajectories = {"SLAM": world_to_map(r.slam_world, r.start),
-                        "ground truth": world_to_map(r.truth, r.start)}
+        # drawn in this order: SLAM last, on top of the odometry and the truth it follows
+        trajectories = {"ground truth": world_to_map(r.truth, r.start)}
         if len(r.odom_world):
             trajectories["wheel odometry"] = world_to_map(r.odom_world, r.start)
+        trajectories["SLAM"] = world_to_map(r.slam_world, r.start)
         render_map(r.grid, trajectories=trajectories, out_path=out / "mapping.png",
                    title="office: SLAM map and trajectories (map frame)")
         pictures.append("![SLAM map](mapping.png)")
@@ -147,12 +148,30 @@ def _stage_vslam(out: Path, report: Report, seed: int) -> bool:
     # Eddie's wheel odometry variance per node link as measured in the simulator (instead of
     # rtabmap_ros's 0.001 default) and loop closures registered 3D->3D from both frames' depth
     r = run_vslam(out, seed=seed, parameters=dict(SLAM_PARAMETERS))
-    rows = [(k, getattr(r, k)) for k in ("ate_rmse_m", "ate_max_m", "odom_end_error_m",
-                                         "loop_closures", "sim_seconds", "wall_seconds")
-            if hasattr(r, k)]
-    for k, v in rows:
-        print(f"{k}: {v}")
-    report.add("## Stage 4 — RGB-D SLAM (RTAB-Map's manner) on the same route\n\n" + report.table(rows))
+    labels = {
+        "ate_rmse_m": "trajectory RMSE against the ground truth (m; ATE)",
+        "ate_max_m": "trajectory max error (m)",
+        "odom_end_error_m": "end-point error, wheel odometry alone (m)",
+        "slam_end_error_m": "end-point error, RGB-D SLAM (m)",
+        "loop_closures": "loop closures",
+        "nodes": "graph nodes",
+        "sim_seconds": "simulated time (s)",
+        "wall_seconds": "wall time (s)",
+    }
+    rows = [(label, getattr(r, k)) for k, label in labels.items() if hasattr(r, k)]
+    for label, v in rows:
+        print(f"{label}: {v}")
+    picture = ""
+    if len(getattr(r, "slam_world", ())) and len(getattr(r, "truth", ())):
+        from eddiebot.viz.snapshot import render_trajectories
+
+        render_trajectories({"ground truth": world_to_map(r.truth, r.start),
+                             "RGB-D SLAM": world_to_map(r.slam_world, r.start)},
+                            out_path=out / "vslam.png",
+                            title="RGB-D SLAM trajectory against the ground truth (map frame)")
+        picture = "\n![RGB-D SLAM](vslam.png)\n"
+    report.add("## Stage 4 — RGB-D SLAM (RTAB-Map's manner) on the same route\n\n"
+               + report.table(rows) + picture)
     return bool(getattr(r, "finished", True))
 
 
@@ -175,12 +194,11 @@ def run(args: argparse.Namespace) -> int:
         results["nav"] = _stage_nav(out, report, args.seed)
     if "vslam" in stages:
         results["vslam"] = _stage_vslam(out, report, args.seed)
+    report.verdicts.update(results)
     path = report.write()
     print(f"\nreport: {path} ({time.perf_counter() - t0:.0f} s in all)")
-    # the base and the map are what everything else stands on; navigation and RGB-D SLAM
-    # report their misses (goals not reached, error figures) in the report instead
     missed = [k for k, ok in results.items() if not ok]
     if missed:
-        print(f"stages that fell short (see the report): {missed}", file=sys.stderr)
-    required = [k for k in missed if k in ("base", "mapping")]
-    return 1 if required else 0
+        print(f"eddie demo: stages that fell short (see the report): {', '.join(missed)}",
+              file=sys.stderr)
+    return 1 if missed else 0

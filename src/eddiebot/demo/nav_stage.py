@@ -183,8 +183,12 @@ def _report(out: Path, report: Report, result: NavStageResult, map_yaml: Path) -
     trajectories: dict[str, Any] = {"driven (ground truth)": result.driven}
     if result.plans:
         trajectories["last global plan"] = result.plans[-1]
+    goals = {label: np.array([o.goal for o in result.outcomes if o.reached == hit])
+             for label, hit in (("goal reached", True), ("goal missed", False))}
+    markers = {label: pts for label, pts in goals.items() if len(pts)}
     try:
-        render_map(load_map(map_yaml), trajectories=trajectories, out_path=out / "navigation.png",
+        render_map(load_map(map_yaml), trajectories=trajectories, markers=markers,
+                   out_path=out / "navigation.png",
                    title="navigation in the saved map (map frame)")
         picture = "![navigation](navigation.png)\n"
     except Exception as exc:  # a picture must not lose the numbers

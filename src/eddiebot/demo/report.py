@@ -27,6 +27,8 @@ def world_to_map(poses: np.ndarray, start: Sequence[float]) -> np.ndarray:
 class Report:
     out_dir: Path
     sections: list[str] = field(default_factory=list)
+    #: stage → whether it met its targets, for the verdict at the top
+    verdicts: dict[str, bool] = field(default_factory=dict)
 
     def add(self, text: str) -> None:
         self.sections.append(text.rstrip() + "\n")
@@ -39,9 +41,19 @@ class Report:
             lines.append(f"| {name} | {value} |")
         return "\n".join(lines) + "\n"
 
+    def verdict(self) -> str:
+        """One line for the top of the report: every stage met its targets, or which did not."""
+        short = [stage for stage, ok in self.verdicts.items() if not ok]
+        if not self.verdicts:
+            return "No stage ran."
+        if not short:
+            return f"**Every stage met its targets** ({', '.join(self.verdicts)})."
+        return f"**Fell short: {', '.join(short)}** — see the stage sections below."
+
     def write(self) -> Path:
         path = self.out_dir / "report.md"
         tmp = path.with_suffix(".md.tmp")
-        tmp.write_text("# eddiebot demo report\n\n" + "\n".join(self.sections))
+        tmp.write_text("# eddiebot demo report\n\n" + self.verdict() + "\n\n"
+                       + "\n".join(self.sections))
         tmp.replace(path)
         return path

@@ -297,7 +297,8 @@ def run_vslam(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, ..
             n.destroy_node()  # the vSLAM node closes (and completes) its database
         context.shutdown()
     result.database = db_path
-    (out_dir / "result.json").write_text(json.dumps(result.summary(), indent=2))
+    (out_dir / "result.json").write_text(json.dumps(_strict(result.summary()), indent=2,
+                                                    allow_nan=False))
     return result
 
 
@@ -437,3 +438,14 @@ def _score(result: VslamResult, slam: Any, truth: dict[int, tuple[float, float, 
         result.vo_end_error_m = float(np.hypot(*(est_end[:2] - g1[:2])))
         if result.distance_m > 0:
             result.vo_drift_percent = 100.0 * result.vo_end_error_m / result.distance_m
+
+
+def _strict(value: Any) -> Any:
+    """JSON has no NaN or infinity: a figure that could not be computed is null."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _strict(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_strict(v) for v in value]
+    return value

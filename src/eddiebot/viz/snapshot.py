@@ -288,6 +288,7 @@ def render_map(
     scan_pose: Sequence[float] | None = None,
     robot_pose: Sequence[float] | None = None,
     robot_radius: float = ROBOT_RADIUS,
+    markers: Any = None,
     out_path: str | Path | None = None,
     title: str | None = None,
     pixels_per_cell: int | None = None,
@@ -304,7 +305,8 @@ def render_map(
     label → value, or a sequence of those (colours from a palette in order).
     ``scan``: a ``sensor_msgs/LaserScan`` taken at ``scan_pose`` (default ``robot_pose``),
     or (N, 2) map-frame points. ``robot_pose``: (x, y, yaw) drawn as the footprint with
-    its heading. ``pixels_per_cell`` defaults to the smallest integer making the longer
+    its heading. ``markers``: points drawn as crosses (same forms as ``trajectories``, e.g.
+    ``{"goal reached": array, "goal missed": array}``). ``pixels_per_cell`` defaults to the smallest integer making the longer
     side at least ``min_size`` pixels (capped by ``max_size``).
     """
     h, w = grid.height, grid.width
@@ -344,6 +346,14 @@ def render_map(
     if robot_pose is not None:
         _draw_robot(img, snap, robot_pose, robot_radius)
         entries.append(("robot", _ROBOT_COLOR))
+    for ov in _overlays(markers, _PALETTE[2:], 2):
+        color = ov.color or _PALETTE[2]
+        size = max(6, 2 * pixels_per_cell)
+        for p in snap.world_to_pixel(ov.points[:, :2]) if len(ov.points) else []:
+            x, y = int(p[0]), int(p[1])
+            cv2.line(img, (x - size, y - size), (x + size, y + size), color, 3, cv2.LINE_AA)
+            cv2.line(img, (x - size, y + size), (x + size, y - size), color, 3, cv2.LINE_AA)
+        entries.append((ov.label, color))
     if scale_bar:
         _draw_scale_bar(img, snap)
     if legend:
