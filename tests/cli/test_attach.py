@@ -122,3 +122,19 @@ def test_slam_attaches_and_ctrl_c_saves_the_map(sim: Proc, env: dict[str, str],
                            env=env, capture_output=True, text=True, timeout=60)
     assert again.returncode == 0, again.stderr
     assert "where the robot is in it (the same running odometry)" in again.stdout
+
+
+def test_nav_without_a_simulator_says_what_it_looked_for(env: dict[str, str],
+                                                         tmp_path: Path) -> None:
+    import numpy as np
+
+    from eddiebot.maps import OccupancyMap, save_map
+
+    path = save_map(OccupancyMap(np.zeros((10, 10), np.int8), 0.1), tmp_path / "m")
+    run = subprocess.run([*EDDIE, "nav", "--map", str(path), "--attach-timeout", "1"],
+                         env=env, capture_output=True, text=True, timeout=30)
+    assert run.returncode == 2, run.stderr
+    lines = _error_lines(run.stderr)
+    assert len(lines) == 1, run.stderr
+    assert f"no simulator or robot on ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}" in lines[0]
+    assert "eddie nav bring its own with --world office" in lines[0]

@@ -1,13 +1,22 @@
 """``eddie nav --map FILE.yaml [--world NAME]``: autonomous navigation.
 
 With ``--world`` the simulator, Eddie's base, localization and Nav2's servers run in one
-process on the sim clock (launch ``nav_sim``); without it the navigation alone joins the real
-robot's graph through the transport (launch ``nav``). The parameters file (``--params``,
+process on the sim clock (launch ``nav_sim``). Without it the navigation alone (launch
+``nav``) attaches to the simulator (``eddie sim``) or the real robot's bring-up already
+running on the same ROS_DOMAIN_ID (a ``/clock`` or ``/odom`` publisher within
+``--attach-timeout`` s, default 10; else one line and exit status 2), following ``/clock``
+when there is one; stopping it leaves the robot running. The parameters file (``--params``,
 default config/nav2.yaml; config/nav2_report.yaml holds the report's values) is resolved
 into ``<run dir>/nav2_params.yaml`` with the costmaps folded into their servers, plus the
-initial pose for AMCL (``--initial-pose``; with ``--world`` the world's start pose by
-default, which is right for maps in the world frame; a map made by SLAM from the start pose
-needs ``--initial-pose 0 0 0``). Send goals with ``eddie goal X Y YAW``.
+initial pose for AMCL.
+
+The initial pose, in the map frame: ``--initial-pose X Y YAW``; else, attached to the
+robot whose running odometry the map was saved with (the map YAML's ``map_to_odom`` and
+``odom_session`` keys, written by SLAM), where the robot is in the map now; else, with
+``--world`` and a map without those keys (a map in the world frame), the world's start
+pose. Otherwise the run says it cannot know and AMCL waits for one (``--initial-pose`` or
+the dashboard). A pose outside the map, in unknown space or on an obstacle is an error.
+Send goals with ``eddie goal X Y YAW``.
 """
 
 from __future__ import annotations
@@ -16,6 +25,7 @@ import argparse
 import sys
 import tempfile
 from pathlib import Path
+from typing import Any
 
 import yaml
 
@@ -38,6 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         default=None, help="AMCL's initial pose in the map frame")
     parser.add_argument("--camera", default="160x120@5",
                         help="simulated Kinect WxH@HZ (default 160x120@5: enough for the scan)")
+    parser.add_argument("--attach-timeout", type=float, default=None,
+                        help="without --world: how long to wait for a simulator or robot, s "
+                        "(default 10)")
     parser.add_argument("--run-dir", type=Path, default=None,
                         help="where the resolved parameters are written (default a temp dir)")
     add_run_arguments(parser)
@@ -100,35 +113,137 @@ def check_map(path: Path, localization: str) -> None:
             raise MapFormatError(f"{path}: key 'image': file {meta.image} not found")
 
 
-def run(args: argparse.Namespace) -> int:
-    from eddiebot.cli.sim import camera_args
+def check_initial_pose(path: Path, pose: tuple[float, float, float]) -> None:
+    """Raise `CliError` unless ``pose`` lies on a free cell of the map ``path`` (a map that
+    does not load is left to map_server, whose bring-up names what is wrong)."""
+    import numpy as np
 
+    from eddiebot.maps import FREE, UNKNOWN, MapError, is_inside, load_map, world_to_map
+
+    try:
+        grid = load_map(path)
+    except MapError:
+        return
+    cell = world_to_map(grid, np.array([pose[0], pose[1]]))
+    at = f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}, {pose[2]:.2f})"
+    if not bool(is_inside(grid, cell)):
+        x0, y0 = grid.origin[0], grid.origin[1]
+        raise CliError(
+            f"eddie nav: {at} is outside {path} (x {x0:.2f}..{x0 + grid.width * grid.resolution:.2f}"
+            f", y {y0:.2f}..{y0 + grid.height * grid.resolution:.2f} m); give --initial-pose "
+            "X Y YAW in the map's frame")
+    value = int(grid.data[int(cell[1]), int(cell[0])])
+    if value == UNKNOWN:
+        raise CliError(f"eddie nav: {at} lies in unknown space of {path}; give --initial-pose "
+                       "X Y YAW on a free cell")
+    if value > FREE + 50:
+        raise CliError(f"eddie nav: {at} lies on an obstacle of {path}; give --initial-pose "
+                       "X Y YAW on a free cell")
+
+
+def initial_pose(args: argparse.Namespace, robot: Any, read_odom: Any
+                 ) -> tuple[tuple[float, float, float] | None, str]:
+    """AMCL's initial pose (or None: unknown) and one line saying where it comes from."""
+    from eddiebot.maps import read_map_yaml
+
+    name = args.map.name
+    if args.initial_pose is not None:
+        pose = (float(args.initial_pose[0]), float(args.initial_pose[1]),
+                float(args.initial_pose[2]))
+        return pose, f"starting at --initial-pose ({pose[0]:.2f}, {pose[1]:.2f}, {pose[2]:.2f})"
+    anchor = read_map_yaml(args.map).anchor
+    session = getattr(robot, "odom_session", None)
+    if anchor is not None and session is not None and anchor.odom_session == session:
+        odom = read_odom()
+        if odom is not None:
+            from eddiebot.geometry import se2_compose
+
+            x, y, th = (float(v) for v in se2_compose(anchor.map_to_odom, odom))
+            return (x, y, th), (f"starting localised at ({x:.2f}, {y:.2f}, {th:.2f}) in {name}: "
+                                "the map was saved on this robot's running odometry")
+    if args.world is not None and anchor is None:
+        from eddiebot.sim.worlds import load_world
+
+        start = load_world(args.world).start
+        pose = (float(start[0]), float(start[1]), float(start[2]))
+        return pose, (f"starting at the world's start pose ({pose[0]:.2f}, {pose[1]:.2f}, "
+                      f"{pose[2]:.2f}) ({name} has no map_to_odom: taken to be in the world frame)")
+    if anchor is None:
+        why = f"{name} does not record where the robot was (no map_to_odom / odom_session)"
+    elif robot is None:
+        why = f"{name} was saved on a robot that is not this run's simulator"
+    else:
+        why = f"{name} was saved on an odometry that no longer runs"
+    return None, (f"eddie nav: cannot know where the robot is in {name} ({why}); AMCL waits "
+                  "for an initial pose: give --initial-pose X Y YAW (or set it in the dashboard)")
+
+
+def run(args: argparse.Namespace) -> int:
     if args.world is not None:
         check_world(args.world)
     check_map(args.map, args.localization)
-    params = args.params or default_params()
-    pose = tuple(args.initial_pose) if args.initial_pose else None
-    if pose is None and args.world is not None and args.localization == "amcl":
-        from eddiebot.sim.worlds import load_world
-
-        pose = tuple(load_world(args.world).start)
-    run_dir = args.run_dir or Path(tempfile.mkdtemp(prefix="eddie_nav_"))
-    resolved = resolve_params(params, run_dir, pose)  # type: ignore[arg-type]
-    print(f"parameters: {resolved}", flush=True)
-    launch_args = {"map": str(args.map.resolve()), "params_file": str(resolved),
-                   "localization": args.localization}
     if args.world is None:
-        return _run_real(args, launch_args)
+        return _run_attached(args)
+    from eddiebot.cli.sim import camera_args
+
+    pose, line = (None, "") if args.localization != "amcl" else initial_pose(args, None, None)
+    launch_args = _launch_args(args, pose, line)
     launch_args.update({"world": args.world, "seed": str(args.seed), **camera_args(args.camera)})
     return run_stack(args, "nav_sim", launch_args)
 
 
-def _run_real(args: argparse.Namespace, launch_args: dict[str, str]) -> int:
-    """The navigation alone, on the wall clock, joined to the robot's graph."""
+def _launch_args(args: argparse.Namespace, pose: tuple[float, float, float] | None,
+                 line: str) -> dict[str, str]:
+    params = args.params or default_params()
+    run_dir = args.run_dir or Path(tempfile.mkdtemp(prefix="eddie_nav_"))
+    resolved = resolve_params(params, run_dir, pose)  # its errors first
+    if pose is not None:
+        check_initial_pose(args.map, pose)
+    print(f"parameters: {resolved}", flush=True)
+    if line:
+        print(line, flush=True)
+    return {"map": str(args.map.resolve()), "params_file": str(resolved),
+            "localization": args.localization}
+
+
+def _run_attached(args: argparse.Namespace) -> int:
+    """The navigation alone, attached to the simulator or robot running on this domain."""
+    from eddiebot.cli._attach import ATTACH_WAIT_S, graph_cache, odom_pose, wait_for_robot
     from eddiebot.core.context import Context
-    from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
+    from eddiebot.core.launch import (
+        build_nodes,
+        connect_transport,
+        find_launch_file,
+        parse_launch_file,
+    )
     from eddiebot.registry import NODES
 
-    context = Context(use_sim_time=False)
-    return run_nodes(args, context, lambda: build_nodes(
-        parse_launch_file(find_launch_file("nav"), launch_args), context, NODES))
+    context = Context(use_sim_time=True)
+    try:
+        if not args.no_transport:
+            connect_transport(context)
+        wait = ATTACH_WAIT_S if args.attach_timeout is None else args.attach_timeout
+        robot = wait_for_robot(context, "eddie nav", wait)
+        context.use_sim_time = robot.simulated
+        print(f"attached to {robot.what}", flush=True)
+        cache = graph_cache(context)
+        if cache is not None and any(e.node_name == "slam_toolbox" for e in cache.nodes()):
+            print("eddie nav: slam_toolbox runs on this domain and publishes map → odom too; "
+                  "stop eddie slam (Ctrl-C saves its map) before navigating", flush=True)
+        pose, line = (None, "") if args.localization != "amcl" else initial_pose(
+            args, robot, lambda: odom_pose(context))
+        launch_args = _launch_args(args, pose, line)
+        launch_args["use_sim_time"] = "true" if robot.simulated else "false"
+        cloud = robot.simulated and cache is not None and not cache.publishers("/points")
+    except BaseException:
+        context.shutdown()
+        raise
+
+    def build() -> list[Any]:
+        nodes = build_nodes(parse_launch_file(find_launch_file("nav"), launch_args), context, NODES)
+        if cloud:  # the simulator publishes no /points: the local costmap's source
+            nodes += build_nodes(parse_launch_file(find_launch_file("depth_cloud"), {
+                "use_sim_time": "true"}), context, NODES)
+        return nodes
+
+    return run_nodes(args, context, build, owns_sim_clock=False, connected=True)
