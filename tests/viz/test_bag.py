@@ -119,6 +119,16 @@ def test_transient_local_offered_qos_in_metadata(recorded: Path) -> None:
     assert not conns["/odom"].transient_local
 
 
+def test_infinite_qos_durations_as_rosbag2_writes_them(recorded: Path) -> None:
+    import yaml
+
+    meta = yaml.safe_load((recorded / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    qos_text = meta["topics_with_message_count"][0]["topic_metadata"]["offered_qos_profiles"]
+    offered = qos_text if isinstance(qos_text, list) else yaml.safe_load(qos_text)
+    for key in ("deadline", "lifespan", "liveliness_lease_duration"):
+        assert offered[0][key] == {"sec": 9223372036, "nsec": 854775807}
+
+
 def test_bag_info_counts(recorded: Path) -> None:
     info = bag_info(recorded)
     counts = {t.name: t.count for t in info.topics}

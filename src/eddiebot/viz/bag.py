@@ -79,8 +79,9 @@ __all__ = [
 
 _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _NS = 1_000_000_000
-#: rmw's "infinite" duration as rosbag2 (Jazzy) writes it into metadata.yaml.
-_INFINITE = QosTime(9223372036854775807, 4294967295)
+#: rmw's "infinite" duration (RMW_DURATION_INFINITE, INT64_MAX ns) as rosbag2 (Jazzy) writes
+#: it into metadata.yaml: split into seconds and nanoseconds, 9223372036 s + 854775807 ns.
+_INFINITE = QosTime(9223372036, 854775807)
 _LOOP_GAP_NS = 1_000_000
 
 
