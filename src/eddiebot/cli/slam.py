@@ -37,6 +37,7 @@ laser's mount comes from ``/tf_static``.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import sys
 from collections.abc import Callable
 from pathlib import Path
@@ -433,13 +434,12 @@ def _save_outputs(node: object, out_dir: Path) -> None:
     try:
         paths = node.save_outputs(out_dir)  # type: ignore[attr-defined]
     except Exception as exc:
-        print(f"eddie slam: could not save the session to {out_dir}: {exc}", file=sys.stderr)
+        with contextlib.suppress(OSError):
+            print(f"eddie slam: could not save the session to {out_dir}: {exc}", file=sys.stderr)
         return
     names = ", ".join(p.name for p in paths.values())
-    try:
+    with contextlib.suppress(OSError):  # SIGHUP: the terminal may be gone
         print(f"saved the session and the map to {out_dir}/ ({names})", flush=True)
-    except OSError:
-        pass
 
 
 def run(args: argparse.Namespace) -> int:
