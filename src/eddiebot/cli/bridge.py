@@ -87,7 +87,8 @@ def _bridge(args: argparse.Namespace, topics: dict[str, str] | None) -> int:
         assert transport is not None  # required=True raises instead
         config = DdsBridgeConfig(domain_id=domain, network=zenoh_config.network,
                                  allow=args.allow, deny=args.deny, topics=topics)
-        bridge = DdsBridge(context, transport, config).start()
+        bridge = DdsBridge(context, transport, config)
+        bridge.start()
         print(f"eddie bridge dds: domain {domain} ({zenoh_config.network}) <-> graph of domain "
               f"{context.domain_id} at {zenoh_config.router}", flush=True)
         seen: set[tuple[str, str, str]] = set()

@@ -352,38 +352,46 @@ class DdsBridge:
         self._dds_pubs: dict[str, Any] = {}  # DCPSPublication key → endpoint
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._topics: dict[tuple[str, str], Any] = {}
         self.node = Node(self.config.node_name, context=context, start_parameter_services=False)
         self._zenoh = _ZenohSide(transport, self.node)
         try:
-            self._domain = Domain(self.config.domain_id, cyclone_config(self.config.network))
-        except Exception as exc:
-            raise TransportError(
-                f"cannot join DDS domain {self.config.domain_id}: {exc}") from exc
-        self.participant = DomainParticipant(
-            self.config.domain_id, qos=Qos(Policy.Userdata(b"enclave=/;")))
-        self._publisher = Publisher(self.participant)
-        self._subscriber = Subscriber(self.participant)
-        self._own_key = str(self.participant.guid)
-        self._pub_reader = BuiltinDataReader(self.participant, BuiltinTopicDcpsPublication)
-        self._topics: dict[tuple[str, str], Any] = {}
+            try:
+                self._domain = Domain(self.config.domain_id, cyclone_config(self.config.network))
+            except Exception as exc:
+                raise TransportError(
+                    f"cannot join DDS domain {self.config.domain_id}: {exc}") from exc
+            self.participant = DomainParticipant(
+                self.config.domain_id, qos=Qos(Policy.Userdata(b"enclave=/;")))
+            self._publisher = Publisher(self.participant)
+            self._subscriber = Subscriber(self.participant)
+            self._own_key = str(self.participant.guid)
+            self._pub_reader = BuiltinDataReader(self.participant, BuiltinTopicDcpsPublication)
+        except BaseException:  # Ctrl-C half-way included: leave nothing declared
+            self.close()
+            raise
 
     # -- life ---------------------------------------------------------------------------
     def start(self) -> DdsBridge:
-        self.step()
+        """Run discovery passes in a thread (a Ctrl-C in the caller's thread never stops
+        one half-way, with a route declared but not yet recorded)."""
         self._thread = threading.Thread(target=self._run, name="eddie-dds-bridge", daemon=True)
         self._thread.start()
         return self
 
     def _run(self) -> None:
-        while not self._stop.wait(self.config.poll_period_s):
+        while not self._stop.is_set():
             try:
                 self.step()
             except Exception:
                 if self._closed:
                     return
                 log.exception("DDS bridge discovery pass failed")
+            self._stop.wait(self.config.poll_period_s)
 
     def close(self) -> None:
+        """Close every route and leave both graphs; also after a Ctrl-C half-way through
+        (each route is closed even if closing another one is interrupted)."""
         if self._closed:
             return
         self._closed = True
@@ -393,9 +401,11 @@ class DdsBridge:
         with self._lock:
             lives = list(self._routes.values())
             self._routes.clear()
-        for live in lives:
-            _quietly(live.close)
-        self.node.destroy_node()
+        try:
+            for live in lives:
+                _quietly(live.close)
+        finally:
+            self.node.destroy_node()
         # Cyclone's entities go with their Python objects; drop the participant first
         self._topics.clear()
         for name in ("_pub_reader", "_publisher", "_subscriber", "participant", "_domain"):
@@ -442,7 +452,12 @@ class DdsBridge:
                             route.direction, exc)
                 continue
             with self._lock:
-                self._routes[key] = live
+                closed = self._closed
+                if not closed:
+                    self._routes[key] = live
+            if closed:
+                _quietly(live.close)
+                return
             log.info("bridged %s [%s] %s (%s, %s, %s %d)", route.topic, route.type_name,
                      route.direction, route.qos.reliability.name.lower(),
                      route.qos.durability.name.lower(), route.qos.history.name.lower(),
