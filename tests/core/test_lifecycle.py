@@ -17,7 +17,7 @@ from eddiebot.msgs.lifecycle_msgs import (
     TransitionEvent,
 )
 from eddiebot.msgs.nav2_msgs import ManageLifecycleNodes
-from eddiebot.msgs.std_msgs import Header, String
+from eddiebot.msgs.std_msgs import String
 from eddiebot.msgs.std_srvs import Trigger
 
 S = 1_000_000_000
@@ -146,11 +146,13 @@ def test_services_and_transition_events(ctx):
 
 
 def test_bond_heartbeat_only_while_active(ctx):
+    from eddiebot.msgs.bond import Status
+
     ex = SingleThreadedExecutor(context=ctx)
     n = Server("planner", [], ctx)
     beats = []
     listener = Node("listener", context=ctx)
-    listener.create_subscription(Header, "/bond", beats.append, 100)
+    listener.create_subscription(Status, "/bond", beats.append, 100)
     ex.add_node(n)
     ex.add_node(listener)
     n.trigger_configure()
@@ -159,11 +161,36 @@ def test_bond_heartbeat_only_while_active(ctx):
     n.trigger_activate()
     ex.spin_for(1.0)
     assert 10 <= len(beats) <= 11
-    assert beats[-1].frame_id == "/planner"
+    # bondcpp's heartbeat: the bond id is the node's name, one instance id, the timings
+    assert {b.id for b in beats} == {"planner"} and len({b.instance_id for b in beats}) == 1
+    assert beats[-1].active and beats[-1].heartbeat_period == pytest.approx(0.1)
+    assert beats[-1].heartbeat_timeout == pytest.approx(4.0)
     n.trigger_deactivate()
+    ex.spin_for(0.01)
+    assert beats[-1].active is False  # the bond is broken, and the sister told so
     count = len(beats)
     ex.spin_for(1.0)
     assert len(beats) == count
+
+
+def test_manager_beats_its_side_and_a_broken_bond_takes_the_group_down_at_once(ctx):
+    from eddiebot.msgs.bond import Status
+
+    journal: list = []
+    ex, nodes, manager = _group(ctx, ["a", "b"], journal, bond_timeout=4.0, autostart=True,
+                                attempt_respawn_reconnection=False)
+    beats = []
+    listener = Node("listener2", context=ctx)
+    listener.create_subscription(Status, "/bond", beats.append, 100)
+    ex.add_node(listener)
+    ex.spin_for(0.5)
+    ours = {b.id for b in beats if b.instance_id == manager._bond_instance}
+    assert ours == {"a", "b"}
+    # a bondcpp node breaking its bond (active false) is down now, not after 4 s
+    pub = listener.create_publisher(Status, "/bond", 5)
+    pub.publish(Status(id="b", instance_id="sister-of-b", active=False))
+    ex.spin_for(0.5)
+    assert not manager.system_active
 
 
 def _group(ctx, names, journal, fail=None, **params):

@@ -12,19 +12,24 @@ Each transition runs a callback (``on_configure`` …) answering
 SUCCESS back to unconfigured, otherwise finalized); an exception counts as ERROR.
 The node serves ``<node>/change_state``, ``get_state``, ``get_available_states``,
 ``get_available_transitions`` and publishes ``<node>/transition_event``. Lifecycle
-publishers stay silent until the node is active. While active the node publishes a bond
-heartbeat on ``/bond`` (std_msgs/Header: frame_id = node name, stamp = now) every
-``bond_heartbeat_period`` seconds.
+publishers stay silent until the node is active. While active the node keeps a bond as
+bondcpp does, so a real ``nav2_lifecycle_manager`` can manage it: ``bond/msg/Status`` on the
+relative ``bond`` topic (id = node name, a fresh instance id per bond, ``active``, the
+heartbeat timeout and period) every ``bond_heartbeat_period`` seconds (0.1 s, as nav2_util),
+and one ``active: false`` when the bond is broken on deactivation.
 
 ``LifecycleManager`` is Nav2's lifecycle_manager: it configures then activates
 ``node_names`` in order, takes them down in reverse, serves ``<manager>/manage_nodes``
 (nav2_msgs/ManageLifecycleNodes) and ``<manager>/is_active`` (std_srvs/Trigger), and
-takes the group down when an active node's heartbeat stops for ``bond_timeout``.
+takes the group down when an active node's heartbeat stops for ``bond_timeout`` or the node
+says its bond is broken. Its own side of each bond beats every 0.1 s with its own instance
+id, so nodes of a real Nav2 (bondcpp) see their bond formed too.
 """
 
 from __future__ import annotations
 
 import enum
+import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -111,6 +116,26 @@ _TRANSITIONS = (
     _Transition(7, "shutdown", _A, LifecycleState.SHUTTINGDOWN, "on_shutdown", _F, _F, 50),
 )
 _ERROR_RESULT_BASE = 60
+#: nav2_util's LifecycleNode: setHeartbeatTimeout(4.0); nav2's manager beats every 0.1 s
+_NODE_BOND_TIMEOUT_S = 4.0
+_MANAGER_BOND_PERIOD_S = 0.1
+
+
+def _bond_id(node_name: str) -> str:
+    """The bond id nav2 uses for a managed node: its name, without namespace."""
+    return node_name.rstrip("/").rsplit("/", 1)[-1]
+
+
+def bond_status(bond_id: str, instance_id: str, active: bool, stamp_ns: int,
+                heartbeat_timeout_s: float, heartbeat_period_s: float) -> Any:
+    """A ``bond/msg/Status`` heartbeat as bondcpp publishes it."""
+    from eddiebot.msgs.bond import Status
+    from eddiebot.msgs.builtin_interfaces import Time
+
+    msg = Status(id=bond_id, instance_id=instance_id, active=active,
+                 heartbeat_timeout=heartbeat_timeout_s, heartbeat_period=heartbeat_period_s)
+    msg.header.stamp = Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
+    return msg
 
 
 class LifecyclePublisher(Publisher):
@@ -149,6 +174,7 @@ class LifecycleNode(Node):
         self._managed: list[LifecyclePublisher] = []
         self._bond_timer: Timer | None = None
         self._bond_pub: Publisher | None = None
+        self._bond_instance = ""
         self._in_transition = False
         if not self.has_parameter("bond_heartbeat_period"):
             self.declare_parameter("bond_heartbeat_period", 0.1)
@@ -309,9 +335,11 @@ class LifecycleNode(Node):
         if period <= 0 or self._bond_timer is not None:
             return
         if self._bond_pub is None:
-            from eddiebot.msgs.std_msgs import Header
+            from eddiebot.msgs.bond import Status
 
-            self._bond_pub = self.create_publisher(Header, "/bond", 10)
+            # bondcpp: KeepLast(5) on the relative "bond" topic, one instance id per bond
+            self._bond_pub = self.create_publisher(Status, "bond", 5)
+        self._bond_instance = uuid.uuid4().hex
         self._heartbeat()
         self._bond_timer = self.create_timer(period, self._heartbeat)
 
@@ -319,13 +347,13 @@ class LifecycleNode(Node):
         if self._bond_timer is not None:
             self.destroy_timer(self._bond_timer)
             self._bond_timer = None
+            self._heartbeat(active=False)  # bondcpp's breakBond: tell the sister at once
 
-    def _heartbeat(self) -> None:
-        from eddiebot.msgs.std_msgs import Header
-
+    def _heartbeat(self, active: bool = True) -> None:
         if self._bond_pub is not None:
-            self._bond_pub.publish(Header(stamp=self.now().to_msg(),
-                                          frame_id=self.fully_qualified_name))
+            self._bond_pub.publish(bond_status(
+                self.get_name(), self._bond_instance, active, self.now().nanoseconds,
+                _NODE_BOND_TIMEOUT_S, float(self.get_parameter("bond_heartbeat_period").value)))
 
     # -- services -------------------------------------------------------------------------
     def _srv_change_state(self, request: Any, response: Any) -> Any:
@@ -402,7 +430,6 @@ class LifecycleManager(Node):
     def __init__(self, node_name: str = "lifecycle_manager", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         from eddiebot.msgs import get_service
-        from eddiebot.msgs.std_msgs import Header
 
         self.declare_parameter("node_names", [""])
         self.declare_parameter("autostart", False)
@@ -422,13 +449,19 @@ class LifecycleManager(Node):
         self.last_error = ""
         self.dead_nodes: list[str] = []
         self._last_beat: dict[str, int] = {}
+        self._broken: set[str] = set()
         self._bond_timer: Timer | None = None
         self._respawn_timer: Timer | None = None
         self._respawn_since = 0
         self.create_service(get_service("nav2_msgs/srv/ManageLifecycleNodes"), "~/manage_nodes",
                             self._srv_manage)
         self.create_service(get_service("std_srvs/srv/Trigger"), "~/is_active", self._srv_is_active)
-        self.create_subscription(Header, "/bond", self._on_heartbeat, 100)
+        from eddiebot.msgs.bond import Status
+
+        self.create_subscription(Status, "bond", self._on_heartbeat, 100)
+        self._bond_pub_mgr = self.create_publisher(Status, "bond", 5)
+        self._bond_instance = uuid.uuid4().hex
+        self._beat_timer: Timer | None = None
         if self.get_parameter("autostart").value:
             self._notify(_Call(self, self.startup))
 
@@ -556,30 +589,52 @@ class LifecycleManager(Node):
         if timeout_ns <= 0:
             return
         now = self.now().nanoseconds
-        self._last_beat = {self._fqn[n]: now for n in self.node_names}
+        self._last_beat = {_bond_id(n): now for n in self.node_names}
+        self._broken = set()
         if self._bond_timer is None:
             self._bond_timer = self.create_timer(min(0.2, timeout_ns / 2e9), self._check_bonds)
+        if self._beat_timer is None:
+            # the manager's side of each bond beats too, as nav2's lifecycle manager does
+            self._beat_timer = self.create_timer(_MANAGER_BOND_PERIOD_S, self._beat)
+            self._beat()
+
+    def _beat(self, active: bool = True) -> None:
+        now = self.now().nanoseconds
+        timeout_s = self.bond_timeout_ns / 1e9
+        for bond_id in list(self._last_beat):
+            self._bond_pub_mgr.publish(bond_status(bond_id, self._bond_instance, active, now,
+                                                   timeout_s, _MANAGER_BOND_PERIOD_S))
 
     def _destroy_bonds(self) -> None:
+        if self._beat_timer is not None:
+            self.destroy_timer(self._beat_timer)
+            self._beat_timer = None
+            self._beat(active=False)
         self._last_beat = {}
         if self._bond_timer is not None:
             self.destroy_timer(self._bond_timer)
             self._bond_timer = None
 
     def _on_heartbeat(self, msg: Any) -> None:
-        if msg.frame_id in self._last_beat:
-            self._last_beat[msg.frame_id] = self.now().nanoseconds
+        # bondcpp's filter: this bond's id, the sister's instance (not our own)
+        if msg.id not in self._last_beat or msg.instance_id == self._bond_instance:
+            return
+        if not msg.active:  # the sister says the bond is broken: dead now, not after the timeout
+            self._broken.add(msg.id)
+        elif msg.id not in self._broken:  # bondcpp: a dead bond stays dead
+            self._last_beat[msg.id] = self.now().nanoseconds
 
     def _check_bonds(self) -> None:
         if not self.system_active or not self._last_beat:
             return
         now = self.now().nanoseconds
         timeout_ns = self.bond_timeout_ns
-        dead = [n for n in self.node_names if now - self._last_beat.get(self._fqn[n], now) > timeout_ns]
+        dead = [n for n in self.node_names if _bond_id(n) in self._broken
+                or now - self._last_beat.get(_bond_id(n), now) > timeout_ns]
         if not dead:
             return
         for name in dead:
-            silent_ms = (now - self._last_beat[self._fqn[name]]) / 1e6
+            silent_ms = (now - self._last_beat[_bond_id(name)]) / 1e6
             self.get_logger().error(
                 f"CRITICAL FAILURE: SERVER {name} IS DOWN after not receiving a heartbeat for "
                 f"{silent_ms:.0f} ms. Shutting down related nodes.")
