@@ -140,31 +140,3 @@ def test_wildcard_and_nested_parameters(tmp_path):
     names = {(o.node_pattern, o.name, o.value) for o in pf.overrides}
     assert ("/**", "use_sim_time", True) in names
     assert ("controller_server", "FollowPath.desired_linear_vel", 0.4) in names
-
-
-def test_a_process_on_the_transport_publishes_rosout(monkeypatch):
-    import sys
-    import types
-
-    from eddiebot.core import Node
-    from eddiebot.core.launch import connect_transport
-    from eddiebot.msgs.rcl_interfaces import Log
-
-    fake = types.ModuleType("eddiebot.transport")
-    fake.connect = lambda context: None  # type: ignore[attr-defined]
-    monkeypatch.setitem(sys.modules, "eddiebot.transport", fake)
-    ctx = Context()
-    assert connect_transport(ctx)
-    talker = Node("talker", context=ctx)
-    viewer = Node("viewer", context=ctx)
-    got: list = []
-    viewer.create_subscription(Log, "/rosout", got.append, 10)
-    talker.get_logger().warning("wheels slipping")
-    from eddiebot.core import SingleThreadedExecutor
-
-    ex = SingleThreadedExecutor(context=ctx)
-    ex.add_node(talker)
-    ex.add_node(viewer)
-    ex.spin_until_idle()
-    assert [(m.name, m.msg) for m in got] == [("talker", "wheels slipping")]
-    ctx.shutdown()

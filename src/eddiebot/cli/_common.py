@@ -279,3 +279,11 @@ def discovery_wait_s() -> float:
         return float(os.environ.get("EDDIE_DISCOVERY_WAIT", "0.3"))
     except ValueError:
         return 0.3
+
+
+def connect_transport(context: Any) -> bool:
+    """Join the graph of other processes (Zenoh, unless ``EDDIE_TRANSPORT=none``); whether a
+    transport is attached. Node log lines then go out on ``/rosout`` too."""
+    from eddiebot.transport import connect
+
+    return connect(context) is not None

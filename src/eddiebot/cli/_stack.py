@@ -16,12 +16,12 @@ import sys
 from collections.abc import Callable
 from typing import Any
 
+from eddiebot.cli._common import connect_transport
 from eddiebot.cli.errors import BringUpError
 from eddiebot.core.context import Context
 from eddiebot.core.launch import (
     LaunchDescription,
     build_nodes,
-    connect_transport,
     find_launch_file,
     parse_launch_file,
     spin_nodes,

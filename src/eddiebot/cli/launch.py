@@ -5,12 +5,12 @@ from __future__ import annotations
 import argparse
 import sys
 
+from eddiebot.cli._common import connect_transport
 from eddiebot.core.context import Context
 from eddiebot.core.errors import ParameterError
 from eddiebot.core.launch import (
     LaunchError,
     build_nodes,
-    connect_transport,
     find_launch_file,
     parse_cli_args,
     parse_launch_file,

@@ -209,10 +209,10 @@ def _launch_args(args: argparse.Namespace, pose: tuple[float, float, float] | No
 def _run_attached(args: argparse.Namespace) -> int:
     """The navigation alone, attached to the simulator or robot running on this domain."""
     from eddiebot.cli._attach import ATTACH_WAIT_S, graph_cache, odom_pose, wait_for_robot
+    from eddiebot.cli._common import connect_transport
     from eddiebot.core.context import Context
     from eddiebot.core.launch import (
         build_nodes,
-        connect_transport,
         find_launch_file,
         parse_launch_file,
     )

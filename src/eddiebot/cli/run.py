@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from eddiebot.cli._common import connect_transport
 from eddiebot.core.context import Context
 from eddiebot.core.errors import ParameterError
 from eddiebot.core.launch import (
@@ -13,7 +14,6 @@ from eddiebot.core.launch import (
     LaunchError,
     NodeSpec,
     build_nodes,
-    connect_transport,
     spin_nodes,
 )
 from eddiebot.registry import NODES

@@ -286,13 +286,13 @@ def _live(args: argparse.Namespace) -> int:
     import time as _time
 
     from eddiebot.cli._attach import ATTACH_WAIT_S, odom_pose, wait_for_robot
+    from eddiebot.cli._common import connect_transport
     from eddiebot.cli._stack import check_world, run_nodes
     from eddiebot.cli.errors import CliError
     from eddiebot.cli.sim import camera_args
     from eddiebot.core.context import Context
     from eddiebot.core.launch import (
         build_nodes,
-        connect_transport,
         find_launch_file,
         parse_launch_file,
     )

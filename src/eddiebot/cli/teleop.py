@@ -24,8 +24,8 @@ from collections.abc import Callable
 from typing import Any, TextIO
 
 from eddiebot.base.teleop import USAGE, KeyTeleop, TeleopState
+from eddiebot.cli._common import connect_transport
 from eddiebot.core.context import Context
-from eddiebot.core.launch import connect_transport
 from eddiebot.core.node import Node
 from eddiebot.msgs.geometry_msgs import Twist
 

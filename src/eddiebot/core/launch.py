@@ -336,20 +336,6 @@ def parse_cli_args(items: list[str]) -> dict[str, str]:
     return out
 
 
-def connect_transport(context: Context) -> bool:
-    """Attach the inter-process transport if it is installed, and publish every node's log
-    lines on ``/rosout`` as rcl does (other processes' viewers read them); False if not."""
-    try:
-        module = importlib.import_module("eddiebot.transport")
-    except ImportError:
-        return False
-    module.connect(context)
-    from eddiebot.core.clock_node import enable_rosout
-
-    enable_rosout(context)
-    return True
-
-
 def spin_nodes(
     nodes: list[Node],
     context: Context,

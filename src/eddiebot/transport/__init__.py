@@ -100,4 +100,8 @@ def connect(
     except BaseException:  # Ctrl-C half-way: leave no open session behind
         transport.close()
         raise
+    # other processes' viewers read every node's log lines on /rosout, as with rcl
+    from eddiebot.core.clock_node import enable_rosout
+
+    enable_rosout(ctx)
     return transport
