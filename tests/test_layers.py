@@ -26,13 +26,6 @@ TIERS: tuple[tuple[str, ...], ...] = (
 )
 TIER = {pkg: i for i, tier in enumerate(TIERS) for pkg in tier}
 
-#: known exceptions, each with the reason it is still here; the test fails once one is gone
-#: so the list can only shrink
-ALLOWED: dict[tuple[str, str], str] = {
-    ("demo/nav_stage.py", "cli"): "default_params/resolve_params still live in cli/nav.py",
-}
-
-
 def _imports(path: Path) -> set[str]:
     names: list[str] = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
@@ -53,7 +46,6 @@ def test_every_package_has_a_tier():
 
 
 def test_lower_never_imports_higher():
-    found: set[tuple[str, str]] = set()
     violations = []
     for path in SRC.rglob("*.py"):
         rel = path.relative_to(SRC)
@@ -63,10 +55,5 @@ def test_lower_never_imports_higher():
         for target in _imports(path):
             if target == pkg or target not in TIER or TIER[target] <= TIER[pkg]:
                 continue
-            key = (rel.as_posix(), target)
-            if key in ALLOWED:
-                found.add(key)
-            else:
-                violations.append(f"{rel.as_posix()} ({pkg}) imports eddiebot.{target}")
+            violations.append(f"{rel.as_posix()} ({pkg}) imports eddiebot.{target}")
     assert not violations, "\n".join(sorted(violations))
-    assert found == set(ALLOWED), f"no longer needed, remove from ALLOWED: {set(ALLOWED) - found}"

@@ -6,6 +6,8 @@
 
 from __future__ import annotations
 
+from eddiebot.core.errors import ParameterFileError
+
 __all__ = ["BringUpError", "CliError", "ParamsFileError"]
 
 
@@ -13,9 +15,8 @@ class CliError(Exception):
     """A command cannot start: the message says what to change, in one line."""
 
 
-class ParamsFileError(CliError, ValueError):
-    """A ``--params`` file is unreadable, not YAML, or sets a parameter no node has; the
-    message names the file and the line (``FILE:LINE: ...``)."""
+#: A ``--params`` file that is unreadable or not YAML (``FILE:LINE[:COL]: ...``).
+ParamsFileError = ParameterFileError
 
 
 class BringUpError(CliError):

@@ -27,10 +27,10 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from eddiebot.cli._stack import add_run_arguments, check_world, run_nodes, run_stack
 from eddiebot.cli.errors import CliError
+from eddiebot.nav.params_file import default_params
+from eddiebot.nav.params_file import resolve_params as _resolve
 
 __all__ = ["HELP", "add_arguments", "resolve_params", "run"]
 
@@ -56,48 +56,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_run_arguments(parser)
 
 
-def default_params() -> Path:
-    from eddiebot.core.launch import package_share
-
-    return package_share() / "config" / "nav2.yaml"
-
-
 def resolve_params(source: Path, out_dir: Path, initial_pose: tuple[float, float, float] | None
                    ) -> Path:
-    """Write the Nav2 parameters with the costmaps folded in (and AMCL's initial pose).
-
-    A Nav2 user's file drops in: each section of a server eddiebot does not run and each key
-    no server or plugin reads is named once on stderr (``not supported: …``, ``ignored: …``)
-    and left out. Raises `eddiebot.cli.errors.ParamsFileError` (``FILE:LINE: ...``) for a
-    file that is not YAML, and `eddiebot.nav.errors.UnsupportedPlugin` (server, key,
-    plugin) for a plugin that cannot be configured.
-    """
-    from eddiebot.cli._params import load_params_file
-    from eddiebot.cli.errors import ParamsFileError
-    from eddiebot.nav.nodes._common import nest_nav2_params
-    from eddiebot.nav.nodes.params_audit import audit_nav2_params
-
-    doc, _ = load_params_file(source)
-    if doc is None:
-        doc = {}
-    if not isinstance(doc, dict):
-        raise ParamsFileError(f"{source}: top level must map node names to "
-                              "{ros__parameters: {...}}")
-    audit = audit_nav2_params(doc)
-    for warning in audit.warnings:
-        print(f"eddie nav: {source}: {warning}", file=sys.stderr)
-    doc = nest_nav2_params(audit.supported)
-    if initial_pose is not None:
-        amcl = doc.setdefault("amcl", {}).setdefault("ros__parameters", {})
-        amcl["set_initial_pose"] = True
-        amcl["initial_pose"] = {"x": initial_pose[0], "y": initial_pose[1], "z": 0.0,
-                                "yaw": initial_pose[2]}
-    out_dir.mkdir(parents=True, exist_ok=True)
-    out = out_dir / "nav2_params.yaml"
-    tmp = out.with_suffix(".yaml.tmp")
-    tmp.write_text(f"# resolved from {source}\n" + yaml.safe_dump(doc, sort_keys=False))
-    tmp.replace(out)
-    return out
+    """:func:`eddiebot.nav.params_file.resolve_params`, its warnings on stderr."""
+    return _resolve(source, out_dir, initial_pose,
+                    warn=lambda text: print(f"eddie nav: {text}", file=sys.stderr))
 
 
 def check_map(path: Path, localization: str) -> None:

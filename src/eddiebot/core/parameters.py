@@ -333,3 +333,21 @@ def overrides_from_dict(values: dict[str, Any], where: str = "") -> list[Paramet
 
 def describe_sequence(values: Sequence[Any]) -> str:
     return ", ".join(repr(v) for v in values)
+
+
+def load_params_file(path: Path) -> tuple[Any, yaml.Node | None]:
+    """The document and its YAML node tree (for line numbers) of a parameters file; an
+    unreadable file or malformed YAML raises `ParameterFileError` naming file, line, column."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ParameterFileError(f"{path}: cannot read the parameters file: "
+                              f"{exc.strerror or exc}") from exc
+    try:
+        return yaml.safe_load(text), yaml.compose(text, Loader=yaml.SafeLoader)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        where = f"{path}:{mark.line + 1}:{mark.column + 1}" if mark is not None else str(path)
+        raise ParameterFileError(f"{where}: malformed YAML: {exc.problem or exc.context}") from exc
+    except yaml.YAMLError as exc:
+        raise ParameterFileError(f"{path}: malformed YAML: {exc}") from exc

@@ -64,7 +64,7 @@ class NavStageResult:
 
 
 def _resolved_params(out: Path, initial_pose: tuple[float, float, float]) -> Path:
-    from eddiebot.cli.nav import default_params, resolve_params
+    from eddiebot.nav.params_file import default_params, resolve_params
 
     return resolve_params(default_params(), out, initial_pose)
 
