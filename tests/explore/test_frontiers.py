@@ -21,7 +21,7 @@ from eddiebot.explore import (
     reachable_mask,
     search_frontiers,
 )
-from eddiebot.explore.frontiers import mark_swept
+from eddiebot.explore.frontiers import UNKNOWN_BLOCKING, mark_swept
 from eddiebot.maps import OccupancyMap
 
 RES = 0.05
@@ -39,6 +39,13 @@ def room(width_cells: int = 90, height_cells: int = 60, open_east: bool = True) 
     if not open_east:
         d[20:20 + height_cells, 9 + width_cells] = 100
     return OccupancyMap(d, RES, (0.0, 0.0, 0.0))
+
+
+def faded_cone(config: ExploreConfig, unknown_from: float) -> float:
+    """The gain of a cone whose unknown part starts ``unknown_from`` m ahead (m²)."""
+    r = np.linspace(max(config.sensor_min_range, unknown_from), config.sensor_max_range, 2000)
+    fade = np.exp(-UNKNOWN_BLOCKING * (r - unknown_from))
+    return float(config.sensor_fov * np.trapezoid(r * fade, r))
 
 
 def test_frontier_cells_are_unknown_cells_beside_free_ones() -> None:
@@ -61,10 +68,9 @@ def test_one_frontier_with_its_size_centroid_viewpoint_and_gain() -> None:
     assert abs(f.viewpoint[2]) < 0.05
     # path length from x = 1.0 to the viewpoint, straight along the room
     assert f.distance == pytest.approx(f.viewpoint[0] - 1.0, abs=0.1)
-    # the whole 57° cone from 0.5 to 4.5 m lies beyond the frontier... minus the 0.9 m in the room:
-    # unknown area seen is the cone between 0.9 and 4.5 m (clipped by the grid's east edge)
-    cone = config.sensor_fov / 2 * (4.5**2 - 0.9**2)
-    assert 0.8 * cone < f.gain < 1.05 * cone
+    # the cone between the frontier (0.9 m ahead) and 4.5 m, clipped by the grid's east
+    # edge (10 m), each cell weighted by how far into the unknown it lies
+    assert f.gain == pytest.approx(faded_cone(config, 0.9), rel=0.1)
     assert f.cost == pytest.approx(frontier_cost(f.distance, f.turn, f.gain, config))
 
 
@@ -105,12 +111,11 @@ def test_gain_counts_only_what_the_camera_can_see() -> None:
     d = np.full((200, 200), -1, np.int8)
     g = OccupancyMap(d, RES, (-5.0, -5.0, 0.0))
     full = information_gain(g, (0.0, 0.0, 0.0), config)
-    cone = config.sensor_fov / 2 * (config.sensor_max_range**2 - config.sensor_min_range**2)
-    assert full == pytest.approx(cone, rel=0.1)
+    assert full == pytest.approx(faded_cone(config, 0.0), rel=0.1)
     d2 = d.copy()
     d2[:, 120] = 100  # a wall 1 m ahead stops every ray
     walled = information_gain(OccupancyMap(d2, RES, (-5.0, -5.0, 0.0)), (0.0, 0.0, 0.0), config)
-    assert walled < 0.1 * full
+    assert walled < 0.15 * full  # only the 0.5-1 m before the wall
     # looking at known free space gains nothing
     assert information_gain(OccupancyMap(np.zeros((200, 200), np.int8), RES, (-5.0, -5.0, 0.0)),
                             (0.0, 0.0, 0.0), config) == 0.0

@@ -35,6 +35,8 @@ class ExploreConfig:
     # eddiebot additions
     robot_radius: float = 0.23
     """Cells closer than this to an occupied cell are not reachable (Nav2's inscribed radius)."""
+    goal_clearance: float = 0.35
+    """Goals (viewpoints, entries) keep this far from known obstacles, m."""
     free_threshold: int = 19
     """A map cell with 0 ≤ value ≤ this is free (map_server's free_thresh 0.196)."""
     occupied_threshold: int = 65
@@ -65,7 +67,7 @@ class ExploreConfig:
             if not float(getattr(self, name)) > 0.0:
                 raise ExploreConfigError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in ("potential_scale", "orientation_scale", "gain_scale", "min_frontier_size",
-                     "robot_radius", "sensor_min_range", "min_gain", "standoff", "blacklist_radius",
+                     "robot_radius", "sensor_min_range", "min_gain", "goal_clearance", "standoff", "blacklist_radius",
                      "time_limit"):
             if float(getattr(self, name)) < 0.0:
                 raise ExploreConfigError(f"{name} must be ≥ 0, got {getattr(self, name)!r}")
@@ -95,7 +97,7 @@ class ExploreConfig:
 #: is slow and blind with a 57° scan.
 EDDIE_EXPLORE_PARAMS: dict[str, Any] = {
     "planner_frequency": 1.0,
-    "progress_timeout": 30.0,
+    "progress_timeout": 20.0,
     "potential_scale": 1.0,
     "orientation_scale": 0.5,
     "gain_scale": 0.3,

@@ -119,12 +119,19 @@ def explore_description(world: str, seed: int, nav_params: Path, *,
 
 
 def _nav_params(out_dir: Path) -> Path:
-    """config/nav2.yaml with the costmaps folded into their servers, written to ``out_dir``."""
+    """config/nav2.yaml for exploring (no AMCL, plans through known space only) with the
+    costmaps folded into their servers, written to ``out_dir``."""
     from eddiebot.core.launch import package_share
     from eddiebot.nav.nodes._common import nest_nav2_params
 
     doc = yaml.safe_load((package_share() / "config" / "nav2.yaml").read_text()) or {}
     doc.pop("amcl", None)  # SLAM localizes
+    # plans only through space the map has seen: a shortcut through the unknown is often
+    # through a wall not yet mapped, and the robot then stalls against it
+    planner = doc.get("planner_server", {}).get("ros__parameters", {})
+    for name in planner.get("planner_plugins", []):
+        if isinstance(planner.get(name), dict):
+            planner[name]["allow_unknown"] = False
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / "nav2_params.yaml"
     tmp = path.with_suffix(".yaml.tmp")

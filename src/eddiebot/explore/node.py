@@ -19,6 +19,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from eddiebot.core.action import ActionClient
 from eddiebot.core.node import Node
 from eddiebot.core.qos import qos_profile_latched
@@ -198,11 +200,15 @@ class ExploreNode(Node):
         search = search_frontiers(swept, pose, self.config)
         self.last_search = search
         self.searches += 1
-        ids = self.tracker.update([f.centroid for f in search.frontiers])
+        known = float(np.count_nonzero(self.grid.data >= 0)) * self.grid.resolution**2
+        ids = self.tracker.update([f.centroid for f in search.frontiers],
+                                  [f.size for f in search.frontiers])
         for f, tid in zip(search.frontiers, ids, strict=True):
             track = self.tracker.tracks[tid]
+            track.judge_visit(known)
             if track.visits >= self.config.max_visits and not self.blacklist.contains(f.centroid):
-                self._abandon(f.centroid, f"unproductive: reached {track.visits} times, still there")
+                self._abandon(f.centroid, f"unproductive: reached {track.visits} times, "
+                                          "nothing new seen")
         if self._target is not None and self._goal_handle is not None:
             goal = self.goals[-1].viewpoint
             if self._progress.update(math.hypot(goal[0] - pose[0], goal[1] - pose[1]), now):
@@ -221,26 +227,41 @@ class ExploreNode(Node):
             return
         frontier, tid = choice
         if tid == self._target and self._goal_handle is not None:
-            old = self.goals[-1].viewpoint
-            if math.hypot(old[0] - frontier.viewpoint[0], old[1] - frontier.viewpoint[1]) \
-                    < _RESEND_DISTANCE:
+            old, new = self.goals[-1].viewpoint, self._goal_for(frontier, tid)
+            if math.hypot(old[0] - new[0], old[1] - new[1]) < _RESEND_DISTANCE:
                 return
         self._go_to(frontier, tid, now)
+
+    def _goal_for(self, frontier: Frontier, tid: int) -> tuple[float, float, float]:
+        """The frontier's viewpoint; after a visit that showed nothing new (unknown cells the
+        gain counted through may be walls), the frontier's entry: drive up to it."""
+        x, y, yaw = frontier.viewpoint
+        track = self.tracker.tracks.get(tid)
+        if track is not None and track.visits >= 1:
+            ex, ey = frontier.entry
+            if math.hypot(ex - x, ey - y) > 0.1:
+                yaw = math.atan2(ey - y, ex - x)
+            x, y = ex, ey
+        return x, y, yaw
 
     def _go_to(self, frontier: Frontier, tid: int, now: float) -> None:
         from eddiebot.msgs.nav2_msgs import NavigateToPose
 
+        self._progress.reset(now)  # a new goal, or the same frontier's goal moved
         if tid != self._target:
-            self._progress.reset(now)
+            track = self.tracker.tracks.get(tid)
+            if track is not None and self.grid is not None:
+                track.known_at_goal = float(np.count_nonzero(self.grid.data >= 0)) \
+                    * self.grid.resolution**2
         self._target = tid
-        record = GoalRecord(tid, frontier.viewpoint, frontier.centroid, now)
+        x, y, yaw = self._goal_for(frontier, tid)
+        record = GoalRecord(tid, (x, y, yaw), frontier.centroid, now)
         if self.goals and self.goals[-1].outcome == "active":
             self.goals[-1].outcome = "replaced"
         self.goals.append(record)
-        x, y, yaw = frontier.viewpoint
         self.get_logger().info(
             f"frontier {tid}: {frontier.size:.1f} m at ({frontier.centroid[0]:.2f}, "
-            f"{frontier.centroid[1]:.2f}), viewpoint ({x:.2f}, {y:.2f}), path {frontier.distance:.1f} m, "
+            f"{frontier.centroid[1]:.2f}), goal ({x:.2f}, {y:.2f}), path {frontier.distance:.1f} m, "
             f"gain {frontier.gain:.1f} m², cost {frontier.cost:.2f}")
         self._generation += 1
         generation = self._generation
@@ -256,7 +277,7 @@ class ExploreNode(Node):
                 self._fresh_map_after = self._now_s()
                 track = self.tracker.tracks.get(tid)
                 if track is not None:
-                    track.visits += 1
+                    track.arrived = True
             else:
                 record.outcome = f"failed ({status}, code {code})"
                 self._abandon(frontier.centroid, f"navigation failed (status {status}, code {code})")

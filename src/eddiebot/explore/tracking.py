@@ -29,7 +29,21 @@ class Track:
     id: int
     centroid: tuple[float, float]
     visits: int = 0
+    """Arrivals in a row that revealed (almost) nothing."""
     seen: int = 1
+    size: float = 0.0
+    known_at_goal: float = 0.0
+    """Known map area (m²) when the robot set off to this frontier."""
+    arrived: bool = False
+
+    def judge_visit(self, known_now: float, min_revealed: float = 0.5) -> None:
+        """After an arrival, on a map made since: a trip that added less than
+        ``min_revealed`` m² of known map counts as unproductive; one that added more clears
+        the count."""
+        if not self.arrived:
+            return
+        self.arrived = False
+        self.visits = self.visits + 1 if known_now - self.known_at_goal < min_revealed else 0
 
 
 class FrontierTracker:
@@ -45,8 +59,9 @@ class FrontierTracker:
         self._missing: dict[int, int] = {}
         self._next = 0
 
-    def update(self, centroids: Sequence[tuple[float, float]]) -> list[int]:
-        """Identities for ``centroids``, in their order."""
+    def update(self, centroids: Sequence[tuple[float, float]],
+               sizes: Sequence[float] | None = None) -> list[int]:
+        """Identities for ``centroids`` (with their ``sizes``, m), in their order."""
         pairs = sorted(
             (math.hypot(c[0] - t.centroid[0], c[1] - t.centroid[1]), i, t.id)
             for i, c in enumerate(centroids) for t in self.tracks.values())
@@ -70,6 +85,8 @@ class FrontierTracker:
                 t = self.tracks[tid]
                 t.centroid = (float(c[0]), float(c[1]))
                 t.seen += 1
+            if sizes is not None:
+                self.tracks[tid].size = float(sizes[i])
             self._missing[tid] = 0
             out.append(tid)
         for tid in list(self.tracks):

@@ -1,0 +1,80 @@
+"""Frontier exploration of the built-in worlds: `eddie explore` on each world × seeds.
+
+Each run is `eddiebot.explore.mission.run_exploration` (the simulator with its default wheel
+slip and sensor noise, Eddie's base, SLAM, Nav2's servers and the explore node on the sim
+clock, Kinect 160x120 at 10 Hz, Eddie's explore parameters) until no frontier is left or
+``--time-limit`` simulated seconds of exploring, then home. Figures per run: coverage of the
+world's reachable free floor that the map marks free, agreement with the scan-height ground
+truth on the cells both call known, ATE of the SLAM poses (aligned RMSE), distance driven,
+simulated and wall time, share of the time spent turning in place, collisions, whether the
+robot came home, frontier goals reached and abandoned. Targets: coverage ≥ 95 %, agreement
+≥ 95 %, 0 collisions, home at the end. Prints a table and writes
+``benchmarks/results/explore.json``; ``--keep DIR`` keeps each run's map and report.
+
+    .venv/bin/python benchmarks/bench_explore.py [--worlds office house ...] [--seeds 0 1 2]
+        [--time-limit 1200] [--keep DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _common import print_table, write_results  # noqa: E402
+
+COLUMNS = ["world", "seed", "reason", "coverage", "map_agreement", "ate_m", "distance_m",
+           "explore_time_s", "sim_time_s", "wall_time_s", "turning_share", "collisions",
+           "returned_home", "frontiers_visited", "frontiers_abandoned"]
+
+
+def builtin_worlds() -> list[str]:
+    from eddiebot.sim.worlds import list_worlds
+
+    return list(list_worlds())
+
+
+def run_one(world: str, seed: int, time_limit: float, keep: Path | None) -> dict[str, Any]:
+    from eddiebot.explore.mission import run_exploration
+    from eddiebot.explore.report import write_report
+
+    out = (keep / f"{world}_seed{seed}") if keep else Path(tempfile.mkdtemp(prefix="explore_"))
+    result = run_exploration(out, world=world, seed=seed, time_limit=time_limit,
+                             camera=(160, 120, 10.0))
+    write_report(result, out)
+    row = result.summary()
+    row.pop("goals", None)
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--worlds", nargs="*", default=None, help="default: every built-in world")
+    parser.add_argument("--seeds", nargs="*", type=int, default=[0, 1, 2])
+    parser.add_argument("--time-limit", type=float, default=1200.0,
+                        help="simulated seconds of exploring per run (default 1200)")
+    parser.add_argument("--keep", type=Path, default=None, help="keep maps and reports here")
+    parser.add_argument("--name", default="explore", help="results file name")
+    args = parser.parse_args(argv)
+    worlds = args.worlds or builtin_worlds()
+    rows = []
+    for world in worlds:
+        for seed in args.seeds:
+            row = run_one(world, seed, args.time_limit, args.keep)
+            rows.append(row)
+            print_table([row], COLUMNS)
+            sys.stdout.flush()
+            write_results(args.name, rows)  # keep what is done if a later run is stopped
+    print()
+    print_table(rows, COLUMNS)
+    path = write_results(args.name, rows)
+    print(f"\nwrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
