@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "transport"))
-from _procs import Proc, free_port, session_env, start_router, stop
+from _procs import Proc, private_router
 
 EDDIE = [sys.executable, "-m", "eddiebot.cli.main"]
 SIM = [*EDDIE, "sim", "--world", "office", "--camera", "160x120@5"]
@@ -27,15 +27,8 @@ _domains = itertools.count(150)
 
 @pytest.fixture(scope="module")
 def graph_env() -> Iterator[dict[str, str]]:
-    port = free_port()
-    env = session_env(port)
-    router = start_router(env, port)
-    if router is None:
-        pytest.skip("could not start a Zenoh router")
-    try:
+    with private_router() as env:
         yield env
-    finally:
-        stop(router)
 
 
 @pytest.fixture

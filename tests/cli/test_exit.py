@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "transport"))
-from _procs import PEER, Proc, free_port, session_env, start_router, stop
+from _procs import PEER, Proc, private_router
 
 from eddiebot.cli.main import main
 
@@ -27,15 +27,8 @@ EDDIE = [sys.executable, "-m", "eddiebot.cli.main"]
 
 @pytest.fixture(scope="module")
 def graph_env() -> Iterator[dict[str, str]]:
-    port = free_port()
-    env = session_env(port)
-    router = start_router(env, port)
-    if router is None:
-        pytest.skip("could not start a Zenoh router")
-    try:
+    with private_router() as env:
         yield env
-    finally:
-        stop(router)
 
 
 @pytest.fixture

@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "transport"))
-from _procs import PEER, Proc, free_port, session_env, start_router, stop
+from _procs import PEER, Proc, private_router
 
 from eddiebot.cli._common import (
     get_field,
@@ -28,29 +28,24 @@ from eddiebot.cli.main import main
 @pytest.fixture(scope="module")
 def graph_env() -> Iterator[dict[str, str]]:
     """A router on a random port and a hub process; this process's env points at them."""
-    port = free_port()
-    env = session_env(port)
-    router = start_router(env, port)
-    if router is None:
-        pytest.skip("could not start a Zenoh router")
-    hub = Proc([sys.executable, str(PEER), "hub"], {**env, "PEER_TIMEOUT": "300"})
-    saved = {k: os.environ.get(k) for k in ("EDDIE_ZENOH_ROUTER", "EDDIE_ROUTER_AUTOSTART",
-                                             "EDDIE_TRANSPORT", "EDDIE_DISCOVERY_WAIT")}
-    os.environ.update({"EDDIE_ZENOH_ROUTER": env["EDDIE_ZENOH_ROUTER"],
-                       "EDDIE_ROUTER_AUTOSTART": "0", "EDDIE_DISCOVERY_WAIT": "0.3"})
-    os.environ.pop("EDDIE_TRANSPORT", None)
-    try:
-        if not hub.wait_for("READY", timeout=30):
-            pytest.fail(f"the hub process did not start: {hub.stderr}")
-        yield env
-    finally:
-        hub.finish(timeout=10)
-        stop(router)
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-            else:
-                os.environ[k] = v
+    with private_router() as env:
+        hub = Proc([sys.executable, str(PEER), "hub"], {**env, "PEER_TIMEOUT": "300"})
+        saved = {k: os.environ.get(k) for k in ("EDDIE_ZENOH_ROUTER", "EDDIE_ROUTER_AUTOSTART",
+                                                 "EDDIE_TRANSPORT", "EDDIE_DISCOVERY_WAIT")}
+        os.environ.update({"EDDIE_ZENOH_ROUTER": env["EDDIE_ZENOH_ROUTER"],
+                           "EDDIE_ROUTER_AUTOSTART": "0", "EDDIE_DISCOVERY_WAIT": "0.3"})
+        os.environ.pop("EDDIE_TRANSPORT", None)
+        try:
+            if not hub.wait_for("READY", timeout=30):
+                pytest.fail(f"the hub process did not start: {hub.stderr}")
+            yield env
+        finally:
+            hub.finish(timeout=10)
+            for k, v in saved.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
 
 
 def eddie(capsys: Any, *argv: str) -> tuple[int, str]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import socket
@@ -9,6 +10,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 PEER = Path(__file__).with_name("_peer.py")
@@ -132,3 +134,20 @@ def stop(proc: subprocess.Popen[bytes]) -> None:
         proc.wait(timeout=5)
     except subprocess.TimeoutExpired:
         proc.kill()
+
+
+@contextlib.contextmanager
+def private_router() -> Iterator[dict[str, str]]:
+    """A Zenoh router of its own on a random loopback port, for as long as the block runs;
+    yields the environment that points processes at it (skips the test if it cannot start)."""
+    import pytest
+
+    port = free_port()
+    env = session_env(port)
+    router = start_router(env, port)
+    if router is None:
+        pytest.skip("could not start a Zenoh router")
+    try:
+        yield env
+    finally:
+        stop(router)

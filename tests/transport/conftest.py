@@ -6,21 +6,14 @@ import sys
 from collections.abc import Iterator
 
 import pytest
-from _procs import PEER, Proc, free_port, session_env, start_router, stop
+from _procs import PEER, Proc, private_router
 
 
 @pytest.fixture(scope="session")
 def zenoh_env() -> Iterator[dict[str, str]]:
     """Environment of every process of the session: its own router on a random port."""
-    port = free_port()
-    env = session_env(port)
-    router = start_router(env, port)
-    if router is None:
-        pytest.skip("could not start a Zenoh router")
-    try:
+    with private_router() as env:
         yield env
-    finally:
-        stop(router)
 
 
 @pytest.fixture

@@ -33,6 +33,10 @@ ATTACH_WAIT_S = 10.0
 _CLOCK_GRACE_S = 1.0
 
 
+#: how long a start-up check lets the graph's liveliness tokens arrive
+_SETTLE_S = 0.5
+
+
 def graph_cache(context: Context) -> GraphCache | None:
     """The graph view of the context's transport, or None when it has none."""
     for transport in context.transports:
@@ -81,6 +85,8 @@ def refuse_second_simulator(context: Context, command: str) -> None:
     cache = graph_cache(context)
     if cache is None:
         return
+    # liveliness tokens may still be arriving on a loaded machine: let the graph settle
+    cache.wait_for(lambda: bool(cache.publishers("/clock")), _SETTLE_S)
     clocks = cache.publishers("/clock")
     if not clocks:
         return
