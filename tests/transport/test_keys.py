@@ -2,6 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import pytest
+from rosbags.typesys.store import Typestore
+
 from eddiebot.core.qos import QoSProfile, qos_profile_latched, qos_profile_sensor_data
 from eddiebot.transport.config import ZenohConfig, normalize_endpoint
 from eddiebot.transport.keys import (
@@ -100,3 +105,52 @@ def test_service_hash_as_rosidl() -> None:
     # rmw_zenoh's design.md example for add_two_ints
     assert service_hash_from(defs, name) == (
         "RIHS01_e118de6bf5eeb66a2491b5bda11202e7b68f198d6f67922cf30364858239c81a")
+
+
+def test_service_hash_from_an_interface_file(tmp_path: Path,
+                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """A service we do not ship hashes from its .srv, as rosidl and rmw_zenoh do."""
+    from eddiebot.transport.keys import service_type_hash
+
+    folder = tmp_path / "share" / "example_interfaces" / "srv"
+    folder.mkdir(parents=True)
+    (folder / "AddTwoInts.srv").write_text("int64 a\nint64 b\n---\nint64 sum\n")
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(tmp_path))
+    assert service_type_hash("example_interfaces/srv/AddTwoInts") == (
+        "RIHS01_e118de6bf5eeb66a2491b5bda11202e7b68f198d6f67922cf30364858239c81a")
+
+
+def test_shipped_service_hash_is_rosbags_hash_of_its_description() -> None:
+    from rosbags.interfaces import Nodetype
+
+    from eddiebot.msgs import TYPESTORE
+    from eddiebot.transport.keys import service_type_hash
+
+    name = "std_srvs/srv/SetBool"
+    store = Typestore()
+    store.fielddefs.update(TYPESTORE.fielddefs)
+    info = "service_msgs/msg/ServiceEventInfo"
+    consts, info_fields = store.fielddefs[info]
+    store.fielddefs[info] = (consts, [
+        (n, (Nodetype.ARRAY, ((Nodetype.BASE, ("uint8", 0)), 16))) if n == "client_gid"
+        else (n, d) for n, d in info_fields])
+    store.fielddefs[f"{name}_Event"] = ([], [
+        ("info", (Nodetype.NAME, info)),
+        ("request", (Nodetype.SEQUENCE, ((Nodetype.NAME, f"{name}_Request"), 1))),
+        ("response", (Nodetype.SEQUENCE, ((Nodetype.NAME, f"{name}_Response"), 1)))])
+    store.fielddefs[name] = ([], [
+        ("request_message", (Nodetype.NAME, f"{name}_Request")),
+        ("response_message", (Nodetype.NAME, f"{name}_Response")),
+        ("event_message", (Nodetype.NAME, f"{name}_Event"))])
+    assert service_type_hash(name) == store.hash_rihs01(name)
+
+
+def test_undescribed_service_has_no_hash(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from eddiebot.msgs import UnknownTypeError
+    from eddiebot.transport.keys import UNKNOWN_TYPE_HASH, message_type_hash, service_type_hash
+
+    monkeypatch.setenv("EDDIE_INTERFACE_PATH", str(tmp_path))
+    monkeypatch.delenv("AMENT_PREFIX_PATH", raising=False)
+    with pytest.raises(UnknownTypeError, match=r"nowhere_srvs/srv/Nothing\.srv"):
+        service_type_hash("nowhere_srvs/srv/Nothing")
+    assert message_type_hash("nowhere_msgs/msg/Nothing") == UNKNOWN_TYPE_HASH

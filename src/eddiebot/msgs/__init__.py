@@ -5,7 +5,9 @@ interfaces this package ships (``eddiebot_msgs``, ``std_srvs``, ``nav2_msgs``,
 ``slam_toolbox``, ``rcl_interfaces`` services, ``lifecycle_msgs`` services, ...).
 Import classes per package, as in ROS 2: ``from eddiebot.msgs.geometry_msgs import Twist``.
 Every field has a default, arrays are numpy arrays, and the same objects go to the
-bus, to the CDR serializer and to rosbag2 files.
+bus, to the CDR serializer and to rosbag2 files. A type missing from the store is looked
+up once, when first asked for, in the ``.msg``/``.srv``/``.action`` files under the folders of
+``EDDIE_INTERFACE_PATH`` and ``AMENT_PREFIX_PATH`` (``share/<pkg>/msg/...``) and registered.
 """
 
 from eddiebot.msgs._store import (
@@ -18,6 +20,7 @@ from eddiebot.msgs._store import (
     get_action,
     get_message,
     get_service,
+    load_type,
     message_definition,
     normalize_type_name,
     serialize,
@@ -38,6 +41,7 @@ __all__ = [
     "get_action",
     "get_message",
     "get_service",
+    "load_type",
     "message_definition",
     "normalize_type_name",
     "serialize",

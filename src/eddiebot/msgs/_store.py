@@ -15,6 +15,8 @@ zero-filled fixed arrays, empty sequences, default nested messages), so ``Twist(
 
 from __future__ import annotations
 
+import os
+import threading
 from dataclasses import dataclass
 from importlib import resources
 from typing import Any
@@ -24,6 +26,7 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from eddiebot.msgs._paths import INTERFACE_PATH_ENV, find_interface_file, searched_description
 from eddiebot.msgs.errors import UnknownTypeError
 
 # "byte" is int8 because that is what the rosbags CDR codec decodes it to (numpy "byte").
@@ -107,80 +110,93 @@ def _interface_files() -> list[tuple[str, str, str, str]]:
     return found
 
 
-def _build() -> tuple[Typestore, dict[str, ServiceType], dict[str, ActionType]]:
-    store = get_typestore(Stores.ROS2_JAZZY)
-    files = _interface_files()
+def _parse_interface(
+    pkg: str, kind: str, name: str, text: str
+) -> tuple[dict[str, Any], str | None, str | None]:
+    """The message types of one interface file (services and actions split as rosidl does),
+    with the service or action name it defines (if any)."""
+    full = f"{pkg}/{kind}/{name}"
     typs: dict[str, Any] = {}
-    srv_names: list[str] = []
-    action_names: list[str] = []
-    for pkg, kind, name, text in files:
-        full = f"{pkg}/{kind}/{name}"
-        if kind == "msg":
-            typs.update(get_types_from_msg(text, full))
-        elif kind == "srv":
-            req, res = _split_srv(text)
-            typs.update(get_types_from_msg(req, f"{full}_Request"))
-            typs.update(get_types_from_msg(res, f"{full}_Response"))
-            srv_names.append(full)
-        else:
-            sections = _sections(text)
-            if len(sections) != 3:
-                raise ValueError(f"{full}.action needs two '---' separators")
-            goal, result, feedback = sections
-            typs.update(get_types_from_msg(goal, f"{full}_Goal"))
-            typs.update(get_types_from_msg(result, f"{full}_Result"))
-            typs.update(get_types_from_msg(feedback, f"{full}_Feedback"))
-            uuid = "unique_identifier_msgs/UUID goal_id\n"
-            typs.update(
-                get_types_from_msg(uuid + f"{pkg}/{name}_Goal goal\n", f"{full}_SendGoal_Request")
+    if kind == "msg":
+        typs.update(get_types_from_msg(text, full))
+    elif kind == "srv":
+        req, res = _split_srv(text)
+        typs.update(get_types_from_msg(req, f"{full}_Request"))
+        typs.update(get_types_from_msg(res, f"{full}_Response"))
+    else:
+        sections = _sections(text)
+        if len(sections) != 3:
+            raise ValueError(f"{full}.action needs two '---' separators")
+        goal, result, feedback = sections
+        typs.update(get_types_from_msg(goal, f"{full}_Goal"))
+        typs.update(get_types_from_msg(result, f"{full}_Result"))
+        typs.update(get_types_from_msg(feedback, f"{full}_Feedback"))
+        uuid = "unique_identifier_msgs/UUID goal_id\n"
+        typs.update(
+            get_types_from_msg(uuid + f"{pkg}/{name}_Goal goal\n", f"{full}_SendGoal_Request")
+        )
+        typs.update(
+            get_types_from_msg(
+                "bool accepted\nbuiltin_interfaces/Time stamp\n", f"{full}_SendGoal_Response"
             )
-            typs.update(
-                get_types_from_msg(
-                    "bool accepted\nbuiltin_interfaces/Time stamp\n", f"{full}_SendGoal_Response"
-                )
+        )
+        typs.update(get_types_from_msg(uuid, f"{full}_GetResult_Request"))
+        typs.update(
+            get_types_from_msg(
+                f"int8 status\n{pkg}/{name}_Result result\n", f"{full}_GetResult_Response"
             )
-            typs.update(get_types_from_msg(uuid, f"{full}_GetResult_Request"))
-            typs.update(
-                get_types_from_msg(
-                    f"int8 status\n{pkg}/{name}_Result result\n", f"{full}_GetResult_Response"
-                )
+        )
+        typs.update(
+            get_types_from_msg(
+                uuid + f"{pkg}/{name}_Feedback feedback\n", f"{full}_FeedbackMessage"
             )
-            typs.update(
-                get_types_from_msg(
-                    uuid + f"{pkg}/{name}_Feedback feedback\n", f"{full}_FeedbackMessage"
-                )
-            )
-            action_names.append(full)
+        )
     # get_types_from_msg resolves "pkg/Name" references as pkg/msg/Name; action sub-types live
     # under pkg/action/, so point those references at the right names.
     # get_types_from_msg also files pkg/srv/X_Request under pkg/srv/msg/; undo that.
     typs = {k.replace("/srv/msg/", "/srv/"): _fix_action_refs(v) for k, v in typs.items()}
+    return typs, full if kind == "srv" else None, full if kind == "action" else None
+
+
+def _service_type(store: Typestore, n: str) -> ServiceType:
+    return ServiceType(n, store.types[f"{n}_Request"], store.types[f"{n}_Response"])
+
+
+def _action_type(store: Typestore, n: str) -> ActionType:
+    return ActionType(
+        n,
+        store.types[f"{n}_Goal"],
+        store.types[f"{n}_Result"],
+        store.types[f"{n}_Feedback"],
+        ServiceType(
+            f"{n}_SendGoal",
+            store.types[f"{n}_SendGoal_Request"],
+            store.types[f"{n}_SendGoal_Response"],
+        ),
+        ServiceType(
+            f"{n}_GetResult",
+            store.types[f"{n}_GetResult_Request"],
+            store.types[f"{n}_GetResult_Response"],
+        ),
+        store.types[f"{n}_FeedbackMessage"],
+    )
+
+
+def _build() -> tuple[Typestore, dict[str, ServiceType], dict[str, ActionType]]:
+    store = get_typestore(Stores.ROS2_JAZZY)
+    typs: dict[str, Any] = {}
+    srv_names: list[str] = []
+    action_names: list[str] = []
+    for pkg, kind, name, text in _interface_files():
+        found, srv, action = _parse_interface(pkg, kind, name, text)
+        typs.update(found)
+        srv_names += [srv] if srv else []
+        action_names += [action] if action else []
     store.register(typs)
     for cls in store.types.values():
         _add_defaults(store, cls)
-    services = {
-        n: ServiceType(n, store.types[f"{n}_Request"], store.types[f"{n}_Response"])
-        for n in srv_names
-    }
-    actions = {}
-    for n in action_names:
-        actions[n] = ActionType(
-            n,
-            store.types[f"{n}_Goal"],
-            store.types[f"{n}_Result"],
-            store.types[f"{n}_Feedback"],
-            ServiceType(
-                f"{n}_SendGoal",
-                store.types[f"{n}_SendGoal_Request"],
-                store.types[f"{n}_SendGoal_Response"],
-            ),
-            ServiceType(
-                f"{n}_GetResult",
-                store.types[f"{n}_GetResult_Request"],
-                store.types[f"{n}_GetResult_Response"],
-            ),
-            store.types[f"{n}_FeedbackMessage"],
-        )
+    services = {n: _service_type(store, n) for n in srv_names}
+    actions = {n: _action_type(store, n) for n in action_names}
     return store, services, actions
 
 
@@ -283,6 +299,122 @@ def _add_defaults(store: Typestore, cls: Any) -> None:
 
 TYPESTORE, SERVICES, ACTIONS = _build()
 
+# -- types described by interface files on the search path (see _paths) -------------------
+_ACTION_SUFFIXES = (
+    "_SendGoal_Request", "_SendGoal_Response", "_GetResult_Request", "_GetResult_Response",
+    "_FeedbackMessage", "_SendGoal", "_GetResult", "_Goal", "_Result", "_Feedback",
+)
+_SRV_SUFFIXES = ("_Request", "_Response")
+_LOAD_LOCK = threading.RLock()
+#: (type, search path) → the error of a look-up that found nothing (no repeated walks).
+_MISSES: dict[tuple[str, str], UnknownTypeError] = {}
+
+
+def _interface_of(full: str) -> tuple[str, str, str] | None:
+    """(pkg, kind, file name) of the interface file describing message type ``full``."""
+    parts = full.split("/")
+    if len(parts) != 3 or not all(parts):
+        return None
+    pkg, kind, name = parts
+    suffixes = {"srv": _SRV_SUFFIXES, "action": _ACTION_SUFFIXES}.get(kind, ())
+    if kind not in ("msg", "srv", "action"):
+        return None
+    for suffix in suffixes:
+        if name.endswith(suffix) and len(name) > len(suffix):
+            return pkg, kind, name[: -len(suffix)]
+    return pkg, kind, name
+
+
+def _references(entry: Any) -> list[str]:
+    """Names of the message types the fields of one parsed type refer to."""
+    out = []
+    for _, desc in entry[1]:
+        kind, detail = desc
+        while kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+            kind, detail = detail[0]
+        if kind == Nodetype.NAME:
+            out.append(detail)
+    return out
+
+
+def _search_key() -> str:
+    return os.environ.get(INTERFACE_PATH_ENV, "") + "\0" + os.environ.get("AMENT_PREFIX_PATH", "")
+
+
+def _known(full: str) -> bool:
+    # a message, a service, an action, or an action's SendGoal/GetResult service
+    return (full in TYPESTORE.fielddefs or full in SERVICES or full in ACTIONS
+            or f"{full}_Request" in TYPESTORE.fielddefs)
+
+
+def load_type(full: str, kind: str = "message") -> None:
+    """Register the interface describing ``full`` (``pkg/msg/X``, ``pkg/srv/X[_Request]``,
+    ``pkg/action/X[_Goal]``, ...) and everything it uses, from the interface files on the
+    search path (``EDDIE_INTERFACE_PATH``, ``AMENT_PREFIX_PATH``). A no-op for a known type.
+
+    Raises ``UnknownTypeError`` (saying where it looked and how to add the type) when no
+    file describes it or one of the types it uses.
+    """
+    if _known(full):
+        return
+    with _LOAD_LOCK:
+        if _known(full):
+            return
+        key = (full, _search_key())
+        if key in _MISSES:
+            raise _MISSES[key]
+        try:
+            _load_locked(full, kind)
+        except UnknownTypeError as exc:
+            _MISSES[key] = exc
+            raise
+
+
+def _load_locked(full: str, kind: str) -> None:
+    typs: dict[str, Any] = {}
+    services: list[str] = []
+    actions: list[str] = []
+    loaded: set[tuple[str, str, str]] = set()
+    pending = [full]
+    while pending:
+        wanted = pending.pop()
+        if wanted in TYPESTORE.fielddefs or wanted in typs:
+            continue
+        iface = _interface_of(wanted)
+        path = find_interface_file(*iface) if iface is not None else None
+        if iface is None or path is None:
+            what = f"{iface[0]}/{iface[1]}/{iface[2]}.{iface[1]}" if iface else wanted
+            used = "" if wanted == full else f"it uses {wanted}, and "
+            raise UnknownTypeError(full, kind, (
+                f"{used}no {what} found ({searched_description()}); add a folder holding "
+                f"{what} to {INTERFACE_PATH_ENV}"
+            ))
+        if iface in loaded:  # read already, and it does not define this name
+            raise UnknownTypeError(full, kind, f"{path} does not define {wanted}")
+        loaded.add(iface)
+        try:
+            found, srv, action = _parse_interface(*iface, path.read_text())
+        except Exception as exc:
+            raise UnknownTypeError(full, kind, f"{path} does not parse: {exc}") from None
+        if wanted not in found and wanted not in (srv, action) and f"{wanted}_Request" not in found:
+            raise UnknownTypeError(full, kind, f"{path} does not define {wanted}")
+        typs.update(found)
+        services += [srv] if srv else []
+        actions += [action] if action else []
+        for entry in found.values():
+            pending += [r for r in _references(entry)
+                        if r not in TYPESTORE.fielddefs and r not in typs]
+    try:
+        TYPESTORE.register(typs)
+    except Exception as exc:
+        raise UnknownTypeError(full, kind, f"cannot register its definition: {exc}") from None
+    for name in typs:
+        _add_defaults(TYPESTORE, TYPESTORE.types[name])
+    for n in services:
+        SERVICES[n] = _service_type(TYPESTORE, n)
+    for n in actions:
+        ACTIONS[n] = _action_type(TYPESTORE, n)
+
 
 def get_message(name: str) -> Any:
     """The class of message type ``pkg/msg/Name`` (also accepts ``pkg/Name``)."""
@@ -290,7 +422,8 @@ def get_message(name: str) -> Any:
     try:
         return TYPESTORE.types[full]
     except KeyError:
-        raise UnknownTypeError(name, "message") from None
+        load_type(full)
+        return TYPESTORE.types[full]
 
 
 def get_service(name: str) -> ServiceType:
@@ -299,7 +432,10 @@ def get_service(name: str) -> ServiceType:
     try:
         return SERVICES[full]
     except KeyError:
-        raise UnknownTypeError(name, "service") from None
+        load_type(full, "service")
+    if full not in SERVICES:  # pkg/srv/X_Request: a message of the service, not one
+        raise UnknownTypeError(name, "service")
+    return SERVICES[full]
 
 
 def get_action(name: str) -> ActionType:
@@ -308,7 +444,10 @@ def get_action(name: str) -> ActionType:
     try:
         return ACTIONS[full]
     except KeyError:
-        raise UnknownTypeError(name, "action") from None
+        load_type(full, "action")
+    if full not in ACTIONS:
+        raise UnknownTypeError(name, "action")
+    return ACTIONS[full]
 
 
 def normalize_type_name(name: str) -> str:
@@ -329,22 +468,30 @@ def type_name(msg_or_cls: Any) -> str:
 
 def serialize(msg: Any, typename: str | None = None) -> bytes:
     """ROS 2 CDR (little-endian, with encapsulation header) of ``msg``."""
-    return bytes(TYPESTORE.serialize_cdr(msg, typename or type_name(msg)))
+    full = typename or type_name(msg)
+    load_type(full)
+    return bytes(TYPESTORE.serialize_cdr(msg, full))
 
 
 def deserialize(data: bytes | memoryview, typename: str) -> Any:
     """Decode ROS 2 CDR bytes as ``typename``."""
-    return TYPESTORE.deserialize_cdr(data, normalize_type_name(typename))
+    full = normalize_type_name(typename)
+    load_type(full)
+    return TYPESTORE.deserialize_cdr(data, full)
 
 
 def type_hash(typename: str) -> str:
     """The RIHS01 type hash of a message type, as ROS 2 Iron+ and rmw_zenoh use it."""
-    return TYPESTORE.hash_rihs01(normalize_type_name(typename))
+    full = normalize_type_name(typename)
+    load_type(full)
+    return TYPESTORE.hash_rihs01(full)
 
 
 def message_definition(typename: str) -> str:
     """The full .msg text of a type with its dependencies, as rosbag2 stores it."""
-    text, _ = TYPESTORE.generate_msgdef(normalize_type_name(typename), ros_version=2)
+    full = normalize_type_name(typename)
+    load_type(full)
+    text, _ = TYPESTORE.generate_msgdef(full, ros_version=2)
     return text
 
 

@@ -21,11 +21,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from eddiebot.core.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from eddiebot.msgs import TYPESTORE, normalize_type_name, type_hash
+from eddiebot.msgs import TYPESTORE, UnknownTypeError, load_type, normalize_type_name, type_hash
 
 __all__ = [
     "ADMIN_SPACE",
     "ATTACHMENT",
+    "UNKNOWN_TYPE_HASH",
     "GraphEntity",
     "dds_type_name",
     "decode_attachment",
@@ -34,6 +35,7 @@ __all__ = [
     "liveliness_key",
     "liveliness_prefix",
     "mangle",
+    "message_type_hash",
     "node_liveliness_key",
     "parse_liveliness_key",
     "qos_from_keyexpr",
@@ -86,13 +88,19 @@ def service_type_hash(srv_type: str) -> str:
 
     The description holds ``request_message``, ``response_message`` and ``event_message``
     (``service_msgs/ServiceEventInfo info``, ``Request[<=1] request``, ``Response[<=1]
-    response``); it equals rosidl's (checked on example_interfaces/srv/AddTwoInts).
+    response``); it equals rosidl's (checked on example_interfaces/srv/AddTwoInts). A service
+    we do not ship is read from the interface search path (``EDDIE_INTERFACE_PATH``); one
+    nothing describes raises ``UnknownTypeError``: no hash is made up for it.
     """
+    load_type(srv_type, "service")
     return service_hash_from(TYPESTORE.fielddefs, srv_type)
 
 
 def service_hash_from(fielddefs: Any, srv_type: str) -> str:
-    """:func:`service_type_hash` over the given field definitions (``pkg/srv/X_Request`` ...)."""
+    """:func:`service_type_hash` over the given field definitions (``pkg/srv/X_Request`` ...).
+
+    Raises ``UnknownTypeError`` when they do not describe the service completely.
+    """
     from rosbags.interfaces import Nodetype
     from rosbags.typesys.store import Typestore
 
@@ -119,21 +127,40 @@ def service_hash_from(fielddefs: Any, srv_type: str) -> str:
     ])
     try:
         return str(store.hash_rihs01(srv_type))
-    except Exception:  # a type the store cannot describe: still a stable key
-        return "RIHS01_" + hashlib.sha256(srv_type.encode()).hexdigest()
+    except KeyError as exc:
+        raise UnknownTypeError(srv_type, "service", f"its definition uses {exc}, which is not "
+                               "described") from None
 
 
-@functools.cache
-def _msg_hash(ros_type: str) -> str:
-    try:
-        return type_hash(ros_type)
-    except Exception:
-        return "TypeHashNotSupported"
+#: Hashes of message types computed so far (a type that cannot be described is not kept:
+#: its definition may turn up on the search path later).
+_MSG_HASHES: dict[str, str] = {}
+
+#: The hash chunk of an entity whose type no definition here describes (rmw_zenoh's word
+#: for a type without a hash).
+UNKNOWN_TYPE_HASH = "TypeHashNotSupported"
 
 
-def topic_key(domain: int, name: str, ros_type: str, *, service: bool = False) -> str:
-    """The data key of a topic, or the queryable key of a service."""
-    h = service_type_hash(ros_type) if service else _msg_hash(ros_type)
+def message_type_hash(ros_type: str) -> str:
+    """The RIHS01 hash of a message type from its definition; ``UNKNOWN_TYPE_HASH`` when
+    nothing describes it."""
+    h = _MSG_HASHES.get(ros_type)
+    if h is None:
+        try:
+            h = _MSG_HASHES[ros_type] = type_hash(ros_type)
+        except KeyError:
+            return UNKNOWN_TYPE_HASH
+    return h
+
+
+_msg_hash = message_type_hash
+
+
+def topic_key(domain: int, name: str, ros_type: str, *, service: bool = False,
+              type_hash: str | None = None) -> str:
+    """The data key of a topic, or the queryable key of a service (``type_hash``: a hash
+    learnt from the graph for a type no definition here describes)."""
+    h = type_hash or (service_type_hash(ros_type) if service else _msg_hash(ros_type))
     return f"{domain}/{name.strip('/')}/{dds_type_name(ros_type)}/{h}"
 
 
@@ -186,10 +213,11 @@ def liveliness_key(
     name: str,
     ros_type: str,
     qos: QoSProfile | None = None,
+    type_hash: str | None = None,
 ) -> str:
     """Token of a publisher (MP), subscription (MS), service (SS) or client (SC)."""
     service = kind in ("SS", "SC")
-    h = service_type_hash(ros_type) if service else _msg_hash(ros_type)
+    h = type_hash or (service_type_hash(ros_type) if service else _msg_hash(ros_type))
     return (
         f"{ADMIN_SPACE}/{domain}/{zid}/{node_id}/{entity_id}/{kind}/%/{mangle(namespace)}/"
         f"{node_name}/{mangle(name)}/{dds_type_name(ros_type)}/{h}/"
