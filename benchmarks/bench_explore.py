@@ -25,7 +25,7 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from _common import print_table, write_results  # noqa: E402
+from _common import print_table, write_results
 
 COLUMNS = ["world", "seed", "reason", "coverage", "map_agreement", "ate_m", "distance_m",
            "explore_time_s", "sim_time_s", "wall_time_s", "turning_share", "collisions",

@@ -43,7 +43,7 @@ def test_explores_two_rooms_and_comes_home(world_file: Path, tmp_path: Path) -> 
     assert result.coverage >= 0.85, result.summary()
     assert result.map_agreement >= 0.9
     assert result.returned_home, result.summary()
-    assert result.reason in ("no frontier left", "time limit")
+    assert result.reason.startswith(("no reachable frontier left", "time limit"))
     assert result.sim_time_s < 240.0 + 300.0 + 61.0
     for name in ("map.yaml", "map.pgm", "report.json", "report.md", "exploration.png"):
         assert (out / name).is_file(), name
@@ -52,6 +52,45 @@ def test_explores_two_rooms_and_comes_home(world_file: Path, tmp_path: Path) -> 
                 "returned_home", "frontiers_abandoned", "map_to_world"):
         assert key in figures
     assert figures["map_to_world"] == [1.0, 1.5, 0.0]
+
+
+CLOSET = """
+name: closet
+description: a closed 2.5 x 2.5 m room
+floor: {texture: wood}
+ceiling: {height: 2.5, texture: ceiling}
+start: {x: 1.25, y: 1.25, theta: 0.0}
+walls:
+  - {points: [[0, 0], [2.5, 0], [2.5, 2.5], [0, 2.5], [0, 0]], thickness: 0.15, texture: brick}
+"""
+
+
+def test_a_closed_room_is_done_after_the_look_around(tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("EDDIE_CACHE_DIR", str(tmp_path / "cache"))
+    world = tmp_path / "closet.yaml"
+    world.write_text(CLOSET)
+    result = run_exploration(tmp_path / "out", world=str(world), camera=(160, 120, 10.0),
+                             wall_timeout_s=120.0)
+    assert result.reason.startswith("no reachable frontier left (0 unreachable"), result.reason
+    assert result.goals_sent == 0 and result.sim_time_s < 30.0
+    assert result.coverage > 0.95 and result.returned_home
+
+
+def test_ctrl_c_stops_the_robot_where_it_is(world_file: Path, tmp_path: Path) -> None:
+    seen: dict[str, float] = {}
+
+    def interrupt(node: object, sim_s: float) -> None:
+        if len(getattr(node, "goals", ())) >= 2:
+            seen["at"] = sim_s
+            raise KeyboardInterrupt
+
+    result = run_exploration(tmp_path / "out", world=str(world_file), camera=(160, 120, 10.0),
+                             wall_timeout_s=120.0, progress=interrupt)
+    assert result.interrupted and result.reason == "interrupted"
+    assert not result.returned_home
+    assert result.sim_time_s <= seen["at"] + 0.5  # no drive home after the interrupt
+    assert (tmp_path / "out" / "map.yaml").is_file()  # what was mapped is kept
 
 
 def test_without_a_world_it_says_attaching_is_not_supported(capsys: pytest.CaptureFixture[str]) -> None:

@@ -223,7 +223,10 @@ class ExploreNode(Node):
         choice = choose_frontier(search.frontiers, ids, self.blacklist, self._target, self.config)
         self._publish_markers(search.frontiers, ids)
         if choice is None:
-            self._finish("no frontier left", pose)
+            low = sum(f.gain < self.config.min_gain for f in search.frontiers)
+            self._finish(f"no reachable frontier left ({search.unreachable} unreachable, "
+                         f"{search.too_small} too small, {low} with nothing to see, "
+                         f"{len(self.blacklist)} abandoned)", pose)
             return
         frontier, tid = choice
         if tid == self._target and self._goal_handle is not None:
