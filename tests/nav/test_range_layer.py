@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from eddiebot.nav.costmap import RangeReading, build_costmap
-from eddiebot.nav.costmap.layers import RangeLayer, RangeLayerConfig, sensor_model
+from eddiebot.nav.costmap.layers.range import RangeLayer, RangeLayerConfig, sensor_model
 from eddiebot.nav.errors import ParameterError
 
 

@@ -18,7 +18,7 @@ import numpy.typing as npt
 from eddiebot.maps import OccupancyMap
 from eddiebot.nav.cost_values import NO_INFORMATION, occupancy_to_mask_costs
 from eddiebot.nav.costmap.costmap2d import Costmap2D
-from eddiebot.nav.costmap.layers import Bounds, Layer
+from eddiebot.nav.costmap.layers.base import Bounds, Layer
 
 # nav2_msgs/CostmapFilterInfo type values.
 KEEPOUT_FILTER = 0
