@@ -1,4 +1,9 @@
-"""``eddie topic list|echo|hz|info|pub`` — as ``ros2 topic``."""
+"""``eddie topic list|echo|hz|bw|info|pub`` — as ``ros2 topic``.
+
+``hz``, ``bw`` take samples raw (CDR bytes), so they work on any type, described here or
+not; ``echo`` decodes, so it needs the type's definition (shipped, or an interface file on
+``EDDIE_INTERFACE_PATH``/``AMENT_PREFIX_PATH``) and says so in one line when there is none.
+"""
 
 from __future__ import annotations
 
@@ -18,6 +23,7 @@ from eddiebot.cli._common import (
     message_to_yaml,
     parse_type,
 )
+from eddiebot.msgs.errors import UnknownTypeError
 
 __all__ = ["add_arguments", "run"]
 
@@ -55,6 +61,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--window", "-w", type=int, default=10000, help="samples in the window")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
 
+    p = sub.add_parser("bw", help="print the bandwidth a topic uses")
+    p.add_argument("topic_name")
+    p.add_argument("--window", "-w", type=int, default=100, help="samples in the window")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+
     p = sub.add_parser("info", help="type, publishers and subscribers of a topic")
     p.add_argument("topic_name")
     p.add_argument("-v", "--verbose", action="store_true", help="every endpoint with its QoS")
@@ -85,8 +96,9 @@ def run(args: argparse.Namespace) -> int:
         args._parser.print_help()
         return 0
     try:
-        return int({"list": _list, "echo": _echo, "hz": _hz, "info": _info, "pub": _pub}[verb](args))
-    except ValueError as exc:
+        return int({"list": _list, "echo": _echo, "hz": _hz, "bw": _bw, "info": _info,
+                    "pub": _pub}[verb](args))
+    except (ValueError, UnknownTypeError) as exc:
         print(f"eddie topic {verb}: {exc}", file=sys.stderr)
         return 2
 
@@ -173,7 +185,12 @@ def _echo(args: argparse.Namespace) -> int:
             print("---", flush=True)
             received[0] += 1
 
-        s.node.create_subscription(get_message(type_name), topic, on_msg,
+        try:
+            msg_type = get_message(type_name)
+        except UnknownTypeError as exc:
+            print(f"eddie topic echo: cannot decode {topic}: {exc}", file=sys.stderr)
+            return 2
+        s.node.create_subscription(msg_type, topic, on_msg,
                                    _qos(args, default_tl=tl, default_be=be))
         ex = SingleThreadedExecutor(context=s.context)
         ex.add_node(s.node)
@@ -195,9 +212,22 @@ def _echo(args: argparse.Namespace) -> int:
 
 
 # -- hz -------------------------------------------------------------------------------
+def _raw_type(s: CliSession, topic: str, type_name: str) -> Any:
+    """The class to subscribe to ``topic`` with raw (the samples' CDR bytes, undecoded): ours,
+    or for a type nothing here describes a stand-in carrying its publishers' RIHS01 hash."""
+    from eddiebot.msgs import get_message, raw_message_type
+
+    try:
+        return get_message(type_name)
+    except UnknownTypeError:
+        cache = s.remote()
+        hashes = sorted({e.type_hash for e in (cache.publishers(topic) if cache else [])
+                         if e.type_name == type_name and e.type_hash.startswith("RIHS01_")})
+        return raw_message_type(type_name, hashes[0] if hashes else None)
+
+
 def _hz(args: argparse.Namespace) -> int:
     from eddiebot.core import SingleThreadedExecutor
-    from eddiebot.msgs import get_message
 
     topic = args.topic_name if args.topic_name.startswith("/") else "/" + args.topic_name
     with cli_session("topic") as s:
@@ -205,11 +235,12 @@ def _hz(args: argparse.Namespace) -> int:
         if type_name is None:
             print(f"eddie topic hz: topic {topic} did not appear", file=sys.stderr)
             return 1
-        tl, be = _publisher_qos_hint(s, topic)
+        _tl, be = _publisher_qos_hint(s, topic)
         stamps: deque[float] = deque(maxlen=max(2, args.window + 1))
-        s.node.create_subscription(get_message(type_name), topic,
+        # raw: a rate needs no decoding, so any type is counted, described here or not
+        s.node.create_subscription(_raw_type(s, topic, type_name), topic,
                                    lambda _m: stamps.append(time.monotonic()),
-                                   10 if not be else _qos_be())
+                                   10 if not be else _qos_be(), raw=True)
         ex = SingleThreadedExecutor(context=s.context)
         ex.add_node(s.node)
         start = next_print = time.monotonic()
@@ -223,6 +254,62 @@ def _hz(args: argparse.Namespace) -> int:
                 break
         print(_rate_report(list(stamps)), flush=True)
     return 0
+
+
+# -- bw -------------------------------------------------------------------------------
+def _bw(args: argparse.Namespace) -> int:
+    from eddiebot.core import SingleThreadedExecutor
+    from eddiebot.msgs import serialize
+
+    topic = args.topic_name if args.topic_name.startswith("/") else "/" + args.topic_name
+    with cli_session("topic") as s:
+        type_name = s.wait_for_topic_type(topic, args.duration)
+        if type_name is None:
+            print(f"eddie topic bw: topic {topic} did not appear", file=sys.stderr)
+            return 1
+        _tl, be = _publisher_qos_hint(s, topic)
+        samples: deque[tuple[float, int]] = deque(maxlen=max(1, args.window))
+
+        def on_sample(data: Any) -> None:
+            # bytes from another process; a message object from this one (by reference)
+            size = len(data) if isinstance(data, (bytes, bytearray, memoryview)) else len(
+                serialize(data))
+            samples.append((time.monotonic(), size))
+
+        s.node.create_subscription(_raw_type(s, topic, type_name), topic, on_sample,
+                                   10 if not be else _qos_be(), raw=True)
+        print(f"Subscribed to [{topic}]", flush=True)
+        ex = SingleThreadedExecutor(context=s.context)
+        ex.add_node(s.node)
+        start = next_print = time.monotonic()
+        while s.context.ok():
+            ex.spin_once(timeout_sec=0.05)
+            now = time.monotonic()
+            if now >= next_print + 1.0:
+                next_print = now
+                print(_bw_report(list(samples), now), flush=True)
+            if args.duration is not None and now - start >= args.duration:
+                break
+        print(_bw_report(list(samples), time.monotonic()), flush=True)
+    return 0
+
+
+def _bw_report(samples: list[tuple[float, int]], now: float) -> str:
+    """``ros2 topic bw``'s lines: bytes per second over the window, and message sizes."""
+    if len(samples) < 2:
+        return "no new messages" if not samples else f"1 message of {_size(samples[0][1])}"
+    sizes = [n for _, n in samples]
+    span = max(now, samples[-1][0]) - samples[0][0]
+    rate = sum(sizes) / span if span > 0 else float("inf")
+    return (f"{_size(rate)}/s from {len(sizes)} messages\n\tMessage size mean: "
+            f"{_size(sum(sizes) / len(sizes))} min: {_size(min(sizes))} max: {_size(max(sizes))}")
+
+
+def _size(n: float) -> str:
+    for unit, scale in (("MB", 1e6), ("KB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.2f} {unit}"
+    return f"{n:.2f} B"
 
 
 def _qos_be() -> Any:

@@ -416,6 +416,19 @@ def _load_locked(full: str, kind: str) -> None:
         ACTIONS[n] = _action_type(TYPESTORE, n)
 
 
+def raw_message_type(name: str, rihs01: str | None = None) -> type:
+    """A stand-in class for message type ``name`` that nothing here describes.
+
+    It names the type (and ``rihs01``, the hash its publishers announce) so that a *raw*
+    subscription can take its samples as CDR bytes (``hz``, ``bw``, ``record``); it has no
+    fields and cannot be serialized or decoded.
+    """
+    full = normalize_type_name(name)
+    return type(full.rsplit("/", 1)[-1], (), {
+        "__msgtype__": full, "__rihs01__": rihs01, "__doc__": f"{full}, undescribed here",
+    })
+
+
 def get_message(name: str) -> Any:
     """The class of message type ``pkg/msg/Name`` (also accepts ``pkg/Name``)."""
     full = normalize_type_name(name)

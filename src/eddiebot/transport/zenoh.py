@@ -9,7 +9,10 @@
   (in-process delivery stays by reference); payloads are ROS 2 CDR with an attachment of
   sequence number, source timestamp and 16-byte GID;
 - one Zenoh subscriber per subscribed topic listens to every type on it, so a remote
-  publisher of another type is reported (topic and both types, once) and dropped;
+  publisher of another type is reported (topic and both types, once) and dropped; a sample
+  whose key carries our type name with another RIHS01 hash (another definition of the type)
+  is not decoded either: counted in ``undecoded`` and reported once, as rmw_zenoh matches
+  on the hash;
 - transient-local publishers keep their last ``depth`` samples in a Zenoh publication
   cache (the advanced publisher), which late-joining subscribers query, as in rmw_zenoh;
 - reliable QoS is Zenoh reliable with congestion control *block*; best effort *drops*;
@@ -42,10 +45,12 @@ from eddiebot.transport.errors import RemoteServiceError
 from eddiebot.transport.graph import GraphCache
 from eddiebot.transport.keys import (
     ATTACHMENT,
+    UNKNOWN_TYPE_HASH,
     GraphEntity,
     entity_gid,
     liveliness_key,
     liveliness_prefix,
+    message_type_hash,
     node_liveliness_key,
     parse_liveliness_key,
     ros_type_name,
@@ -178,6 +183,11 @@ class ZenohTransport:
         self._topic_subs: dict[str, _TopicSub] = {}
         self._queryables: dict[int, Any] = {}
         self._warned: set[tuple[str, str, str]] = set()
+        #: topic → samples received but not decoded: their key carries the type we
+        #: subscribed to with another RIHS01 hash (another definition of it)
+        self.undecoded: dict[str, int] = {}
+        #: topic → the hash whose samples raw subscriptions of an undescribed type take
+        self._raw_hashes: dict[str, str] = {}
         self._call_seq = itertools.count(1)
         self._client_gid = entity_gid(f"{self.zid}/clients")
         self._closed = False
@@ -296,9 +306,10 @@ class ZenohTransport:
             self._node_ids.pop(id(node), None)
 
     def _entity_key(self, node: Node, kind: str, name: str, type_name: str,
-                    qos: QoSProfile | None) -> str:
+                    qos: QoSProfile | None, type_hash: str | None = None) -> str:
         return liveliness_key(self.domain, self.zid, self._node_id(node), next(self._ids), kind,
-                              node.get_namespace(), node.get_name(), name, type_name, qos)
+                              node.get_namespace(), node.get_name(), name, type_name, qos,
+                              type_hash)
 
     # -- publishers -----------------------------------------------------------------
     def on_publisher_added(self, pub: Publisher) -> None:
@@ -384,7 +395,11 @@ class ZenohTransport:
                 zsub = self._declare_subscriber(topic, tl, sub.qos.depth)
                 ts = self._topic_subs[topic] = _TopicSub(zsub, tl, ts.count if ts else 0)
             ts.count += 1
-        self._declare_token(sub, self._entity_key(sub.node, "MS", topic, sub.type_name, sub.qos))
+        # a raw subscription of a type nothing here describes announces the hash it was
+        # made for (learnt from the publishers' tokens)
+        learnt = getattr(sub.msg_type, "__rihs01__", None)
+        self._declare_token(sub, self._entity_key(sub.node, "MS", topic, sub.type_name, sub.qos,
+                                                  learnt))
         for e in self.cache.publishers(topic):
             self._on_graph_change(e, True)
 
@@ -403,25 +418,49 @@ class ZenohTransport:
                                                allowed_origin=zenoh.Locality.REMOTE)
 
     def _sample_handler(self, topic: str) -> Callable[[Any], None]:
-        types: dict[str, str] = {}
+        # (dds type, hash chunk) of a key → the ROS type its samples decode as, or None when
+        # they are not ours to decode (another type, or the same type of another definition)
+        verdicts: dict[tuple[str, str, str], str | None] = {}
         context = self.context
+
+        def verdict(entry_type: str, dds: str, remote_hash: str) -> str | None:
+            remote = ros_type_name(dds)
+            if remote != entry_type:
+                self._warn_mismatch(topic, entry_type, remote)
+                return None
+            ours = message_type_hash(remote)
+            if ours == UNKNOWN_TYPE_HASH:
+                # nothing here describes the type: raw subscriptions take the bytes of the
+                # definition they were made for (learnt from the graph), else of the first
+                # one seen; a second one on the same topic would mix two layouts
+                entry = context.topics.get(topic)
+                wanted = [h for sub in (entry.subscriptions if entry else [])
+                          if (h := getattr(sub.msg_type, "__rihs01__", None))]
+                ours = self._raw_hashes.setdefault(topic, wanted[0] if wanted else remote_hash)
+            if remote_hash != ours:
+                self._warn_definition(topic, remote, remote_hash)
+                return None
+            return remote
 
         def handler(sample: Any) -> None:
             try:
                 entry = context.topics.get(topic)
                 if entry is None or entry.type_name is None:
                     return
-                dds = str(sample.key_expr).rsplit("/", 2)[-2]
-                remote = types.get(dds)
+                dds, remote_hash = str(sample.key_expr).rsplit("/", 2)[-2:]
+                key = (entry.type_name, dds, remote_hash)
+                if key in verdicts:
+                    remote = verdicts[key]
+                else:
+                    remote = verdicts[key] = verdict(entry.type_name, dds, remote_hash)
                 if remote is None:
-                    remote = types[dds] = ros_type_name(dds)
-                if remote != entry.type_name:
-                    self._warn_mismatch(topic, entry.type_name, remote)
+                    if ros_type_name(dds) == entry.type_name:  # same name, other definition
+                        self.undecoded[topic] = self.undecoded.get(topic, 0) + 1
                     return
                 data = sample.payload.to_bytes()
                 subs = list(entry.subscriptions)
                 if any(getattr(sub, "raw", False) for sub in subs):
-                    # raw subscriptions (the recorder) take the CDR bytes as they came
+                    # raw subscriptions (the recorder, hz, bw) take the CDR bytes as they came
                     cooked = []
                     for sub in subs:
                         if getattr(sub, "raw", False):
@@ -439,6 +478,14 @@ class ZenohTransport:
 
         return handler
 
+    def _warn_definition(self, topic: str, type_name: str, remote_hash: str) -> None:
+        key = (topic, type_name, remote_hash)
+        if key in self._warned:
+            return
+        self._warned.add(key)
+        log.error("%s: a publisher of %s with another definition (%s); its samples are not "
+                  "decoded", topic, type_name, remote_hash)
+
     def on_subscription_removed(self, sub: Subscription) -> None:
         self._drop_token(sub)
         with self._lock:
@@ -448,6 +495,7 @@ class ZenohTransport:
             ts.count -= 1
             if ts.count <= 0:
                 del self._topic_subs[sub.topic_name]
+                self._raw_hashes.pop(sub.topic_name, None)
                 _undeclare(ts.zsub)
 
     # -- services -------------------------------------------------------------------

@@ -45,7 +45,14 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionMode
 from rosbags.rosbag2.errors import ReaderError, WriterError
 from rosbags.rosbag2.metadata import parse_qos
-from rosbags.rosbag2.storage_mcap import McapWriter, PendingChunk, write_record, write_string
+from rosbags.rosbag2.storage_mcap import (
+    McapWriter,
+    PendingChunk,
+    Schema,
+    write_record,
+    write_schema,
+    write_string,
+)
 
 from eddiebot.core.node import Node, Publisher, Subscription, Timer
 from eddiebot.core.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -53,7 +60,9 @@ from eddiebot.msgs import (
     TYPESTORE,
     deserialize,
     get_message,
+    load_type,
     message_definition,
+    raw_message_type,
     serialize,
     type_hash,
     type_name,
@@ -163,6 +172,14 @@ class _McapFile(McapWriter):
         if self.chunk.bio.tell():
             self.close_chunk()
         self.bio.flush()
+
+    def add_msgtype(self, connection: Connection) -> None:
+        """A type without a definition gets rosbag2's empty schema: encoding and data ""."""
+        if connection.msgdef.data:
+            super().add_msgtype(connection)
+            return
+        self.schemas.append(Schema(len(self.schemas) + 1, connection.msgtype, "", ""))
+        write_schema(self.chunk.bio, self.schemas[-1])
 
     def pending_bytes(self) -> int:
         return int(self.bio.tell() + self.chunk.bio.tell())
@@ -477,8 +494,9 @@ def ensure_type(conn: BagConnection) -> None:
         return
     from rosbags.typesys import get_types_from_idl, get_types_from_msg
 
-    if not conn.msgdef:
-        raise UnknownTypeError(conn.type_name, "message")
+    if not conn.msgdef:  # an empty schema: perhaps an interface file describes it
+        load_type(conn.type_name)
+        return
     if conn.msgdef_format in ("ros2idl", "omgidl"):
         types = get_types_from_idl(conn.msgdef)
     else:
@@ -1149,13 +1167,32 @@ class RecorderNode(Node):
                 continue
             self._subscribe(name, typ)
 
+    def _remote_hash(self, topic: str, typ: str) -> str | None:
+        """The RIHS01 hash the publishers of ``topic`` announce for ``typ`` (None: none yet)."""
+        for t in list(self.context.transports):
+            try:
+                cache = t.graph().get("cache")
+            except Exception:
+                continue
+            for e in cache.publishers(topic) if cache is not None else []:
+                if e.type_name == typ and e.type_hash.startswith("RIHS01_"):
+                    return str(e.type_hash)
+        return None
+
     def _subscribe(self, topic: str, typ: str) -> None:
+        msgdef: str | None = None
+        rihs01: str | None = None
         try:
             cls = get_message(typ)
-        except UnknownTypeError:
-            self._skipped.add(topic)
-            self.get_logger().warning(f"not recording {topic}: type {typ} is unknown here")
-            return
+        except UnknownTypeError as exc:
+            # nothing describes it here: record its CDR as it comes, with an empty schema
+            # (as rosbag2 does for a type whose definition it cannot find)
+            rihs01 = self._remote_hash(topic, typ)
+            if rihs01 is None:
+                return  # no publisher has announced it yet: look again at the next poll
+            cls = raw_message_type(typ, rihs01)
+            msgdef = ""
+            self.get_logger().warning(f"recording {topic} undecoded, with no definition: {exc}")
         offered = self._offered_qos(topic)
         latched = any(q.transient_local for q in offered)
         best_effort = bool(offered) and all(
@@ -1167,7 +1204,8 @@ class RecorderNode(Node):
             reliability=ReliabilityPolicy.BEST_EFFORT if best_effort else ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
         )
-        self.writer.add_topic(topic, cls.__msgtype__, qos=offered or [sub_qos])
+        self.writer.add_topic(topic, cls.__msgtype__, qos=offered or [sub_qos], msgdef=msgdef,
+                              rihs01=rihs01)
 
         def on_message(msg: Any, topic: str = topic, typ: str = cls.__msgtype__) -> None:
             self._record(topic, typ, msg)
