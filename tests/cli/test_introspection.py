@@ -74,6 +74,22 @@ def test_interface_show_service_and_action(capsys: Any) -> None:
     assert eddie(capsys, "interface", "show", "no_such/msg/Thing")[0] == 1
 
 
+def test_interface_show_from_the_search_path(capsys: Any, tmp_path: Path,
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    folder = tmp_path / "shown_msgs" / "srv"
+    folder.mkdir(parents=True)
+    (folder / "Scale.srv").write_text("float64 factor\n---\nbool ok\n")
+    monkeypatch.setenv("EDDIE_INTERFACE_PATH", str(tmp_path))
+    code, out = eddie(capsys, "interface", "show", "shown_msgs/srv/Scale")
+    assert code == 0
+    assert out.split() == ["float64", "factor", "---", "bool", "ok"]
+    capsys.readouterr()
+    assert main(["interface", "show", "shown_msgs/msg/Absent"]) == 1
+    err = capsys.readouterr().err
+    assert "shown_msgs/msg/Absent.msg" in err
+    assert "EDDIE_INTERFACE_PATH" in err
+
+
 def test_interface_list(capsys: Any) -> None:
     code, out = eddie(capsys, "interface", "list")
     assert code == 0

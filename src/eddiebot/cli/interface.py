@@ -86,19 +86,33 @@ def render_definition(type_name: str, *, expand: bool = True, indent: str = "") 
 
 
 def _show(type_name: str, expand: bool) -> int:
-    from eddiebot.msgs import ACTIONS, SERVICES, TYPESTORE, normalize_type_name
+    from eddiebot.msgs import (
+        ACTIONS,
+        SERVICES,
+        TYPESTORE,
+        UnknownTypeError,
+        load_type,
+        normalize_type_name,
+    )
 
     name = normalize_type_name(type_name)
+    srv = name if "/srv/" in name else name.replace("/msg/", "/srv/", 1)
+    act = name if "/action/" in name else name.replace("/msg/", "/action/", 1)
+    missing = ""
+    for candidate in dict.fromkeys((name, srv, act)):  # from the interface search path
+        try:
+            load_type(candidate, "interface")
+            break
+        except UnknownTypeError as exc:
+            missing = missing or exc.detail
     if name in TYPESTORE.fielddefs and "/msg/" in name:
         print(render_definition(name, expand=expand))
         return 0
-    srv = name if "/srv/" in name else name.replace("/msg/", "/srv/", 1)
     if srv in SERVICES:
         print(render_definition(f"{srv}_Request", expand=expand))
         print("---")
         print(render_definition(f"{srv}_Response", expand=expand))
         return 0
-    act = name if "/action/" in name else name.replace("/msg/", "/action/", 1)
     if act in ACTIONS:
         print(render_definition(f"{act}_Goal", expand=expand))
         print("---")
@@ -106,7 +120,8 @@ def _show(type_name: str, expand: bool) -> int:
         print("---")
         print(render_definition(f"{act}_Feedback", expand=expand))
         return 0
-    print(f"Unknown interface '{type_name}'", file=sys.stderr)
+    print(f"Unknown interface '{type_name}'" + (f": {missing}" if missing else ""),
+          file=sys.stderr)
     return 1
 
 
