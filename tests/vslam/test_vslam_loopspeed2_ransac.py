@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 from test_vslam_registration_score import _score_3d3d
 
-from eddiebot.vslam import registration
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.registration import _ransac_samples, _smallest_sorted, solve_3d3d
+from eddiebot.vslam.registration import rigid
+from eddiebot.vslam.registration.rigid import _ransac_samples, _smallest_sorted, solve_3d3d
 from eddiebot.vslam.transforms import from_xyz_yaw
 
 
@@ -64,7 +64,7 @@ def test_solve_3d3d_unchanged(monkeypatch):
         assert _ransac_samples.cache_info().hits == 1
         assert np.array_equal(t_again, t_new) and np.array_equal(inl_again, inl_new)
         _ransac_samples.cache_clear()
-        monkeypatch.setattr(registration, "_smallest_sorted", lambda d, k: None)
+        monkeypatch.setattr(rigid, "_smallest_sorted", lambda d, k: None)
         t_old, inl_old = solve_3d3d(from_pts, to_pts, params)
         monkeypatch.undo()
         _ransac_samples.cache_clear()
@@ -100,7 +100,7 @@ def test_pruned_best_hypothesis_is_the_scores_argmax():
             if trial == 5:
                 valid[:] = False  # every score is -1 - error: the least error wins
             score = _score_3d3d(rot, trans, valid, p, q, 0.1)
-            best = registration._best_3d3d(rot, trans, valid, p, q, 0.1)
+            best = rigid._best_3d3d(rot, trans, valid, p, q, 0.1)
             assert best == int(np.argmax(score))
             checked += 1
     assert checked == 42

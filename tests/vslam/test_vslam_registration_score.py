@@ -6,7 +6,7 @@ import numpy as np
 from numba import njit
 
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.registration import _errors_3d3d, _pair_error, solve_3d3d
+from eddiebot.vslam.registration.rigid import _errors_3d3d, _pair_error, solve_3d3d
 
 
 @njit(cache=True)

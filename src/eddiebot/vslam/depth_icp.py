@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 from eddiebot.geometry.grid import bucket_grid
 from eddiebot.vslam.camera import CameraIntrinsics, depth_to_meters
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.registration import LOST_VARIANCE, huge_covariance
+from eddiebot.vslam.registration.common import LOST_VARIANCE, huge_covariance
 from eddiebot.vslam.transforms import rotation_angle, se3_inverse
 
 __all__ = [

@@ -43,7 +43,7 @@ from eddiebot.vslam.occupancy import (
     voxel_first_indices,
 )
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.registration import register
+from eddiebot.vslam.registration.pipeline import register
 from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, to_3dof, xyz_rpy, yaw_of
 from eddiebot.vslam.vocabulary import Vocabulary
 
