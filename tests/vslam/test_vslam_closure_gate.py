@@ -3,8 +3,9 @@
 import numpy as np
 from vslam_synthetic import frame, kinect_camera, link_adjacency, planar_pose
 
+from eddiebot.vslam.closure_check import closure_mahalanobis, path_covariance
 from eddiebot.vslam.memory import Link, LinkType
-from eddiebot.vslam.rtabmap import Rtabmap, closure_mahalanobis, path_covariance
+from eddiebot.vslam.rtabmap import Rtabmap
 
 CAM = kinect_camera(320, 240)
 REPORT = {"RGBD/LinearUpdate": "0.05", "RGBD/ProximityBySpace": "false",

@@ -104,13 +104,13 @@ def test_added_only_update_equals_whole_graph_update(sigma, monkeypatch):
 
 
 def test_path_cost_in_scalars_equals_the_matrix_trace():
-    from eddiebot.vslam import rtabmap
+    from eddiebot.vslam import closure_check
 
     rng = np.random.default_rng(5)
     for _ in range(300):
         d = rng.choice([1e-14, 0.0, 1e-3, 1.0, 37.5, 1e6], 6) * rng.uniform(0.5, 2.0, 6)
         info = np.diag(d)
-        c = rtabmap._link_covariance_xyt(info)
+        c = closure_check._link_covariance_xyt(info)
         want = 0.25 + float(c[0, 0] + c[1, 1] + c[2, 2])
         got = 0.25 + (1.0 / max(float(info[0, 0]), 1e-12) + 1.0 / max(float(info[1, 1]), 1e-12)
                       + 1.0 / max(float(info[5, 5]), 1e-12))
@@ -125,5 +125,5 @@ def test_path_cost_in_scalars_equals_the_matrix_trace():
     for a in range(1, 6):
         add(a, a + 1, 0.1)
     add(1, 6, 0.5)  # one link, but σ² 0.25 × 3 > five links of 0.01 × 3
-    pose, cov = rtabmap.path_covariance(links, 1, 6)
+    pose, cov = closure_check.path_covariance(links, 1, 6)
     assert abs(cov[0, 0] - 0.5**2) > 1e-6 and cov[2, 2] == pytest.approx(5 * 0.01)

@@ -8,7 +8,11 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from eddiebot.vslam.memory import Link, LinkType
-from eddiebot.vslam.rtabmap import ODOM_FRAME_ID_OFFSET, OdometryFrames, odometry_frame_graph
+from eddiebot.vslam.odometry_frames import (
+    ODOM_FRAME_ID_OFFSET,
+    OdometryFrames,
+    odometry_frame_graph,
+)
 from eddiebot.vslam.transforms import from_xyz_yaw
 
 

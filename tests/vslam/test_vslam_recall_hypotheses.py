@@ -7,7 +7,8 @@ from vslam_synthetic import frame, kinect_camera, planar_pose
 
 from eddiebot.vslam.memory import Link
 from eddiebot.vslam.parameters import ParameterError, RtabmapParameters
-from eddiebot.vslam.rtabmap import Rtabmap, _Verification
+from eddiebot.vslam.records import _Verification
+from eddiebot.vslam.rtabmap import Rtabmap
 from eddiebot.vslam.transforms import se3_inverse
 
 CAM = kinect_camera(320, 240)

@@ -4,17 +4,13 @@ import numpy as np
 import pytest
 from vslam_synthetic import frame, kinect_camera, link_adjacency, planar_pose
 
+from eddiebot.vslam.closure_check import closure_mahalanobis, path_covariance
 from eddiebot.vslam.errors import ParameterError
 from eddiebot.vslam.graph import GtsamPoseGraph
 from eddiebot.vslam.memory import Link, LinkType
+from eddiebot.vslam.odometry_frames import ODOM_FRAME_ID_OFFSET, odometry_frame_graph
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.rtabmap import (
-    ODOM_FRAME_ID_OFFSET,
-    Rtabmap,
-    closure_mahalanobis,
-    odometry_frame_graph,
-    path_covariance,
-)
+from eddiebot.vslam.rtabmap import Rtabmap
 from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse
 
 CAM = kinect_camera(320, 240)

@@ -33,7 +33,8 @@ from eddiebot.vslam.memory import Link, LinkType, Node, NodeData
 from eddiebot.vslam.occupancy import GlobalGrid, LocalGrid
 
 if TYPE_CHECKING:
-    from eddiebot.vslam.rtabmap import FrameRecord, Rtabmap
+    from eddiebot.vslam.records import FrameRecord
+    from eddiebot.vslam.rtabmap import Rtabmap
 
 __all__ = ["SCHEMA_VERSION", "SessionDatabase", "is_session_database"]
 

@@ -9,17 +9,15 @@ Pure core: the optional `SessionDatabase` is the only I/O, and time is only meas
 
 from __future__ import annotations
 
-import heapq
 import time
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import NamedTuple, Protocol
+from collections.abc import Callable, Mapping
 
 import numpy as np
 from numpy.typing import NDArray
 
 from eddiebot.vslam.bayes import BayesFilter, adjust_likelihood, tfidf_scores
 from eddiebot.vslam.camera import CameraIntrinsics
+from eddiebot.vslam.closure_check import closure_mahalanobis, path_covariance
 from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
 from eddiebot.vslam.graph import (
     GraphLink,
@@ -42,7 +40,14 @@ from eddiebot.vslam.occupancy import (
     merge_local_grids,
     voxel_first_indices,
 )
+from eddiebot.vslam.odometry_frames import (
+    ODOM_FRAME_ID_OFFSET,
+    OdometryFrames,
+    _worst_link_error,
+    odometry_frame_graph,
+)
 from eddiebot.vslam.parameters import RtabmapParameters
+from eddiebot.vslam.records import FrameRecord, MapDatabase, ProcessResult, _Verification
 from eddiebot.vslam.registration.pipeline import register
 from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, to_3dof, xyz_rpy, yaw_of
 from eddiebot.vslam.vocabulary import Vocabulary
@@ -53,90 +58,9 @@ __all__ = ["ODOM_FRAME_ID_OFFSET", "FrameRecord", "OdometryFrames", "ProcessResu
 F64 = NDArray[np.float64]
 _DEFAULT_ODOM_VARIANCE = 0.001
 _CLOUD_VOXEL = 0.02
-#: ids of the per-node odometry frames in the optimised graph (`RGBD/OdomHeadingSigma`): node id + this
-ODOM_FRAME_ID_OFFSET = 1 << 40
-_FRAME_TIE_VARIANCE = 1e-8  # m², rad²: a node's odometry frame shares its position (and the root's yaw)
-_ODOMETRY_LINKS = (LinkType.NEIGHBOR, LinkType.NEIGHBOR_MERGED)
 #: `RGBD/LoopClosureHypotheses`: a further hypothesis is not within this many links of one
 #: already verified (the span where `Bayes/PredictionLC` gives a place's neighbours ≥ 1 %)
 _HYPOTHESIS_MARGIN = 4
-
-
-@dataclass(frozen=True)
-class ProcessResult:
-    """Outcome of one `Rtabmap.process` call.
-
-    `map_to_odom`: correction (4×4) to publish as map→odom; `pose`: base pose in the map frame
-    (None if the frame was rejected); ids are 0 when absent.
-    """
-
-    node_id: int
-    added: bool
-    map_to_odom: F64
-    pose: F64 | None
-    loop_closure_id: int = 0
-    proximity_id: int = 0
-    hypothesis_id: int = 0
-    hypothesis_value: float = 0.0
-    rejected_loop_id: int = 0
-    rejection_reason: str = ""
-    localized: bool = False
-    statistics: dict[str, float] = field(default_factory=dict)
-    #: the registered transform (new node → old node, 4×4) of a hypothesis that passed the
-    #: registration but was rejected after it (gate or `RGBD/OptimizeMaxError`), else None
-    rejected_transform: F64 | None = None
-
-
-class _Verification(NamedTuple):
-    """What `Rtabmap._verify` found for one candidate place."""
-
-    link: Link | None  # the closure, None when rejected
-    reason: str  # why it was rejected
-    registered: Link | None = None  # the registered link, also when rejected after registration
-    mahalanobis: float = float("nan")  # its distance from the graph's prediction (σ), if gated
-
-
-@dataclass(frozen=True)
-class FrameRecord:
-    """Everything written to the database for one kept node (one transaction)."""
-
-    node: Node
-    image: NDArray[np.uint8] | None
-    depth: NDArray[np.generic] | None
-    camera: CameraIntrinsics
-    scan: Scan2D | None
-    links: tuple[Link, ...]
-    word_ids: NDArray[np.int64]  # unique word ids the node uses
-    word_descriptors: NDArray[np.uint8]  # their descriptors (N, 32)
-    statistics: dict[str, float]
-
-
-
-
-class MapDatabase(Protocol):
-    """What the core needs from a session database (see `SessionDatabase`)."""
-
-    def load_into(self, rtabmap: Rtabmap) -> None:
-        """Fill a fresh core with the stored map."""
-        ...
-
-    def write_frame(self, record: FrameRecord) -> None:
-        """Persist one kept node, atomically."""
-        ...
-
-    def load_node_data(self, node_id: int) -> NodeData | None:
-        """Heavy data of an LTM node."""
-        ...
-
-
-def _worst_link_error(ids: NDArray[np.int64], lin: F64, ang: F64, sigma: float) -> float:
-    """The largest `RGBD/OptimizeMaxError` ratio of an optimised graph's links. With odometry
-    frames (``sigma`` > 0) a frame shares its node's position by construction (a constraint, not
-    a measurement): only the frame links' heading is judged."""
-    if sigma > 0:
-        tie = (ids[:, 0] < ODOM_FRAME_ID_OFFSET) & (ids[:, 1] >= ODOM_FRAME_ID_OFFSET)
-        lin = np.where(tie, 0.0, lin)
-    return max(float(lin.max(initial=0.0)), float(ang.max(initial=0.0)))
 
 
 class Rtabmap:
@@ -742,198 +666,3 @@ class Rtabmap:
             mem.transfer_to_ltm(i)
             self.bayes.node_left(i, neighbourhood)
         return len(cands)
-
-
-# -- odometry frames (RGBD/OdomHeadingSigma) ---------------------------------------------------
-def odometry_frame_graph(poses: Mapping[int, F64], links: Sequence[Link | GraphLink], root: int,
-                         heading_sigma: float, frame_poses: Mapping[int, F64] | None = None,
-                         ) -> tuple[dict[int, F64], list[GraphLink]]:
-    """The graph to optimise when the odometry heading carries a non-accumulating error.
-
-    Wheel encoders that quantise the heading (Eddie's: 36 positions per wheel turn, ≈ 2° of
-    heading per position) report at every node a heading that is off by an error of its own
-    which does not add up along the path, while the positions, integrated from every encoder
-    step, follow the true direction of travel; a neighbour link, expressed in its first node's
-    reported heading, then carries a sideways error of its length times that node's heading
-    error. Modelled per link (independent x, y, yaw noise), the heading looks like a random
-    walk and the graph turns whole stretches of the path to fit the loop closures.
-
-    Here every node `i` gets an odometry frame (id `ODOM_FRAME_ID_OFFSET + i`, initial pose
-    from `frame_poses` or the node's): the neighbour links (`NEIGHBOR`, `NEIGHBOR_MERGED`) join
-    the frames, and a link node → frame (identity) ties each frame to its node in position and
-    lets its heading differ by `heading_sigma` (rad). The root's frame is tied in heading as
-    well: the map frame is the odometry's at the root. Loop-closure and other links stay
-    between the nodes. Returns the poses (nodes and frames) and the links to optimise.
-    """
-    return OdometryFrames().graph(poses, links, root, heading_sigma, frame_poses)
-
-
-class OdometryFrames:
-    """`odometry_frame_graph` for a graph that grows between calls: the links it derives (a
-    tie per node, the frame copy of each link) are kept per node and per link object, so a call
-    builds only those of new nodes and new or replaced links. Same result as the function,
-    link for link (the same `GraphLink` fields, in the same order)."""
-
-    def __init__(self) -> None:
-        self._sigma = -1.0
-        self._root = 0
-        self._ties: dict[int, GraphLink] = {}  # node id → tie link (node → its frame)
-        self._moved: dict[tuple[int, int], tuple[Link | GraphLink, GraphLink]] = {}
-        self._heading = np.eye(6)
-        self._rigid = np.eye(6)
-        self._eye = np.eye(4)
-
-    def fits(self, root: int, heading_sigma: float) -> bool:
-        """True when `extend` can continue the last `graph` call's links (same root and σ)."""
-        return heading_sigma == self._sigma and root == self._root
-
-    def extend(self, poses: Mapping[int, F64], links: Sequence[Link | GraphLink], root: int,
-               heading_sigma: float, frame_poses: Mapping[int, F64] | None = None,
-               ) -> tuple[dict[int, F64], list[GraphLink]]:
-        """The part of `graph` for added nodes (`poses`) and links only (`fits` must hold):
-        those nodes, their frames and ties, and the links' graph copies."""
-        assert self.fits(root, heading_sigma)
-        return self._build(poses, links, root, heading_sigma, frame_poses, forget=False)
-
-    def graph(self, poses: Mapping[int, F64], links: Sequence[Link | GraphLink], root: int,
-              heading_sigma: float, frame_poses: Mapping[int, F64] | None = None,
-              ) -> tuple[dict[int, F64], list[GraphLink]]:
-        """`odometry_frame_graph(poses, links, root, heading_sigma, frame_poses)`."""
-        return self._build(poses, links, root, heading_sigma, frame_poses, forget=True)
-
-    def _build(self, poses: Mapping[int, F64], links: Sequence[Link | GraphLink], root: int,
-               heading_sigma: float, frame_poses: Mapping[int, F64] | None, forget: bool,
-               ) -> tuple[dict[int, F64], list[GraphLink]]:
-        if heading_sigma != self._sigma or root != self._root:
-            tie = 1.0 / _FRAME_TIE_VARIANCE
-            self._sigma, self._root = heading_sigma, root
-            self._heading = np.diag([tie, tie, tie, tie, tie, 1.0 / heading_sigma**2])
-            self._rigid = np.diag(np.full(6, tie))
-            self._ties = {}
-        known = frame_poses or {}
-        out_poses: dict[int, F64] = dict(poses)
-        out: list[GraphLink] = []
-        ties = self._ties
-        offset = ODOM_FRAME_ID_OFFSET
-        for i in poses:
-            f = offset + i
-            out_poses[f] = known.get(f, poses[i])
-            t = ties.get(i)
-            if t is None:
-                t = ties[i] = GraphLink(i, f, self._eye, self._rigid if i == root else self._heading)
-            out.append(t)
-        moved = self._moved
-        if forget and len(moved) > 2 * len(links) + 1024:  # forget links no longer given
-            moved.clear()
-        for lk in links:
-            key = (lk.from_id, lk.to_id)
-            entry = moved.get(key)
-            if entry is None or entry[0] is not lk:
-                if getattr(lk, "type", None) in _ODOMETRY_LINKS:
-                    g = GraphLink(offset + lk.from_id, offset + lk.to_id, lk.transform,
-                                  lk.information)
-                else:
-                    g = GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information)
-                entry = moved[key] = (lk, g)
-            out.append(entry[1])
-        return out_poses, out
-
-
-# -- loop-closure plausibility ----------------------------------------------------------------
-def _xyt(t: F64) -> F64:
-    return np.array([t[0, 3], t[1, 3], yaw_of(t)])
-
-
-def _link_covariance_xyt(info: F64) -> F64:
-    """(x, y, yaw) covariance of a link from its 6×6 information (diagonal terms)."""
-    d = np.diag(np.asarray(info, dtype=np.float64))[[0, 1, 5]]
-    return np.diag(1.0 / np.maximum(d, 1e-12))
-
-
-def path_covariance(links: Mapping[int, Mapping[int, Link]], start: int, goal: int,
-                    max_nodes: int = 100_000, *,
-                    heading_sigma: float = 0.0) -> tuple[F64, F64] | None:
-    """Pose of `goal` in `start`'s frame (x, y, yaw) and its 3×3 covariance, composed along the
-    graph path from `start` to `goal` of least summed link variance (None if not connected).
-
-    Each link's covariance (x, y, yaw, in the link's `from` frame) is propagated through the
-    SE(2) composition with first-order Jacobians, so a heading uncertainty early on the path
-    grows into a lateral one further along it. A path is one of several in a graph with loops,
-    so this overestimates the marginal covariance: a conservative prediction for gating.
-    `heading_sigma` (`RGBD/OdomHeadingSigma`) adds the odometry frame's heading offset where
-    the path enters and where it leaves a run of odometry links.
-    """
-    if start == goal:
-        return np.zeros(3), np.zeros((3, 3))
-    best = {start: 0.0}
-    parent: dict[int, int] = {}
-    heap = [(0.0, start)]
-    done: set[int] = set()
-    while heap:
-        cost, n = heapq.heappop(heap)
-        if n in done:
-            continue
-        done.add(n)
-        if n == goal or len(done) > max_nodes:
-            break
-        for m, lk in links.get(n, {}).items():
-            if m in done:
-                continue
-            # trace of `_link_covariance_xyt(lk.information)`, in scalars (same values)
-            info = lk.information
-            w = cost + (1.0 / max(float(info[0, 0]), 1e-12) + 1.0 / max(float(info[1, 1]), 1e-12)
-                        + 1.0 / max(float(info[5, 5]), 1e-12))
-            if w < best.get(m, np.inf):
-                best[m] = w
-                parent[m] = n
-                heapq.heappush(heap, (w, m))
-    if goal not in parent:
-        return None
-    chain = [goal]
-    while chain[-1] != start:
-        chain.append(parent[chain[-1]])
-    chain.reverse()
-    pose = np.zeros(3)
-    cov = np.zeros((3, 3))
-    in_odometry = False
-    for a, b in zip(chain[:-1], chain[1:]):
-        lk = links[a][b]
-        odometry = heading_sigma > 0 and lk.type in _ODOMETRY_LINKS
-        if odometry != in_odometry:  # a node's heading ↔ its odometry frame's
-            cov[2, 2] += heading_sigma**2
-            in_odometry = odometry
-        step = _xyt(lk.transform)
-        c, s = np.cos(pose[2]), np.sin(pose[2])
-        j1 = np.array([[1.0, 0.0, -s * step[0] - c * step[1]],
-                       [0.0, 1.0, c * step[0] - s * step[1]],
-                       [0.0, 0.0, 1.0]])
-        j2 = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        cov = j1 @ cov @ j1.T + j2 @ _link_covariance_xyt(lk.information) @ j2.T
-        pose = np.array([pose[0] + c * step[0] - s * step[1],
-                         pose[1] + s * step[0] + c * step[1],
-                         float(np.arctan2(np.sin(pose[2] + step[2]), np.cos(pose[2] + step[2])))])
-    if in_odometry:
-        cov[2, 2] += heading_sigma**2
-    return pose, cov
-
-
-def closure_mahalanobis(link: Link, from_pose: F64, to_pose: F64,
-                        links: Mapping[int, Mapping[int, Link]], *,
-                        heading_sigma: float = 0.0) -> float | None:
-    """Mahalanobis distance (σ) between a candidate closure and the graph's prediction.
-
-    `from_pose`/`to_pose`: current estimates of the closure's two nodes (map frame, 4×4). The
-    prediction is their relative pose; its covariance is that of the least-variance graph path
-    between them (`path_covariance`, with `heading_sigma`) plus the closure's own. None when
-    they are not connected.
-    """
-    path = path_covariance(links, link.from_id, link.to_id, heading_sigma=heading_sigma)
-    if path is None:
-        return None
-    _, cov = path
-    pred = _xyt(se3_inverse(from_pose) @ to_pose)
-    meas = _xyt(link.transform)
-    d = meas - pred
-    d[2] = float(np.arctan2(np.sin(d[2]), np.cos(d[2])))
-    total = cov + _link_covariance_xyt(link.information)
-    return float(np.sqrt(max(0.0, float(d @ np.linalg.solve(total, d)))))
