@@ -184,3 +184,13 @@ def test_config_validates() -> None:
     with pytest.raises(ExploreConfigError):
         ExploreConfig.from_mapping({"potential_scal": 1.0})
     assert ExploreConfig.from_mapping({"min_frontier_size": 1}).min_frontier_size == 1.0
+
+
+def test_free_space_on_the_map_border_is_a_frontier() -> None:
+    # a corridor seen down its length: the map ends where the scan end points did
+    d = np.zeros((40, 100), np.int8)
+    d[0, :] = d[39, :] = 100
+    search = search_frontiers(OccupancyMap(d, RES, (0.0, 0.0, 0.0)), (0.5, 1.0, 0.0), ExploreConfig())
+    east = [f for f in search.frontiers if f.centroid[0] > 4.9]
+    assert len(east) == 1 and east[0].size == pytest.approx(38 * RES)
+    assert east[0].points[:, 0].min() == pytest.approx(5.025)  # just beyond the last column

@@ -69,8 +69,8 @@ class Frontier:
     would see from there (m²); ``turn`` the turning it takes (rad).
     """
 
-    cells: npt.NDArray[np.int64]
-    """(N, 2) column, row of the frontier cells."""
+    points: npt.NDArray[np.float64]
+    """(N, 2) centres of the frontier cells (m)."""
     size: float
     centroid: tuple[float, float]
     entry: tuple[float, float]
@@ -314,15 +314,32 @@ def mark_swept(grid: OccupancyMap, positions: npt.ArrayLike, radius: float) -> O
     return OccupancyMap(data, grid.resolution, grid.origin, grid.frame_id)
 
 
+def _padded(grid: OccupancyMap, passable: npt.NDArray[np.bool_] | None, pad: int
+            ) -> tuple[OccupancyMap, npt.NDArray[np.bool_] | None]:
+    """``grid`` with ``pad`` unknown cells around it (and ``passable`` with impassable ones)."""
+    data = np.pad(grid.data, pad, constant_values=-1)
+    yaw = grid.origin[2]
+    c, s = math.cos(yaw), math.sin(yaw)
+    dx = dy = -pad * grid.resolution
+    origin = (grid.origin[0] + c * dx - s * dy, grid.origin[1] + s * dx + c * dy, yaw)
+    if passable is not None:
+        passable = np.pad(passable, pad, constant_values=False)
+    return OccupancyMap(data, grid.resolution, origin, grid.frame_id), passable
+
+
 def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: ExploreConfig,
                      passable: npt.NDArray[np.bool_] | None = None) -> FrontierSearch:
     """Every reachable frontier of ``grid`` seen from the robot at ``robot`` (x, y, yaw),
     cheapest first.
 
     ``passable``: where the robot's centre may go (default `reachable_mask`); a caller with
-    a costmap passes its non-lethal, non-inscribed cells here.
+    a costmap passes its non-lethal, non-inscribed cells here. The ``distance`` field refers to the grid padded with 2 unknown cells on every side.
     """
     res = grid.resolution
+    # the map ends where the scans' end points did: free cells on its border face the
+    # unknown beyond it (a corridor seen down its length), so pad it with unknown cells
+    pad = 2
+    grid, passable = _padded(grid, passable, pad)
     if passable is None:
         passable = reachable_mask(grid, config)
     rx, ry, ryaw = (float(v) for v in robot)
@@ -404,7 +421,8 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
         rows = rows + sl[0].start
         cols = cols + sl[1].start
         cells = np.stack([cols, rows], axis=1).astype(np.int64)
-        centroid = map_to_world(grid, cells.mean(axis=0)[None, :])[0]
+        pts = map_to_world(grid, cells)
+        centroid = pts.mean(axis=0)
         er, ec = divmod(int(best_flat[k]), grid.width)
         entry = map_to_world(grid, np.array([[ec, er]]))[0]
         if view_flat[k] >= 0:
@@ -426,7 +444,7 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
         turn = abs(_wrap(yaw - ryaw)) if travel < 0.3 else (
             abs(_wrap(bearing - ryaw)) + abs(_wrap(yaw - bearing)))
         found.append(Frontier(
-            cells=cells, size=float(sizes[k - 1]),
+            points=pts, size=float(sizes[k - 1]),
             centroid=(float(centroid[0]), float(centroid[1])),
             entry=(float(entry[0]), float(entry[1])),
             viewpoint=(float(view[0]), float(view[1]), yaw),

@@ -414,9 +414,7 @@ class ExploreNode(Node):
             cells.color.r, cells.color.g, cells.color.b, cells.color.a = \
                 (1.0, 0.0, 0.0, 1.0) if abandoned else (0.0, 0.0, 1.0, 1.0)
             cells.pose.orientation.w = 1.0
-            ox, oy = self.grid.origin[0], self.grid.origin[1]
-            cells.points = [Point(x=ox + (c + 0.5) * res, y=oy + (r + 0.5) * res, z=0.0)
-                            for c, r in f.cells]
+            cells.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in f.points]
             dot = Marker(ns="frontiers", id=2 * k + 1, type=Marker.SPHERE, action=Marker.ADD)
             dot.header.frame_id, dot.header.stamp = frame, stamp
             dot.pose.position.x, dot.pose.position.y = f.centroid
