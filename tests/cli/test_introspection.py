@@ -147,6 +147,11 @@ def test_topic_list_info_and_node_list(graph_env: Any, capsys: Any) -> None:
     assert "Type: std_msgs/msg/String" in out
     assert "Subscription count: 1" in out
     assert "Node name: hub" in out
+    code, out = eddie(capsys, "topic", "type", "/latched_map")
+    assert (code, out) == (0, "std_msgs/msg/String\n")
+    code, out = eddie(capsys, "topic", "find", "std_msgs/String")
+    assert code == 0 and {"/chatter", "/latched_map"} <= set(out.splitlines())
+    assert "/latched_map" not in eddie(capsys, "topic", "find", "std_msgs/msg/Bool")[1]
     code, out = eddie(capsys, "node", "list")
     assert code == 0
     assert "/hub" in out.splitlines()
@@ -164,6 +169,10 @@ def test_service_list_and_call(graph_env: Any, capsys: Any) -> None:
     assert code == 0
     assert "/ping [std_srvs/srv/Trigger]" in out.splitlines()
     assert "/hub/get_parameters [rcl_interfaces/srv/GetParameters]" in out.splitlines()
+    code, out = eddie(capsys, "service", "find", "std_srvs/Trigger")
+    assert code == 0 and "/ping" in out.splitlines()
+    code, out = eddie(capsys, "service", "find", "std_srvs/srv/Trigger", "-c")
+    assert code == 0 and int(out) >= 1
     code, out = eddie(capsys, "service", "call", "/ping", "std_srvs/srv/Trigger")
     assert code == 0
     response = yaml.safe_load(out.split("response:\n", 1)[1])

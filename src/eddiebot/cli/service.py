@@ -1,4 +1,4 @@
-"""``eddie service list|call|type`` — as ``ros2 service``."""
+"""``eddie service list|call|type|find`` — as ``ros2 service``."""
 
 from __future__ import annotations
 
@@ -19,6 +19,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("-a", "--include-hidden-services", action="store_true")
     p = sub.add_parser("type", help="the type of a service")
     p.add_argument("service_name")
+    p = sub.add_parser("find", help="the services of a type")
+    p.add_argument("service_type")
+    p.add_argument("-c", "--count-services", action="store_true")
+    p.add_argument("-a", "--include-hidden-services", action="store_true")
     p = sub.add_parser("call", help="call a service with YAML request values")
     p.add_argument("service_name")
     p.add_argument("service_type")
@@ -51,11 +55,16 @@ def run(args: argparse.Namespace) -> int:
             return 0
         shown = {k: v for k, v in services.items()
                  if args.include_hidden_services or not _hidden(k)}
+        if verb == "find":
+            pkg, _, name = args.service_type.partition("/")
+            wanted = f"{pkg}/srv/{name.rpartition('/')[2]}"  # std_srvs/SetBool or …/srv/SetBool
+            shown = {k: v for k, v in shown.items() if wanted in v}
         if args.count_services:
             print(len(shown))
             return 0
         for name in sorted(shown):
-            print(f"{name} [{', '.join(sorted(shown[name]))}]" if args.show_types else name)
+            show_types = getattr(args, "show_types", False)
+            print(f"{name} [{', '.join(sorted(shown[name]))}]" if show_types else name)
     return 0
 
 

@@ -66,6 +66,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--window", "-w", type=int, default=100, help="samples in the window")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
 
+    p = sub.add_parser("type", help="the type of a topic")
+    p.add_argument("topic_name")
+    p = sub.add_parser("find", help="the topics of a type")
+    p.add_argument("topic_type")
+    p.add_argument("-c", "--count-topics", action="store_true")
+    p.add_argument("-a", "--include-hidden-topics", action="store_true")
     p = sub.add_parser("info", help="type, publishers and subscribers of a topic")
     p.add_argument("topic_name")
     p.add_argument("-v", "--verbose", action="store_true", help="every endpoint with its QoS")
@@ -97,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     try:
         return int({"list": _list, "echo": _echo, "hz": _hz, "bw": _bw, "info": _info,
-                    "pub": _pub}[verb](args))
+                    "pub": _pub, "type": _type, "find": _find}[verb](args))
     except (ValueError, UnknownTypeError) as exc:
         print(f"eddie topic {verb}: {exc}", file=sys.stderr)
         return 2
@@ -327,6 +333,33 @@ def _rate_report(stamps: list[float]) -> str:
     rate = 1.0 / mean if mean > 0 else float("inf")
     return (f"average rate: {rate:.3f}\n\tmin: {min(gaps):.3f}s max: {max(gaps):.3f}s "
             f"std dev: {std:.5f}s window: {len(stamps)}")
+
+
+# -- type / find ----------------------------------------------------------------------
+def _type(args: argparse.Namespace) -> int:
+    topic = args.topic_name if args.topic_name.startswith("/") else "/" + args.topic_name
+    with cli_session("topic") as s:
+        s.wait(discovery_wait_s())
+        types = s.topic_types().get(topic)
+    if not types:
+        print(f"Unknown topic '{topic}'", file=sys.stderr)
+        return 1
+    print("\n".join(sorted(types)))
+    return 0
+
+
+def _find(args: argparse.Namespace) -> int:
+    wanted = parse_type(args.topic_type)
+    with cli_session("topic") as s:
+        s.wait(discovery_wait_s())
+        found = sorted(name for name, types in s.topic_types().items()
+                       if wanted in types and (args.include_hidden_topics or not _hidden(name)))
+    if args.count_topics:
+        print(len(found))
+    else:
+        for name in found:
+            print(name)
+    return 0
 
 
 # -- info -----------------------------------------------------------------------------
