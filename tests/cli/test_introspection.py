@@ -207,3 +207,33 @@ def test_action_list_and_send_goal(graph_env: Any, capsys: Any) -> None:
     assert "Goal finished with status: SUCCEEDED" in out
     result = yaml.safe_load(out.split("Result:\n", 1)[1].split("\n\n", 1)[0])
     assert result["total_elapsed_time"]["sec"] == 2
+
+
+def test_lifecycle_nodes_get_list_set(graph_env: Any, capsys: Any) -> None:
+    import threading
+
+    from eddiebot.core import Context, SingleThreadedExecutor
+    from eddiebot.core.lifecycle import LifecycleNode
+    from eddiebot.transport import connect
+
+    ctx = Context()
+    assert connect(ctx, required=True) is not None
+    node = LifecycleNode("lc_talker", context=ctx)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    spinner = threading.Thread(target=ex.spin, daemon=True)
+    spinner.start()
+    try:
+        code, out = eddie(capsys, "lifecycle", "nodes")
+        assert code == 0 and "/lc_talker" in out.splitlines()
+        assert eddie(capsys, "lifecycle", "get", "/lc_talker") == (0, "unconfigured [1]\n")
+        code, out = eddie(capsys, "lifecycle", "list", "lc_talker")
+        assert code == 0 and "- configure [1]" in out.splitlines()
+        code, out = eddie(capsys, "lifecycle", "set", "/lc_talker", "configure")
+        assert (code, out) == (0, "Transitioning successful\n")
+        assert eddie(capsys, "lifecycle", "get", "/lc_talker") == (0, "inactive [2]\n")
+        assert eddie(capsys, "lifecycle", "set", "/lc_talker", "configure")[0] == 1
+    finally:
+        ex.shutdown()
+        ctx.shutdown()
+        spinner.join(5.0)

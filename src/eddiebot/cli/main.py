@@ -60,6 +60,7 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("node", "eddiebot.cli.node_cmd", "list nodes"),
     ("param", "eddiebot.cli.param", "list|get|set parameters"),
     ("service", "eddiebot.cli.service", "list|type|find|call services"),
+    ("lifecycle", "eddiebot.cli.lifecycle", "nodes|get|list|set lifecycle nodes"),
     ("action", "eddiebot.cli.action", "list|send_goal actions"),
     ("interface", "eddiebot.cli.interface", "show message, service and action definitions"),
     ("record", "eddiebot.cli.record", "record topics to a rosbag2 (MCAP)"),
