@@ -192,6 +192,19 @@ def test_param_list_get_set(graph_env: Any, capsys: Any) -> None:
     assert (code, out.strip()) == (0, "Double value is: 2.0")
     code, _ = eddie(capsys, "param", "set", "/hub", "speed", "fast")
     assert code == 1
+    code, out = eddie(capsys, "param", "describe", "/hub", "speed")
+    assert code == 0 and out.splitlines()[:2] == ["Parameter name: speed", "  Type: double"]
+    assert eddie(capsys, "param", "describe", "/hub", "no_such")[0] == 1
+
+
+def test_param_load_sets_the_nodes_section(graph_env: Any, capsys: Any, tmp_path: Path) -> None:
+    params = tmp_path / "hub.yaml"
+    params.write_text("/hub:\n  ros__parameters:\n    speed: 3.5\n"
+                      "other:\n  ros__parameters:\n    speed: 9.0\n")
+    code, out = eddie(capsys, "param", "load", "/hub", str(params))
+    assert (code, out.strip()) == (0, "Set parameter speed successful")
+    code, out = eddie(capsys, "param", "get", "/hub", "speed")
+    assert (code, out.strip()) == (0, "Double value is: 3.5")
 
 
 def test_action_list_and_send_goal(graph_env: Any, capsys: Any) -> None:

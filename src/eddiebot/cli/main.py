@@ -58,7 +58,7 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("calibrate", "eddiebot.cli.calibrate", "UMBmark calibration of track width and wheel radius"),
     ("topic", "eddiebot.cli.topic", "list|echo|hz|bw|info|type|find|pub topics"),
     ("node", "eddiebot.cli.node_cmd", "list nodes"),
-    ("param", "eddiebot.cli.param", "list|get|set parameters"),
+    ("param", "eddiebot.cli.param", "list|get|set|describe|delete|dump|load parameters"),
     ("service", "eddiebot.cli.service", "list|type|find|call services"),
     ("lifecycle", "eddiebot.cli.lifecycle", "nodes|get|list|set lifecycle nodes"),
     ("action", "eddiebot.cli.action", "list|send_goal actions"),

@@ -1,4 +1,5 @@
-"""``eddie param list|get|set|dump`` — as ``ros2 param``, through rcl_interfaces services."""
+"""``eddie param list|get|set|describe|delete|dump|load`` — as ``ros2 param``, through
+rcl_interfaces services."""
 
 from __future__ import annotations
 
@@ -24,8 +25,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("node_name")
     p.add_argument("parameter_name")
     p.add_argument("value")
+    p = sub.add_parser("describe", help="type, description and constraints of parameters")
+    p.add_argument("node_name")
+    p.add_argument("parameter_names", nargs="+")
+    p = sub.add_parser("delete", help="undeclare a parameter (the node may refuse)")
+    p.add_argument("node_name")
+    p.add_argument("parameter_name")
     p = sub.add_parser("dump", help="a node's parameters as a ROS 2 parameter file")
     p.add_argument("node_name")
+    p = sub.add_parser("load", help="set a node's parameters from a ROS 2 parameter file")
+    p.add_argument("node_name")
+    p.add_argument("parameter_file")
     for sp in sub.choices.values():
         sp.add_argument("--timeout", type=float, default=5.0,
                         help="seconds to wait for the node's parameter services (default 5)")
@@ -108,6 +118,17 @@ def run(args: argparse.Namespace) -> int:
                 return 0
             print(f"Setting parameter failed: {result.reason}", file=sys.stderr)
             return 1
+        if verb == "describe":
+            return _describe_params(client, args.parameter_names)
+        if verb == "delete":
+            result = client.set_parameters({args.parameter_name: None})[0]
+            if result.successful:
+                print("Deleted parameter successfully")
+                return 0
+            print(f"Deleting parameter failed: {result.reason}", file=sys.stderr)
+            return 1
+        if verb == "load":
+            return _load(client, _fq(args.node_name), args.parameter_file)
         # dump
         import yaml
 
@@ -117,3 +138,59 @@ def run(args: argparse.Namespace) -> int:
         print(yaml.safe_dump({_fq(args.node_name): {"ros__parameters": params}},
                              sort_keys=True).rstrip("\n"))
     return 0
+
+
+_TYPE_NAMES = {0: "not set", 1: "boolean", 2: "integer", 3: "double", 4: "string",
+               5: "byte array", 6: "boolean array", 7: "integer array", 8: "double array",
+               9: "string array"}
+
+
+def _describe_params(client: Any, names: list[str]) -> int:
+    status = 0
+    found = {str(d.name): d for d in client.describe_parameters(names)}
+    for name in names:
+        desc = found.get(name)
+        ptype = int(getattr(desc, "type", 0))
+        if desc is None or ptype == 0:
+            print(f"Parameter not set: {name}", file=sys.stderr)
+            status = 1
+            continue
+        print(f"Parameter name: {name}")
+        print(f"  Type: {_TYPE_NAMES.get(ptype, str(ptype))}")
+        if desc.description:
+            print(f"  Description: {desc.description}")
+        constraints = []
+        if desc.read_only:
+            constraints.append("    Read only: true")
+        if desc.dynamic_typing:
+            constraints.append("    Dynamic typing: true")
+        for r in list(desc.floating_point_range) + list(desc.integer_range):
+            constraints.append(f"    Min value: {r.from_value}")
+            constraints.append(f"    Max value: {r.to_value}")
+        if desc.additional_constraints:
+            constraints.append(f"    {desc.additional_constraints}")
+        if constraints:
+            print("  Constraints:")
+            print("\n".join(constraints))
+    return status
+
+
+def _load(client: Any, node: str, path: str) -> int:
+    """Set the parameters a ROS 2 parameter file gives ``node`` (its own section and ``/**``)."""
+    from pathlib import Path
+
+    from eddiebot.core.parameters import load_parameter_file, node_matches
+
+    pf = load_parameter_file(Path(path))
+    values = {o.name: o.value for o in pf.overrides if node_matches(o.node_pattern, node)}
+    if not values:
+        print(f"eddie param load: {path} sets nothing for {node}", file=sys.stderr)
+        return 1
+    status = 0
+    for (name, _), result in zip(values.items(), client.set_parameters(values)):
+        if result.successful:
+            print(f"Set parameter {name} successful")
+        else:
+            print(f"Set parameter {name} failed: {result.reason}", file=sys.stderr)
+            status = 1
+    return status
