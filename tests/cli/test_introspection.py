@@ -212,6 +212,11 @@ def test_action_list_and_send_goal(graph_env: Any, capsys: Any) -> None:
     code, out = eddie(capsys, "action", "list", "-t")
     assert code == 0
     assert "/wait_here [nav2_msgs/action/Wait]" in out.splitlines()
+    code, out = eddie(capsys, "action", "info", "/wait_here")
+    assert code == 0
+    lines = out.splitlines()
+    assert lines[0] == "Action: /wait_here" and "Action servers: 1" in lines
+    assert "    /hub" in lines
     code, out = eddie(capsys, "action", "send_goal", "/wait_here", "nav2_msgs/action/Wait",
                       "{time: {sec: 2}}", "--feedback", "--timeout", "20")
     assert code == 0, out

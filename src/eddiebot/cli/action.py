@@ -25,6 +25,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p = sub.add_parser("list", help="actions in the graph")
     p.add_argument("-t", "--show-types", action="store_true")
     p.add_argument("-c", "--count-actions", action="store_true")
+    p = sub.add_parser("info", help="the servers and clients of an action")
+    p.add_argument("action_name")
+    p.add_argument("-t", "--show-types", action="store_true")
+    p.add_argument("-c", "--count", action="store_true")
     p = sub.add_parser("send_goal", help="send a goal (YAML values) and wait for the result")
     p.add_argument("action_name")
     p.add_argument("action_type")
@@ -49,11 +53,36 @@ def run(args: argparse.Namespace) -> int:
             if name.endswith("/_action/send_goal"):
                 actions[name[: -len("/_action/send_goal")]] = {
                     t.removesuffix("_SendGoal") for t in types}
+        if verb == "info":
+            return _info(s, args, actions)
         if args.count_actions:
             print(len(actions))
             return 0
         for name in sorted(actions):
             print(f"{name} [{', '.join(sorted(actions[name]))}]" if args.show_types else name)
+    return 0
+
+
+def _info(s: Any, args: argparse.Namespace, actions: dict[str, set[str]]) -> int:
+    """``ros2 action info``: who serves the action and who uses it (by its send_goal service)."""
+    name = args.action_name if args.action_name.startswith("/") else "/" + args.action_name
+    if name not in actions:
+        print(f"Unknown action '{name}'", file=sys.stderr)
+        return 1
+    cache = s.remote()
+    send_goal = f"{name}/_action/send_goal"
+    servers = sorted({e.node for e in cache.services(send_goal)}) if cache is not None else []
+    clients = sorted({e.node for e in cache.clients(send_goal)}) if cache is not None else []
+    kind = f" [{', '.join(sorted(actions[name]))}]" if args.show_types else ""
+    print(f"Action: {name}")
+    print(f"Action clients: {len(clients)}")
+    if not args.count:
+        for node in clients:
+            print(f"    {node}{kind}")
+    print(f"Action servers: {len(servers)}")
+    if not args.count:
+        for node in servers:
+            print(f"    {node}{kind}")
     return 0
 
 

@@ -61,7 +61,7 @@ COMMANDS: list[tuple[str, str, str]] = [
     ("param", "eddiebot.cli.param", "list|get|set|describe|delete|dump|load parameters"),
     ("service", "eddiebot.cli.service", "list|type|find|call services"),
     ("lifecycle", "eddiebot.cli.lifecycle", "nodes|get|list|set lifecycle nodes"),
-    ("action", "eddiebot.cli.action", "list|send_goal actions"),
+    ("action", "eddiebot.cli.action", "list|info|send_goal actions"),
     ("interface", "eddiebot.cli.interface", "show message, service and action definitions"),
     ("record", "eddiebot.cli.record", "record topics to a rosbag2 (MCAP)"),
     ("play", "eddiebot.cli.play", "play a rosbag2 with its original timing"),
