@@ -5,11 +5,10 @@ import csv
 import json
 
 import cv2
-from vslam_synthetic import frame, kinect_camera, planar_pose
+from vslam_synthetic import frame, kinect_camera
 
+from _support.vslam_session import write_session_database
 from eddiebot.cli import vslam as cli
-from eddiebot.vslam.database import SessionDatabase
-from eddiebot.vslam.rtabmap import Rtabmap
 
 CAM = kinect_camera(320, 240)
 SEC = 1_000_000_000
@@ -19,16 +18,6 @@ def _run(argv):
     parser = argparse.ArgumentParser(prog="eddie vslam")
     cli.add_arguments(parser)
     return cli.run(parser.parse_args(argv))
-
-
-def _database(path, n=6):
-    with SessionDatabase(path, delete_on_start=True) as db:
-        slam = Rtabmap({"RGBD/LinearUpdate": "0.05", "RGBD/ProximityBySpace": "false",
-                        "Reg/Force3DoF": "true", "RGBD/CreateOccupancyGrid": "true"}, database=db)
-        for k in range(n):
-            slam.process(*frame(3, 2.0 + 0.2 * k, 3.0, 0.0), CAM, planar_pose(0.2 * k, 0, 0),
-                         k * SEC)
-        db.close(slam)
 
 
 def test_loops_writes_query_match_score_rows(tmp_path):
@@ -54,7 +43,7 @@ def test_loops_writes_query_match_score_rows(tmp_path):
 
 def test_db_info_and_export(tmp_path, capsys):
     db = tmp_path / "map.db"
-    _database(db)
+    write_session_database(db)
     assert _run(["db", "info", str(db), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["nodes"] == 6 and info["sessions"] == 1

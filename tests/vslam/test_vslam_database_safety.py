@@ -9,8 +9,8 @@ import json
 from pathlib import Path
 
 import pytest
-from test_vslam_cli import _database
 
+from _support.vslam_session import write_session_database
 from eddiebot.cli import vslam as cli
 from eddiebot.core.context import Context
 from eddiebot.vslam.database import SessionDatabase, is_session_database
@@ -66,7 +66,7 @@ def test_sim_keeps_the_database_unless_delete_db_on_start(tmp_path, monkeypatch,
     monkeypatch.setattr(stack, "run_stack",
                         lambda args, name, launch_args: launched.append(launch_args) or 0)
     ours = tmp_path / "map.db"
-    _database(ours, n=2)
+    write_session_database(ours, n=2)
     assert _run(["--database", str(ours)]) == 0
     assert launched[-1]["delete_db_on_start"] == "false"
     assert _run(["sim", "--database", str(ours), "--delete_db_on_start"]) == 0
@@ -92,7 +92,7 @@ def test_db_info_and_export_only_read(tmp_path, capsys, foreign):
     assert _run(["db", "info", str(foreign)]) == 1
     assert _digest(foreign) == before
     ours = tmp_path / "map.db"
-    _database(ours, n=3)
+    write_session_database(ours, n=3)
     before = _digest(ours)
     ours.chmod(0o444)  # read-only files can be inspected
     try:

@@ -67,7 +67,7 @@ CORRIDOR_LONG_ROUTE: tuple[Waypoint, ...] = (
 #: a posterior of 0.05 (`Rtabmap/LoopThr`, upstream 0.11) and, when the top one fails, the next
 #: two places verified (`RGBD/LoopClosureHypotheses` 3, not upstream): recall at 100 % precision
 #: 0.923 / 0.911 on office / warehouse against 0.841 / 0.837 (docs/benchmarks/vslam.md#vslam-recall).
-#: launch/vslam.yaml carries the same profile (tests/vslam/test_vslam_adopt_profile.py).
+#: launch/vslam.yaml carries the same profile (tests/vslam/test_vslam_parameters_launch_profile.py).
 SLAM_PARAMETERS: dict[str, Any] = {"odom_tf_linear_variance": 1e-5,
                                    "odom_tf_angular_variance": 1e-5,
                                    "Vis/EstimationType": "0",

@@ -20,7 +20,7 @@ one pass per level that also merges its answers with the tail's: the same bit se
 (drawn from OpenCV's RNG as FLANN's `LshTable` draws them), the same buckets in the same order
 and FLANN's result set (unique candidates, a candidate at the current second distance turned
 away), so each query returns what `cv2.flann.Index.knnSearch` returned, without its
-per-candidate allocations and the merging in numpy (`tests/vslam/test_vslam_speed_lsh.py`
+per-candidate allocations and the merging in numpy (`tests/vslam/test_vslam_descriptor_search.py`
 compares both).
 """
 

@@ -8,8 +8,8 @@ so the tests run in about a second.
 
 import numpy as np
 import pytest
-from vslam_synthetic import eddie_kinect_320
 
+from _support.vslam_room import CAM, ICP_VO, ROOM, render_room, spin_in_room
 from eddiebot.vslam.depth_icp import (
     IcpSettings,
     ScanCloud,
@@ -27,37 +27,8 @@ from eddiebot.vslam.odometry import VisualOdometry
 from eddiebot.vslam.parameters import RtabmapParameters
 from eddiebot.vslam.transforms import from_xyz_yaw, se3_inverse, yaw_of
 
-CAM = eddie_kinect_320()
-#: a 4 × 3 m room, 2.5 m high: planes (normal, offset) with normal · x = offset
-ROOM = [((1.0, 0.0, 0.0), 2.0), ((1.0, 0.0, 0.0), -2.0), ((0.0, 1.0, 0.0), 1.5),
-        ((0.0, 1.0, 0.0), -1.5), ((0.0, 0.0, 1.0), 0.0), ((0.0, 0.0, 1.0), 2.5)]
 SETTINGS = IcpSettings(point_to_plane=True, force_3dof=True, downsampling_step=4,
                        max_correspondence_distance=0.1, range_max=3.0)
-ICP_VO = {"Reg/Force3DoF": "true", "Icp/PointToPlane": "true", "Icp/DownsamplingStep": "4",
-          "Icp/MaxCorrespondenceDistance": "0.1", "Icp/RangeMax": "3",
-          "OdomF2M/ScanMaxSize": "10000"}
-
-
-def _render(pose: np.ndarray, planes=ROOM, noise: float = 0.0,
-            rng: np.random.Generator | None = None) -> np.ndarray:
-    """uint16 mm depth image of the nearest plane along each pixel ray from base `pose`."""
-    cam = pose @ CAM.local_transform
-    u, v = np.meshgrid(np.arange(CAM.width), np.arange(CAM.height))
-    rays = np.stack([(u - CAM.cx) / CAM.fx, (v - CAM.cy) / CAM.fy, np.ones(u.shape)], axis=2)
-    d = rays @ cam[:3, :3].T
-    o = cam[:3, 3]
-    best = np.full(u.shape, np.inf)
-    for n, c in planes:
-        nn = np.asarray(n)
-        den = d @ nn
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (c - o @ nn) / den
-        t[~np.isfinite(t) | (t <= 0.05)] = np.inf
-        best = np.minimum(best, t)
-    if noise > 0 and rng is not None:
-        best = best * (1.0 + rng.normal(0.0, noise, best.shape))
-    out = np.where(np.isfinite(best) & (best < 8.0), np.round(best * 1000.0), 0)
-    return out.astype(np.uint16)
 
 
 def _pose_error(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
@@ -67,7 +38,7 @@ def _pose_error(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 def test_cloud_normals_and_voxels_of_a_room():
     pose = from_xyz_yaw(0.0, 0.0, 0.3)
-    depth = _render(pose)
+    depth = render_room(pose)
     pts = depth_cloud(depth, CAM, step=4)
     world = pts @ pose[:3, :3].T + pose[:3, 3]
     # every point lies on one of the room's planes (mm quantisation)
@@ -90,8 +61,8 @@ def test_icp_recovers_a_planar_motion_in_a_room_corner(truth_xyt):
     rng = np.random.default_rng(2)
     a = from_xyz_yaw(0.5, 0.3, 0.6)  # looking into the (2, 1.5) corner
     b = a @ from_xyz_yaw(*truth_xyt)
-    ref = make_scan(_render(a, noise=0.002, rng=rng), CAM, SETTINGS).transformed(a)
-    new = make_scan(_render(b, noise=0.002, rng=rng), CAM, SETTINGS)
+    ref = make_scan(render_room(a, noise=0.002, rng=rng), CAM, SETTINGS).transformed(a)
+    new = make_scan(render_room(b, noise=0.002, rng=rng), CAM, SETTINGS)
     guess = b @ from_xyz_yaw(0.04, -0.03, np.radians(2.0))
     r = icp_register(ref, new, guess, SETTINGS, np.eye(6) * 1e-4)
     assert r.ok and r.free_axis is None  # two walls at right angles fix x, y and yaw
@@ -108,8 +79,8 @@ def test_single_wall_leaves_the_shift_along_it_to_the_guess():
     wall = [((0.0, 1.0, 0.0), 1.1), ((0.0, 0.0, 1.0), 0.0)]  # a side wall 1.1 m away, floor
     a = from_xyz_yaw(0.0, 0.0, np.pi / 2)  # facing the wall
     b = a @ from_xyz_yaw(0.0, 0.0, np.radians(4.0))  # one frame of a spin
-    ref = make_scan(_render(a, wall), CAM, SETTINGS).transformed(a)
-    new = make_scan(_render(b, wall), CAM, SETTINGS)
+    ref = make_scan(render_room(a, wall), CAM, SETTINGS).transformed(a)
+    new = make_scan(render_room(b, wall), CAM, SETTINGS)
     complexity, _ = normals_complexity(new.normals, three_dof=True)
     assert complexity < 0.02
     guess_var = 0.02**2
@@ -144,53 +115,10 @@ def test_scan_map_subtracts_and_keeps_the_newest():
     assert len(m) == 600 and np.sum(m.cloud.points[:, 0] > 4.0) == 500  # oldest dropped
 
 
-def _world_features(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Textured points on the room's walls, 0.2–2.2 m high."""
-    side = rng.integers(0, 4, n)
-    s = rng.uniform(-1.0, 1.0, n)
-    x = np.select([side == 0, side == 1, side == 2], [2.0, -2.0, 2.0 * s], 2.0 * s)
-    y = np.select([side == 0, side == 1, side == 2], [1.5 * s, 1.5 * s, 1.5], -1.5)
-    pts = np.stack([x, y, rng.uniform(0.2, 2.2, n)], axis=1)
-    return pts, rng.integers(0, 256, (n, 32), dtype=np.uint8)
-
-
-def _observe(world: np.ndarray, desc: np.ndarray, pose: np.ndarray,
-             rng: np.random.Generator) -> FrameFeatures:
-    cam_from_world = se3_inverse(pose @ CAM.local_transform)
-    pc = world @ cam_from_world[:3, :3].T + cam_from_world[:3, 3]
-    z = pc[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = CAM.fx * pc[:, 0] / z + CAM.cx
-        v = CAM.fy * pc[:, 1] / z + CAM.cy
-    seen = np.flatnonzero((z > 0.3) & (u >= 0) & (u < CAM.width) & (v >= 0) & (v < CAM.height))
-    uv = np.stack([u[seen], v[seen]], axis=1) + rng.normal(0, 0.3, (seen.size, 2))
-    base_from_world = se3_inverse(pose)
-    pts = world[seen] @ base_from_world[:3, :3].T + base_from_world[:3, 3]
-    n = seen.size
-    return FrameFeatures(uv.astype(np.float32), rng.uniform(1, 2, n).astype(np.float32),
-                         np.full(n, 31, np.float32), np.zeros(n, np.float32),
-                         np.zeros(n, np.int32), desc[seen], pts)
-
-
-def _spin(params: dict[str, str], blank: range, frames: int = 40):
-    """A spin in place at 0.5 rad/s (10 Hz) in the room; features vanish during `blank`."""
-    rng = np.random.default_rng(4)
-    world, desc = _world_features(rng, 1500)
-    vo = VisualOdometry(RtabmapParameters.from_dict(params))
-    start = from_xyz_yaw(0.3, -0.2, 0.2)
-    results, truths = [], []
-    for k in range(frames):
-        truth = start @ from_xyz_yaw(0.0, 0.0, 0.05 * k)
-        feats = FrameFeatures.empty() if k in blank else _observe(world, desc, truth, rng)
-        r = vo.process_features(feats, CAM, k * 100_000_000, depth=_render(truth))
-        results.append(r)
-        truths.append(se3_inverse(start) @ truth)
-    return results, truths
-
 
 def test_fallback_tracks_a_textureless_stretch_and_off_reports_lost():
     blank = range(10, 24)  # 1.4 s, 40° of the spin without a single feature
-    on, truths = _spin({**ICP_VO, "Odom/IcpFallbackInliers": "40"}, blank)
+    on, truths = spin_in_room({**ICP_VO, "Odom/IcpFallbackInliers": "40"}, blank)
     assert all(r.pose is not None for r in on)
     assert sum(r.icp for r in on) >= len(blank)
     lin, ang = _pose_error(truths[-1], on[-1].pose)
@@ -200,15 +128,15 @@ def test_fallback_tracks_a_textureless_stretch_and_off_reports_lost():
     # the blank frames' covariance: small across the view, not the lost 9999
     assert all(np.all(np.diag(r.covariance)[[0, 1, 5]] < 1.0) for r in on[10:24])
 
-    off, _ = _spin(ICP_VO, blank)
+    off, _ = spin_in_room(ICP_VO, blank)
     lost = [k for k, r in enumerate(off) if r.pose is None]
     assert set(blank) <= set(lost)
     assert all(np.all(np.diag(off[k].covariance) == 9999.0) for k in lost)
 
 
-def test_reg_strategy_icp_and_vis_icp_track_the_spin():
+def test_reg_strategy_icp_and_vis_icp_track_thespin_in_room():
     for strategy in ("1", "2"):
-        res, truths = _spin({**ICP_VO, "Reg/Strategy": strategy}, range(0), frames=20)
+        res, truths = spin_in_room({**ICP_VO, "Reg/Strategy": strategy}, range(0), frames=20)
         assert all(r.pose is not None and r.icp for r in res[1:])
         lin, ang = _pose_error(truths[-1], res[-1].pose)
         assert lin < 0.02 and ang < 0.3, strategy

@@ -1,4 +1,15 @@
-"""The Bayes filter's compiled prediction pass gives bit for bit the numpy formulation."""
+"""The Bayes filter's compiled prediction pass gives bit for bit the numpy formulation.
+
+Batched prediction-column updates give the posterior of the entry-by-entry updates, bit for bit.
+
+The prediction with the column sums kept as entries come and go (one compiled pass over the
+live entries) gives the posterior of the pass that sums the whole table, bit for bit, through
+closures (invalidated columns), nodes entering and leaving (single retired entries) and
+compactions of the table."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
 
 import numpy as np
 from vslam_synthetic import graph_neighbours
@@ -125,3 +136,106 @@ def test_adjusted_likelihood_equals_the_score_by_score_formula():
             assert list(got) == list(ref)  # same keys, same order
             assert all(got[k] == ref[k] for k in ref), (trial, mode)
     assert adjust_likelihood({3: 0.0, 4: 0.0}) == {3: 1.0, 4: 1.0, VIRTUAL_PLACE_ID: 2.0}
+
+
+class _OneByOne(BayesFilter):
+    """The previous `node_entered`: one `add_neighbour` per neighbour."""
+
+    def node_entered(self, node_id: int, neighbourhood: Mapping[int, int]) -> None:
+        for j, depth in neighbourhood.items():
+            self.add_neighbour(j, node_id, depth)
+        self.invalidate([node_id])
+
+
+def link_neighbours(links: Mapping[int, set[int]], i: int, depth: int) -> dict[int, int]:
+    """Breadth-first neighbours of ``i`` up to ``depth`` links, each at its first depth."""
+    out: dict[int, int] = {}
+    frontier = [i]
+    for d in range(1, depth + 1):
+        nxt = [m for n in frontier for m in sorted(links.get(n, ())) if m != i and m not in out]
+        for m in nxt:
+            out.setdefault(m, d)
+        frontier = nxt
+    return out
+
+
+def test_node_entered_in_one_append_equals_one_by_one():
+    rng = np.random.default_rng(4)
+    lc = RtabmapParameters().prediction_lc()
+    links: dict[int, set[int]] = {}
+
+    def neighbours(i: int, depth: int) -> dict[int, int]:
+        return link_neighbours(links, i, depth)
+
+    fast, slow = BayesFilter(lc, 0.9), _OneByOne(lc, 0.9)
+    wm: list[int] = []
+    closures = 0
+    for node in range(1, 121):
+        links.setdefault(node, set())
+        if node > 1:
+            links[node].add(node - 1)
+            links[node - 1].add(node)
+        if node > 40 and rng.random() < 0.3:  # a loop closure to an older node
+            old = int(rng.integers(1, node - 30))
+            links[node].add(old)
+            links[old].add(node)
+            closures += 1
+            for f in (fast, slow):
+                f.invalidate([node, old])
+        for f in (fast, slow):
+            f.node_entered(node, {j: d for j, d in neighbours(node, f.max_depth).items() if j in wm})
+        wm.append(node)
+        if node % 25 == 0:  # a node leaves (long-term memory): retired entries, compaction
+            gone = wm.pop(3)
+            for f in (fast, slow):
+                f.node_left(gone, neighbours(gone, f.max_depth))
+        like = {VIRTUAL_PLACE_ID: 1.0, **{j: float(1.0 + 3.0 * rng.random() ** 8) for j in wm}}
+        a = fast.update(like, neighbours)
+        b = slow.update(like, neighbours)
+        assert a == b  # same states, same values to the last bit
+    assert closures > 15
+    assert fast.highest_hypothesis()[1] > 0.0
+
+
+def test_kept_column_sums_give_the_same_posterior():
+    rng = np.random.default_rng(15)
+    lc = RtabmapParameters().prediction_lc()
+    links: dict[int, set[int]] = {}
+
+    def neighbours(i: int, depth: int) -> dict[int, int]:
+        return link_neighbours(links, i, depth)
+
+    kept, summed = BayesFilter(lc, 0.9), BayesFilter(lc, 0.9)
+    summed._col_sum_ok = False  # the pass that sums the table
+    wm: list[int] = []
+    compactions = 0
+    for node in range(1, 261):
+        links.setdefault(node, set())
+        if node > 1:
+            links[node].add(node - 1)
+            links[node - 1].add(node)
+        if node > 40 and rng.random() < 0.4:  # a loop closure to an older node
+            old = int(rng.integers(1, node - 30))
+            links[node].add(old)
+            links[old].add(node)
+            for f in (kept, summed):
+                f.invalidate([node, old])
+        for f in (kept, summed):
+            f.node_entered(node, {j: d for j, d in neighbours(node, f.max_depth).items() if j in wm})
+        wm.append(node)
+        if node % 3 == 0 and len(wm) > 20:  # a node leaves: single entries retired
+            gone = wm.pop(int(rng.integers(0, len(wm) - 10)))
+            for f in (kept, summed):
+                f.node_left(gone, neighbours(gone, f.max_depth))
+        if node % 50 == 0:  # as when the table grows with half its entries retired
+            for f in (kept, summed):
+                f._compact()
+            compactions += 1
+        like = {VIRTUAL_PLACE_ID: 1.0, **{j: float(1.0 + 3.0 * rng.random() ** 8) for j in wm}}
+        a = kept.update(like, neighbours)
+        b = summed.update(like, neighbours)
+        assert list(a.items()) == list(b.items())  # same states, same values to the last bit
+    assert kept._col_sum_ok and compactions == 5 and kept._n > 30_000
+    ids = np.array(list(kept._columns))
+    table_sums = np.bincount(kept._e_col[: kept._n], kept._e_raw[: kept._n], minlength=ids.max() + 1)
+    assert np.array_equal(kept._col_sum[ids], table_sums[ids])  # np.bincount adds in order too
