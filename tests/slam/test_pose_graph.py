@@ -9,25 +9,14 @@ import numpy as np
 import pytest
 from slam_world import dataset
 
+from _support.pose_graphs import LOOP_COV, ODO_COV, chained, incremental, square, two_laps
 from eddiebot.geometry import se2_between, se2_compose
 from eddiebot.slam import EdgeKind, PoseGraph
 from eddiebot.slam.io import build_pose_graph, read_g2o, read_pose_graph, read_toro
 
-ODO_COV = np.diag([0.05**2, 0.05**2, 0.02**2])
-LOOP_COV = np.diag([0.01**2, 0.01**2, 0.005**2])
 # honest about the 0.02 rad/step heading drift of `_drifting_graph` (2.5σ after 39 steps)
 DRIFT_COV = np.diag([0.05**2, 0.05**2, 0.05**2])
 
-
-def _square() -> np.ndarray:
-    """40 poses around a 10 m square (4 sides × 10 steps of 1 m), ending at the start."""
-    poses = [np.zeros(3)]
-    for side in range(4):
-        for step in range(10):
-            turn = math.pi / 2 if step == 9 else 0.0
-            poses.append(se2_compose(poses[-1], [1.0, 0.0, turn]))
-        del side
-    return np.array(poses[:-1])
 
 
 def _drifting_graph(
@@ -51,7 +40,7 @@ def _error(graph: PoseGraph, truth: np.ndarray) -> float:
 
 @pytest.mark.parametrize("optimizer", ["isam2", "levenberg_marquardt"])
 def test_loop_closure_removes_square_drift(optimizer: str) -> None:
-    truth = _square()
+    truth = square()
     graph = _drifting_graph(truth, optimizer=optimizer)
     before = _error(graph, truth)
     assert before > 1.5  # 0.02 rad per step over 39 steps
@@ -66,7 +55,7 @@ def test_loop_closure_removes_square_drift(optimizer: str) -> None:
 
 def test_robust_kernel_rejects_false_loop() -> None:
     """Without the gate, the kernel alone holds a false closure off; without either, it drags."""
-    truth = _square()
+    truth = square()
     results = {}
     for kernel in ("none", "cauchy"):
         graph = _drifting_graph(truth, robust_kernel=kernel, gate_probability=None)
@@ -90,7 +79,7 @@ def _loop(graph: PoseGraph, truth: np.ndarray, i: int, j: int) -> int:
 
 
 def test_gate_holds_a_surprising_loop_until_a_neighbour_confirms_it() -> None:
-    truth = _square()
+    truth = square()
     graph = _drifting_graph(truth, DRIFT_COV)  # gate on, support required (defaults)
     drifted = graph.poses.copy()
     first = _loop(graph, truth, 39, 0)
@@ -115,7 +104,7 @@ def test_gate_holds_a_surprising_loop_until_a_neighbour_confirms_it() -> None:
 
 
 def test_gate_in_levenberg_marquardt_mode_uses_batch_marginals() -> None:
-    truth = _square()
+    truth = square()
     graph = _drifting_graph(truth, DRIFT_COV, optimizer="levenberg_marquardt")
     _loop(graph, truth, 39, 0)
     graph.optimize()
@@ -133,7 +122,7 @@ def test_gate_in_levenberg_marquardt_mode_uses_batch_marginals() -> None:
 
 
 def test_gate_without_support_takes_a_single_plausible_loop() -> None:
-    truth = _square()
+    truth = square()
     graph = _drifting_graph(truth, DRIFT_COV, require_support=False)
     _loop(graph, truth, 39, 0)
     graph.optimize()
@@ -143,7 +132,7 @@ def test_gate_without_support_takes_a_single_plausible_loop() -> None:
 
 
 def test_lazy_single_pose_matches_full_estimate() -> None:
-    truth = _square()
+    truth = square()
     graph = _drifting_graph(truth, DRIFT_COV)
     _loop(graph, truth, 39, 0)
     _loop(graph, truth, 38, 1)
@@ -152,61 +141,9 @@ def test_lazy_single_pose_matches_full_estimate() -> None:
     assert np.allclose(singles, graph.poses, atol=1e-9)
 
 
-def _two_laps(seed: int) -> tuple[np.ndarray, list[tuple[int, int, np.ndarray, np.ndarray, bool]]]:
-    """Two drifting laps of the square; each second-lap node closes onto the first lap, plus
-    8 false closures between random nodes (random relative poses)."""
-    rng = np.random.default_rng(seed)
-    lap = _square()
-    truth = np.concatenate([lap, lap])
-    n = len(truth)
-    edges = []
-    for k in range(1, n):
-        z = se2_between(truth[k - 1], truth[k]) + rng.normal(0.0, [0.02, 0.02, 0.01])
-        edges.append((k - 1, k, z, ODO_COV, False))
-    for k in range(len(lap), n):
-        edges.append((k - len(lap), k, se2_between(truth[k - len(lap)], truth[k]), LOOP_COV, True))
-    for _ in range(8):
-        i, j = sorted(rng.choice(n, size=2, replace=False))
-        z = np.array([rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-0.5, 0.5)])
-        edges.append((int(i), int(j), z, LOOP_COV, True))
-    edges.sort(key=lambda e: max(e[0], e[1]))
-    return truth, edges
-
-
-def _chained(truth: np.ndarray, edges: list, **kwargs: object) -> PoseGraph:
-    graph = PoseGraph(**kwargs)  # type: ignore[arg-type]
-    graph.add_node(truth[0])
-    for k in range(1, len(truth)):
-        graph.add_node(
-            se2_compose(graph.pose(k - 1), edges[[e[:2] for e in edges].index((k - 1, k))][2])
-        )
-    for i, j, z, cov, robust in edges:
-        graph.add_edge(
-            i, j, z, cov, kind=EdgeKind.LOOP if robust else EdgeKind.ODOMETRY, robust=robust
-        )
-    return graph
-
-
-def _incremental(edges: list, truth: np.ndarray, **kwargs: object) -> PoseGraph:
-    """Feed the graph node by node, optimising after each, as the SLAM front end does."""
-    graph = PoseGraph(**kwargs)  # type: ignore[arg-type]
-    by_last: dict[int, list] = {}
-    for e in edges:
-        by_last.setdefault(max(e[0], e[1]), []).append(e)
-    graph.add_node(truth[0])
-    for k in range(1, len(truth)):
-        odo = next(e for e in by_last[k] if not e[4] and e[0] == k - 1)
-        graph.add_node(se2_compose(graph.pose(k - 1), odo[2]))
-        for i, j, z, cov, robust in by_last[k]:
-            kind = EdgeKind.LOOP if robust else EdgeKind.ODOMETRY
-            graph.add_edge(i, j, z, cov, kind=kind, robust=robust)
-        graph.optimize()
-    return graph
-
-
 def test_false_loops_batch_and_incremental_stay_at_the_clean_optimum() -> None:
-    truth, edges = _two_laps(3)
-    clean_graph = _chained(
+    truth, edges = two_laps(3)
+    clean_graph = chained(
         truth,
         [e for e in edges if not (e[4] and e[1] - e[0] != len(truth) // 2)],
         optimizer="levenberg_marquardt",
@@ -216,18 +153,18 @@ def test_false_loops_batch_and_incremental_stay_at_the_clean_optimum() -> None:
     clean_graph.optimize()
     clean = clean_graph.poses
     # batch from chained odometry: swept node by node through the gate, then polished
-    batch = _chained(truth, edges, optimizer="levenberg_marquardt")
+    batch = chained(truth, edges, optimizer="levenberg_marquardt")
     batch.optimize()
     assert len(batch.rejected) == 8
     assert float(np.max(np.hypot(*(batch.poses[:, :2] - clean[:, :2]).T))) < 0.01
     # without the gate the same start is dragged off
-    plain = _chained(
+    plain = chained(
         truth, edges, optimizer="levenberg_marquardt", gate_probability=None, robust_kernel="none"
     )
     plain.optimize()
     assert float(np.max(np.hypot(*(plain.poses[:, :2] - clean[:, :2]).T))) > 0.5
     # node by node through iSAM2, as the SLAM front end feeds it
-    inc = _incremental(edges, truth)
+    inc = incremental(edges, truth)
     assert len(inc.rejected) + len(inc.held) >= 8
     assert float(np.max(np.hypot(*(inc.poses[:, :2] - clean[:, :2]).T))) < 0.01
 
@@ -295,7 +232,7 @@ def _noisy_square(
 ) -> tuple[np.ndarray, PoseGraph]:
     """The square driven with honest random odometry noise (covariance diag(odo_sigma²))."""
     rng = np.random.default_rng(seed)
-    truth = _square()
+    truth = square()
     graph = PoseGraph(**kwargs)  # type: ignore[arg-type]
     graph.add_node(truth[0])
     for k in range(1, len(truth)):
@@ -309,7 +246,7 @@ def _noisy_square(
 def test_rejected_true_loop_is_accepted_once_the_estimate_agrees() -> None:
     """Deferred acceptance: a true loop the overconfident graph first rejects comes back in
     when a later constraint moves the estimate its way."""
-    truth = _square()
+    truth = square()
     graph = _drifting_graph(truth)  # 0.02 rad/step drift, 0.02 rad odometry σ: overconfident
     early = _loop(graph, truth, 38, 1)
     graph.optimize()
@@ -404,7 +341,7 @@ def test_final_pass_recovers_a_true_loop_the_live_gate_turned_away_by_chance() -
     unlucky (here χ² = 20); the final pass gates at the family-wise χ²₃(1 − 0.001/40) ≈ 24
     and takes it back. A false loop of the same session stays out."""
     rng = np.random.default_rng(5)
-    lap = _square()
+    lap = square()
     truth = np.concatenate([lap, lap])
     graph = PoseGraph()
     graph.add_node(truth[0])

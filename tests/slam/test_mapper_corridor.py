@@ -12,29 +12,13 @@ import math
 from pathlib import Path
 
 import numpy as np
-from slam_world import CORRIDOR, raycast
 
+from _support.slam_scans import kinect_scan
 from eddiebot.geometry import se2_between, se2_compose
-from eddiebot.slam import Scan, SlamCore, load_slam_config
+from eddiebot.slam import SlamCore, load_slam_config
 from eddiebot.slam.mapper import constrained_information, fuse_increments
 
 EDDIE_CONFIG = Path(__file__).resolve().parents[2] / "src" / "eddiebot" / "config" / "slam.yaml"
-
-#: Kinect-made scan: 57° wide, 320 beams, 0.5–8 m.
-KINECT_ANGLES = np.linspace(-math.radians(28.5), math.radians(28.5), 320)
-
-
-def kinect_scan(pose: np.ndarray, stamp_ns: int, rng: np.random.Generator) -> Scan:
-    """Ranges with the Kinect's depth behaviour: noise and 1/8-pixel steps growing with z²."""
-    r = raycast(CORRIDOR, pose, KINECT_ANGLES, 8.0)
-    hit = np.isfinite(r)
-    z = np.where(hit, r, 1.0) * np.cos(KINECT_ANGLES)  # depth along the optical axis
-    step = 2.85e-3 * z * z
-    z = np.round((z + rng.normal(0.0, 0.5, z.shape) * step) / step) * step
-    ranges = z / np.cos(KINECT_ANGLES)
-    ranges[~hit | (ranges < 0.5) | (ranges > 8.0)] = np.nan
-    return Scan(ranges, KINECT_ANGLES.copy(), 0.5, 8.0, stamp_ns)
-
 
 def corridor_drive(**overrides: object) -> tuple[np.ndarray, np.ndarray, list]:
     """(SLAM errors, odometry errors) at each node of a 16 m drive, and the warnings."""

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from test_pose_graph import LOOP_COV, ODO_COV, _chained, _incremental, _two_laps
 
+from _support.pose_graphs import LOOP_COV, ODO_COV, chained, incremental, two_laps
 from eddiebot.geometry import se2_between, se2_compose
 from eddiebot.slam import EdgeKind, PoseGraph
 from eddiebot.slam.config import SlamConfig
@@ -15,9 +15,9 @@ from eddiebot.slam.mapper import SlamCore
 
 @pytest.mark.parametrize(("skip", "tol"), [(1, 1e-4), (10, 2e-3)])
 def test_cholesky_reaches_the_qr_optimum_with_the_same_verdicts(skip: int, tol: float) -> None:
-    truth, edges = _two_laps(3)
-    qr = _incremental(edges, truth)
-    chol = _incremental(edges, truth, factorization="cholesky", relinearize_skip=skip)
+    truth, edges = two_laps(3)
+    qr = incremental(edges, truth)
+    chol = incremental(edges, truth, factorization="cholesky", relinearize_skip=skip)
     assert chol.factorization == "cholesky" and chol.factorization_fallbacks == 0
     assert sorted(chol.rejected) == sorted(qr.rejected)
     assert len(chol.rejected) + len(chol.held) >= 8  # the false closures stay out
@@ -47,9 +47,9 @@ class _FailingOnce:
 
 
 def test_a_failing_cholesky_update_is_solved_in_batch_and_the_graph_stays_on_qr() -> None:
-    truth, edges = _two_laps(3)
+    truth, edges = two_laps(3)
     first = [e for e in edges if max(e[0], e[1]) < 20]
-    graph = _chained(truth[:20], first, factorization="cholesky")
+    graph = chained(truth[:20], first, factorization="cholesky")
     graph.optimize()
     failing = _FailingOnce(graph._isam)
     graph._isam = failing  # type: ignore[assignment]
@@ -63,7 +63,7 @@ def test_a_failing_cholesky_update_is_solved_in_batch_and_the_graph_stays_on_qr(
     assert graph.factorization == "qr" and graph.factorization_fallbacks == 1
     assert graph._isam is not failing  # restarted from the batch optimum, on QR
     # the estimate is the batch optimum of the same edges
-    reference = _chained(truth[:21], [e for e in edges if max(e[0], e[1]) <= 20],
+    reference = chained(truth[:21], [e for e in edges if max(e[0], e[1]) <= 20],
                          optimizer="levenberg_marquardt")
     reference.optimize()
     assert float(np.max(np.abs(graph.poses[:, :2] - reference.poses[:, :2]))) < 1e-3
@@ -191,8 +191,8 @@ def _long_laps(per_lap: int = 200, laps: int = 2, every: int = 25, seed: int = 1
 def test_recent_nodes_last_keeps_the_optimum_and_re_eliminates_less() -> None:
     truth, edges = _long_laps()
     edges = _with_spans(edges, truth, 10)
-    plain = _incremental(edges, truth, factorization="cholesky")
-    recent = _incremental(edges, truth, factorization="cholesky", recent_last=11)
+    plain = incremental(edges, truth, factorization="cholesky")
+    recent = incremental(edges, truth, factorization="cholesky", recent_last=11)
     assert sorted(recent.rejected) == sorted(plain.rejected)
     assert float(np.max(np.abs(recent.poses - plain.poses))) < 1e-4
     # the span edges' far ends stay at the root: about half the variables re-eliminated
@@ -210,10 +210,10 @@ def test_recent_nodes_last_is_a_checked_config_parameter() -> None:
 
 def test_wildfire_threshold_reaches_isam2_and_keeps_the_optimum() -> None:
     truth, edges = _long_laps(per_lap=120, every=15)
-    batch = _chained(truth, edges, optimizer="levenberg_marquardt")
+    batch = chained(truth, edges, optimizer="levenberg_marquardt")
     batch.optimize()
-    default = _incremental(edges, truth, factorization="cholesky")
-    exact = _incremental(edges, truth, factorization="cholesky", wildfire_threshold=0.0)
+    default = incremental(edges, truth, factorization="cholesky")
+    exact = incremental(edges, truth, factorization="cholesky", wildfire_threshold=0.0)
     assert "wildfireThreshold: 0.001" in repr(default._isam.params())
     assert "wildfireThreshold: 0\n" in repr(exact._isam.params())
     assert sorted(exact.rejected) == sorted(default.rejected) == sorted(batch.rejected)

@@ -6,8 +6,8 @@ import logging
 
 import numpy as np
 import pytest
-from test_narrow_scan import kinect_scan
 
+from _support.slam_scans import kinect_scan
 from eddiebot.core.context import Context
 from eddiebot.slam.mapper import ProcessResult, ProcessStatus, SlamWarning
 from eddiebot.slam.node import LOW_FEATURE_CLEAR_MATCHES, SlamNode
