@@ -11,7 +11,7 @@ from eddiebot.nav.nodes.map_server import MAP_QOS, MapSaver, MapServer
 
 
 def test_amcl_localises_and_the_robot_navigates(make_stack):
-    from test_navigate import navigate
+    from _support.nav_actions import navigate
 
     stack = make_stack(start=(1.0, 1.0, 0.0), amcl_pose=(1.25, 0.85, 0.15))
     # set_initial_pose (as Nav2) puts every particle on the given pose; an operator's

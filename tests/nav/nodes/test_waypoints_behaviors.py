@@ -4,8 +4,8 @@ import math
 
 import numpy as np
 import pytest
-from test_navigate import wait_for
 
+from _support.nav_actions import wait_for
 from eddiebot.cli.goal import error_name
 from eddiebot.cli.waypoints import load_waypoints
 from eddiebot.core.action import ActionClient, GoalStatus
