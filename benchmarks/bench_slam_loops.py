@@ -36,6 +36,7 @@ from _common import write_results
 from bench_slam_sim import RUNS, _interp, _series
 
 import eddiebot.slam.mapper as mapper_module
+import eddiebot.slam.mapper.mapping as mapping_module
 from eddiebot.geometry import se2_between, se2_compose, wrap_angle
 from eddiebot.slam import loop_closure
 from eddiebot.slam.scan_matcher import build_correlation_grid, match_scan
@@ -114,8 +115,8 @@ def main() -> int:
                                    for m in reader.messages(topics.all)),
                                   topics, odom_frame=cfg.odom_frame, base_frame=cfg.base_frame)
     recorder = _LoopLog()
-    original = mapper_module.verify_loop
-    mapper_module.verify_loop = recorder  # type: ignore[assignment]
+    original = mapping_module.verify_loop
+    mapping_module.verify_loop = recorder  # type: ignore[assignment]
     try:
         core = mapper_module.SlamCore(cfg, sensor_offset=log.sensor_offset)
         recorder.core = core
@@ -130,7 +131,7 @@ def main() -> int:
                 stamps.append(scan.stamp_ns)
                 online.append(out.pose)
     finally:
-        mapper_module.verify_loop = original
+        mapping_module.verify_loop = original
     n = len(stamps)
     start = np.broadcast_to(np.array(load_world(RUNS[args.world][0]).start, dtype=float), (n, 3))
     gt = _interp(tg, pg, np.array(stamps, dtype=np.int64))

@@ -49,7 +49,7 @@ def test_loop_range_covariance_weakens_a_far_wall_along_the_view_only() -> None:
 def test_loop_edges_carry_the_range_error_only_when_asked() -> None:
     from slam_world import drifting_odometry
 
-    from eddiebot.slam.mapper import _rotate_covariance
+    from eddiebot.slam.mapper.measurement import _rotate_covariance
     from eddiebot.slam.pose_graph import EdgeKind
 
     truth = loop_path()

@@ -401,7 +401,7 @@ def test_range_bias_correction_keeps_a_corridor_end_wall_in_place(correct: bool)
 def test_loop_match_maximum_chains_bounds_the_verifications_per_scan(
     cap: int, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    import eddiebot.slam.mapper as mapper_module
+    import eddiebot.slam.mapper.mapping as mapper_module
 
     per_scan: list[int] = []
     plain = mapper_module.verify_loop

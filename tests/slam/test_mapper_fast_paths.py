@@ -12,7 +12,7 @@ from slam_world import ROOM, SCAN_ANGLES, drifting_odometry, loop_path, raycast
 from eddiebot.geometry import se2_between, se2_compose, se2_inverse, wrap_angle
 from eddiebot.slam import Scan, SlamConfig, SlamCore
 from eddiebot.slam.loop_closure import find_loop_candidates
-from eddiebot.slam.mapper import _between1, _compose1, _compose_rows, _inverse1, _wrap1
+from eddiebot.slam.mapper.se2_rows import _between1, _compose1, _compose_rows, _inverse1, _wrap1
 
 
 def _poses(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -188,7 +188,7 @@ def test_batched_reference_keeps_float32_points_float32() -> None:
 
 
 def test_place_rows_kernel_is_numpy_bit_for_bit() -> None:
-    from eddiebot.slam.mapper import _place_rows
+    from eddiebot.slam.mapper.se2_rows import _place_rows
 
     rng = np.random.default_rng(17)
     counts = rng.integers(0, 400, 60).astype(np.int64)

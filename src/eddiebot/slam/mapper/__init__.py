@@ -1,0 +1,63 @@
+"""`SlamCore`: the 2D SLAM facade the node, the replay CLI and the benchmarks call.
+
+``process(scan, odom_pose)`` takes a scan (sensor frame) and the robot's odometry pose
+(``odom → base_footprint``) and returns a `ProcessResult`; ``map_to_odom`` is the correction
+to publish. Modes are strategies composed into the core, not subclasses:
+
+* ``mapping``: each accepted scan becomes a node, matched against the running buffer of
+  recent nodes, linked to the previous node, checked for loop closures, optimised;
+* ``localization``: scans are matched against a loaded graph's scans near the prior; the
+  graph is never extended;
+* ``lifelong``: mapping on top of a loaded session; an older node whose scan is covered by a
+  new node's (overlap >= ``lifelong_node_overlap``) is retired: it stays in the pose graph as
+  a constraint but no longer renders into the map or serves as a match reference.
+
+Which scans are processed: the first, then any whose *sensor* pose moved at least
+``minimum_travel_distance`` **or** turned at least ``minimum_travel_heading`` since the last
+processed one — in every mode. (Deviation from slam_toolbox, whose sync and localization
+modes add a node-level gate that needs translation, so a robot turning on the spot is never
+re-localised there; the time gate ``minimum_time_interval`` and ``throttle_scans`` are left
+to the node.)
+
+Bad input never raises and never reaches the graph: a scan with a beam count that does not
+match its angles or its announced count, too few valid ranges, non-finite angles, a stamp
+older than the previous scan's, a beam count or angle range other than the first scan's (as
+Karto's laser check), or a non-finite odometry pose is skipped with one warning. NaN and ±Inf
+ranges are ignored beam by beam (one warning, then counted in ``nonfinite_range_scans``). An
+odometry step between consecutive scans beyond ``max_odometry_jump`` (m) or
+``max_odometry_jump_heading`` (rad) is not integrated: the robot is taken to be where it was,
+the odometry is re-anchored there, and the scan starts a new chain that scan matching links to
+the nearest recent node (a weak link where the match fails); ``odometry_jumps`` counts them.
+"""
+
+from __future__ import annotations
+
+from eddiebot.slam.mapper.core import SlamCore
+from eddiebot.slam.mapper.measurement import (
+    constrained_covariance,
+    constrained_information,
+    corrected_scan,
+    fuse_increments,
+    matcher_params,
+    scan_position_covariance,
+    unbiased_points,
+)
+from eddiebot.slam.mapper.results import NodeRecord, ProcessResult, ProcessStatus, SlamWarning
+from eddiebot.slam.mapper.warm_up import valid_point_count, warm_up
+
+__all__ = [
+    "NodeRecord",
+    "ProcessResult",
+    "ProcessStatus",
+    "SlamCore",
+    "SlamWarning",
+    "constrained_covariance",
+    "constrained_information",
+    "corrected_scan",
+    "fuse_increments",
+    "matcher_params",
+    "scan_position_covariance",
+    "unbiased_points",
+    "valid_point_count",
+    "warm_up",
+]

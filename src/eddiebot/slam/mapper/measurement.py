@@ -1,0 +1,186 @@
+"""The measurement model: scan-matcher parameters from the config, odometry and scan-range
+covariances, the range-bias correction, and the fusion of a match with odometry."""
+
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from eddiebot.slam.config import SlamConfig
+from eddiebot.slam.mapper.results import FloatArray
+from eddiebot.slam.mapper.se2_rows import _wrap1
+from eddiebot.slam.scan import Scan
+from eddiebot.slam.scan_matcher import (
+    MatcherParams,
+)
+
+
+def matcher_params(
+    config: SlamConfig, *, loop: bool = False, penalize: bool = True
+) -> MatcherParams:
+    """Matcher set-up for sequential matching (or the coarse loop search) from a config."""
+    if loop:
+        return MatcherParams(
+            search_dimension=config.loop_search_space_dimension,
+            resolution=config.loop_search_space_resolution,
+            smear_deviation=config.loop_search_space_smear_deviation,
+            coarse_angle_offset=config.coarse_search_angle_offset,
+            coarse_angle_resolution=config.coarse_angle_resolution,
+            fine_angle_step=config.fine_search_angle_offset,
+            penalize=False,
+            use_response_expansion=config.use_response_expansion,
+            fine_search_climb=config.match_fine_search_climb,
+        )
+    return MatcherParams(
+        search_dimension=config.correlation_search_space_dimension,
+        resolution=config.correlation_search_space_resolution,
+        smear_deviation=config.correlation_search_space_smear_deviation,
+        coarse_angle_offset=config.coarse_search_angle_offset,
+        coarse_angle_resolution=config.coarse_angle_resolution,
+        fine_angle_step=config.fine_search_angle_offset,
+        penalize=penalize,
+        distance_variance_penalty=config.distance_variance_penalty,
+        angle_variance_penalty=config.angle_variance_penalty,
+        minimum_distance_penalty=config.minimum_distance_penalty,
+        minimum_angle_penalty=config.minimum_angle_penalty,
+        use_response_expansion=config.use_response_expansion,
+        coarse_heading_variance=config.match_coarse_heading_variance,
+        fine_search_climb=config.match_fine_search_climb,
+    )
+
+
+
+_NO_HEADING_VARIANCE = 1.0e4
+"""Odometry heading variance (rad²) standing for no heading information in a fused step."""
+
+
+def _odometry_covariance(delta: FloatArray, config: SlamConfig | None = None) -> FloatArray:
+    """Covariance (x, y, theta) of an odometry increment under the config's noise model."""
+    cfg = config or SlamConfig()
+    d = math.hypot(float(delta[0]), float(delta[1]))
+    sx = cfg.odometry_translation_sigma + cfg.odometry_translation_noise * d
+    sth = (
+        cfg.odometry_rotation_sigma
+        + cfg.odometry_rotation_noise * abs(float(delta[2]))
+        + cfg.odometry_rotation_noise_per_meter * d
+    )
+    return np.diag([sx * sx, sx * sx, sth * sth])
+
+
+def _rotate_covariance(cov: FloatArray, theta: float) -> FloatArray:
+    """Express a map-frame (x, y, theta) covariance in a frame turned by ``theta``."""
+    rot = np.eye(3)
+    c, s = math.cos(theta), math.sin(theta)
+    rot[:2, :2] = [[c, s], [-s, c]]
+    return np.asarray(rot @ cov @ rot.T)
+
+
+def constrained_information(
+    covariance: FloatArray, max_variance: float
+) -> tuple[FloatArray, int]:
+    """Information matrix of a match keeping only its well-observed position directions.
+
+    The position block's eigen-directions with a variance above ``max_variance`` (m²) carry
+    no information (a corridor match says nothing about the position along the corridor; the
+    correlative search's window only bounds that variance). Returns the (3, 3) information
+    and the number of position directions dropped (0, 1 or 2).
+    """
+    cov = 0.5 * (covariance + covariance.T)
+    w, v = np.linalg.eigh(cov[:2, :2])
+    w = np.maximum(w, 1e-12)
+    keep = w <= max_variance
+    info = np.zeros((3, 3))
+    # position block from the kept directions; the heading kept as Karto reports it (no
+    # cross terms: the search estimates the two separately)
+    info[:2, :2] = (v[:, keep] / w[keep]) @ v[:, keep].T
+    info[2, 2] = 1.0 / max(float(cov[2, 2]), 1e-12)
+    return info, int(np.count_nonzero(~keep))
+
+
+def corrected_scan(scan: Scan, bias_quadratic: float) -> Scan:
+    """``scan`` with each finite range r in [range_min, range_max] read as
+    ``r + bias_quadratic · r²`` (capped at range_max): a quadratic range bias removed."""
+    r = np.array(scan.ranges, dtype=np.float64)
+    ok = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
+    r[ok] = np.minimum(r[ok] + bias_quadratic * r[ok] ** 2, scan.range_max)
+    return dataclasses.replace(scan, ranges=r)
+
+
+def unbiased_points(points: FloatArray, bias_quadratic: float) -> FloatArray:
+    """Sensor-frame points (M, 2) each moved away from the sensor to range ``r + k · r²``
+    (``k = bias_quadratic``, 1/m): a quadratic range bias removed from a scan's end points."""
+    r = np.hypot(points[:, 0], points[:, 1])
+    return np.asarray(points * (1.0 + bias_quadratic * r)[:, None], dtype=np.float64)
+
+
+def scan_position_covariance(
+    points: FloatArray,
+    normals: FloatArray,
+    range_sigma: float,
+    range_sigma_quadratic: float = 0.0,
+) -> FloatArray:
+    """Position covariance (2, 2; the points' frame, m²) a scan's geometry allows a match.
+
+    Degeneracy analysis of the point-to-line fit (Zhang, Kaess and Singh 2016, "On degeneracy
+    of optimization-based state estimation problems"): the position block of its Hessian,
+    ``H = Σ n nᵀ / σ²`` over the points with a normal (``σ = range_sigma +
+    range_sigma_quadratic · r²``, each point's range error at range r), has eigen-directions
+    ``d`` with information ``λ_d``. The variance along ``d`` is ``(Σ (n·d)² + 1) / λ_d``:
+    the information-weighted mean range variance of the points whose normals pin ``d`` — an
+    error they share, such as a depth camera's range bias, does not average out over many
+    points — plus one point's worth of random error. Along a direction no line observes (a
+    corridor's length) λ_d is near zero and the variance unbounded; along one only far points
+    pin (a corridor's end wall seen from metres away) it is their range variance.
+    """
+    ok = np.isfinite(normals[:, 0])
+    n = normals[ok]
+    if n.shape[0] == 0:
+        return np.eye(2) * 1.0e6
+    r2 = np.einsum("ij,ij->i", points[ok], points[ok])
+    sigma = range_sigma + range_sigma_quadratic * r2
+    w = 1.0 / np.maximum(sigma * sigma, 1e-12)
+    h = (n * w[:, None]).T @ n
+    lam, v = np.linalg.eigh(0.5 * (h + h.T))
+    count = np.sum((n @ v) ** 2, axis=0)
+    var = np.minimum((count + 1.0) / np.maximum(lam, 1e-12), 1.0e6)
+    return np.asarray((v * var) @ v.T)
+
+
+def constrained_covariance(
+    covariance: FloatArray, max_variance: float, unobserved_variance: float = 1.0e4
+) -> FloatArray:
+    """A match covariance with its poorly observed position directions made uninformative.
+
+    The position directions `constrained_information` drops get ``unobserved_variance`` (m²;
+    an edge with no information there, still invertible for the optimiser); the others and
+    the heading are kept as `constrained_information` keeps them.
+    """
+    info, dropped = constrained_information(covariance, max_variance)
+    if dropped == 0:
+        return np.asarray(covariance, dtype=np.float64)
+    cov = 0.5 * (covariance + covariance.T)
+    w, v = np.linalg.eigh(cov[:2, :2])
+    drop = v[:, np.maximum(w, 1e-12) > max_variance]
+    info[:2, :2] += (drop @ drop.T) / unobserved_variance
+    out = np.linalg.inv(info)
+    return np.asarray(0.5 * (out + out.T))
+
+
+def fuse_increments(
+    z_odom: FloatArray, cov_odom: FloatArray, z_match: FloatArray, info_match: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Information-weighted mean of two measurements of one SE(2) increment (x, y, theta).
+
+    Linearised about the odometry increment; returns the fused increment and its covariance.
+    """
+    info_odom = np.linalg.inv(cov_odom)
+    dz = np.asarray(z_match, dtype=np.float64) - z_odom
+    dz[2] = float(_wrap1(dz[2]))
+    info = info_odom + info_match
+    cov = np.linalg.inv(info)
+    fused = np.asarray(z_odom, dtype=np.float64) + cov @ (info_match @ dz)
+    fused[2] = float(_wrap1(fused[2]))
+    return fused, 0.5 * (cov + cov.T)
