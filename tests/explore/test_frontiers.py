@@ -194,3 +194,17 @@ def test_free_space_on_the_map_border_is_a_frontier() -> None:
     east = [f for f in search.frontiers if f.centroid[0] > 4.9]
     assert len(east) == 1 and east[0].size == pytest.approx(38 * RES)
     assert east[0].points[:, 0].min() == pytest.approx(5.025)  # just beyond the last column
+
+
+def test_ragged_frontier_pieces_are_one_frontier() -> None:
+    from eddiebot.explore import group_frontier_cells
+
+    cells = np.zeros((10, 30), bool)
+    cells[5, 0:8] = True
+    cells[5, 10:18] = True  # two cells apart from the first piece: the same frontier
+    cells[5, 25:29] = True  # seven cells apart: another
+    labels, count = group_frontier_cells(cells, gap=1)
+    assert count == 2
+    assert labels[5, 0] == labels[5, 17] != labels[5, 25]
+    assert (labels > 0).sum() == cells.sum()  # the joining cells are not frontier cells
+    assert group_frontier_cells(cells, gap=0)[1] == 3
