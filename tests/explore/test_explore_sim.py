@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -97,3 +98,28 @@ def test_without_a_world_it_says_attaching_is_not_supported(capsys: pytest.Captu
     assert main(["explore"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not supported yet" in err[0]
+
+
+def test_explore_resume_pauses_and_resumes(world_file: Path, tmp_path: Path) -> None:
+    from eddiebot.msgs.std_msgs import Bool
+
+    log: dict[str, object] = {}
+
+    def operator(node: object, sim_s: float) -> None:
+        n: Any = node
+        if "pub" not in log:
+            log["pub"] = n.create_publisher(Bool, "explore/resume", 10)
+        pub: Any = log["pub"]
+        if sim_s >= 20.0 and "paused_at" not in log:
+            pub.publish(Bool(data=False))
+            log["paused_at"], log["goals"] = sim_s, len(n.goals)
+        elif sim_s >= 45.0 and "resumed" not in log:
+            log["paused_during"] = n.paused and len(n.goals) == log["goals"]
+            log["resumed"] = True
+            pub.publish(Bool(data=True))
+
+    result = run_exploration(tmp_path / "out", world=str(world_file), time_limit=240.0,
+                             camera=(160, 120, 10.0), wall_timeout_s=240.0, progress=operator)
+    assert log["paused_during"] is True  # no goal was sent while paused
+    assert result.goals_sent > int(log["goals"])  # and exploring went on after the resume
+    assert result.returned_home and result.collisions == 0
