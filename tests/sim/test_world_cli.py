@@ -38,3 +38,11 @@ def test_show_unknown_world(capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no built-in world 'atlantis'" in err[0]
     assert "Traceback" not in err[0]
+
+
+def test_a_folder_named_like_a_world_does_not_hide_it(tmp_path, monkeypatch):
+    from eddiebot.sim.worlds import load_world
+
+    (tmp_path / "house").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert load_world("house").name == "house"

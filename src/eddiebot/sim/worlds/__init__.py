@@ -41,7 +41,8 @@ def load_world(name_or_path: str | Path) -> World:
     """A built-in world by name, or a file by path: a world YAML file, or a nav2 map YAML
     (one with ``image:`` and ``resolution:``) extruded to 2 m walls."""
     p = Path(name_or_path)
-    if p.suffix in (".yaml", ".yml") or p.exists():
+    # a bare name is a built-in world even when a folder of that name is in the way
+    if p.suffix in (".yaml", ".yml") or p.is_file() or len(p.parts) > 1:
         if not p.is_file():
             raise UnknownWorldError(f"world file {p} does not exist")
         if _is_nav2_map(p):
