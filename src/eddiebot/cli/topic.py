@@ -232,21 +232,23 @@ def _raw_type(s: CliSession, topic: str, type_name: str) -> Any:
         return raw_message_type(type_name, hashes[0] if hashes else None)
 
 
-def _hz(args: argparse.Namespace) -> int:
+def _measure(args: argparse.Namespace, verb: str, on_sample: Any, report: Any,
+             banner: str | None = None) -> int:
+    """Subscribe raw to the topic (no decoding: any type, described here or not), feed each
+    sample to ``on_sample``, and print ``report()`` every second and at the end."""
     from eddiebot.core import SingleThreadedExecutor
 
     topic = args.topic_name if args.topic_name.startswith("/") else "/" + args.topic_name
     with cli_session("topic") as s:
         type_name = s.wait_for_topic_type(topic, args.duration)
         if type_name is None:
-            print(f"eddie topic hz: topic {topic} did not appear", file=sys.stderr)
+            print(f"eddie topic {verb}: topic {topic} did not appear", file=sys.stderr)
             return 1
         _tl, be = _publisher_qos_hint(s, topic)
-        stamps: deque[float] = deque(maxlen=max(2, args.window + 1))
-        # raw: a rate needs no decoding, so any type is counted, described here or not
-        s.node.create_subscription(_raw_type(s, topic, type_name), topic,
-                                   lambda _m: stamps.append(time.monotonic()),
+        s.node.create_subscription(_raw_type(s, topic, type_name), topic, on_sample,
                                    10 if not be else _qos_be(), raw=True)
+        if banner:
+            print(banner.format(topic=topic), flush=True)
         ex = SingleThreadedExecutor(context=s.context)
         ex.add_node(s.node)
         start = next_print = time.monotonic()
@@ -255,49 +257,34 @@ def _hz(args: argparse.Namespace) -> int:
             now = time.monotonic()
             if now >= next_print + 1.0:
                 next_print = now
-                print(_rate_report(list(stamps)), flush=True)
+                print(report(), flush=True)
             if args.duration is not None and now - start >= args.duration:
                 break
-        print(_rate_report(list(stamps)), flush=True)
+        print(report(), flush=True)
     return 0
+
+
+def _hz(args: argparse.Namespace) -> int:
+    stamps: deque[float] = deque(maxlen=max(2, args.window + 1))
+    return _measure(args, "hz", lambda _m: stamps.append(time.monotonic()),
+                    lambda: _rate_report(list(stamps)))
 
 
 # -- bw -------------------------------------------------------------------------------
 def _bw(args: argparse.Namespace) -> int:
-    from eddiebot.core import SingleThreadedExecutor
     from eddiebot.msgs import serialize
 
-    topic = args.topic_name if args.topic_name.startswith("/") else "/" + args.topic_name
-    with cli_session("topic") as s:
-        type_name = s.wait_for_topic_type(topic, args.duration)
-        if type_name is None:
-            print(f"eddie topic bw: topic {topic} did not appear", file=sys.stderr)
-            return 1
-        _tl, be = _publisher_qos_hint(s, topic)
-        samples: deque[tuple[float, int]] = deque(maxlen=max(1, args.window))
+    samples: deque[tuple[float, int]] = deque(maxlen=max(1, args.window))
 
-        def on_sample(data: Any) -> None:
-            # bytes from another process; a message object from this one (by reference)
-            size = len(data) if isinstance(data, (bytes, bytearray, memoryview)) else len(
-                serialize(data))
-            samples.append((time.monotonic(), size))
+    def on_sample(data: Any) -> None:
+        # bytes from another process; a message object from this one (by reference)
+        size = len(data) if isinstance(data, (bytes, bytearray, memoryview)) else len(
+            serialize(data))
+        samples.append((time.monotonic(), size))
 
-        s.node.create_subscription(_raw_type(s, topic, type_name), topic, on_sample,
-                                   10 if not be else _qos_be(), raw=True)
-        print(f"Subscribed to [{topic}]", flush=True)
-        ex = SingleThreadedExecutor(context=s.context)
-        ex.add_node(s.node)
-        start = next_print = time.monotonic()
-        while s.context.ok():
-            ex.spin_once(timeout_sec=0.05)
-            now = time.monotonic()
-            if now >= next_print + 1.0:
-                next_print = now
-                print(_bw_report(list(samples), now), flush=True)
-            if args.duration is not None and now - start >= args.duration:
-                break
-        print(_bw_report(list(samples), time.monotonic()), flush=True)
-    return 0
+    return _measure(args, "bw", on_sample,
+                    lambda: _bw_report(list(samples), time.monotonic()),
+                    banner="Subscribed to [{topic}]")
 
 
 def _bw_report(samples: list[tuple[float, int]], now: float) -> str:
