@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_transport import _free_port, _image, _stats_us, _wait_line  # noqa: E402
+from bench_transport import _free_port, _image, _stats_us, _wait_line, ping_pong  # noqa: E402
 
 PREFIX = "/bench_dds"
 
@@ -126,21 +126,7 @@ def bench_round_trip(n: int) -> dict[str, Any]:
     while not got and time.monotonic() < deadline:
         ping.publish(msg)
         ex.spin_once(timeout_sec=0.1)
-    rtts: list[int] = []
-    lost = 0
-    for i in range(n + 100):
-        msg.linear.x = float(i)
-        before = len(got)
-        t0 = time.perf_counter_ns()
-        ping.publish(msg)
-        t_end = time.monotonic() + 1.0
-        while len(got) == before and time.monotonic() < t_end:
-            ex.spin_once(timeout_sec=0.01)
-        if len(got) == before:
-            lost += 1
-            continue
-        if i >= 100:
-            rtts.append(got[-1] - t0)
+    rtts, lost = ping_pong(ping, msg, got, ex, n)
     ctx.shutdown()
     return {**_stats_us(rtts), "median_ms": statistics.median(rtts) / 1e6, "lost": lost}
 

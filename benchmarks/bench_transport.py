@@ -172,6 +172,29 @@ def role_sink(expected: str) -> None:
     ctx.shutdown()
 
 
+def ping_pong(ping: Any, msg: Any, got: list[int], ex: Any, n: int,
+              warm_up: int = 100) -> tuple[list[int], int]:
+    """Publish ``msg`` (its ``linear.x`` numbering the round) and spin until the echo's
+    answer lands in ``got`` (perf_counter_ns), up to 1 s; ``warm_up`` first rounds are not
+    counted. Returns the round trips (ns) and how many answers never came."""
+    rtts: list[int] = []
+    lost = 0
+    for i in range(n + warm_up):
+        msg.linear.x = float(i)
+        before = len(got)
+        t0 = time.perf_counter_ns()
+        ping.publish(msg)
+        t_end = time.monotonic() + 1.0
+        while len(got) == before and time.monotonic() < t_end:
+            ex.spin_once(timeout_sec=0.01)
+        if len(got) == before:
+            lost += 1
+            continue
+        if i >= warm_up:
+            rtts.append(got[-1] - t0)
+    return rtts, lost
+
+
 def bench_round_trip(env: dict[str, str], n: int) -> dict[str, Any]:
     from eddiebot.msgs.geometry_msgs import Twist
 
@@ -186,21 +209,7 @@ def bench_round_trip(env: dict[str, str], n: int) -> dict[str, Any]:
         time.sleep(0.01)
     # the echo's pong publisher must also see us
     msg = Twist()
-    rtts: list[int] = []
-    lost = 0
-    for i in range(n + 100):
-        msg.linear.x = float(i)
-        before = len(got)
-        t0 = time.perf_counter_ns()
-        ping.publish(msg)
-        t_end = time.monotonic() + 1.0
-        while len(got) == before and time.monotonic() < t_end:
-            ex.spin_once(timeout_sec=0.01)
-        if len(got) == before:
-            lost += 1
-            continue
-        if i >= 100:
-            rtts.append(got[-1] - t0)
+    rtts, lost = ping_pong(ping, msg, got, ex, n)
     echo.stdin.close()  # type: ignore[union-attr]
     echo.wait(timeout=10)
     ctx.shutdown()
