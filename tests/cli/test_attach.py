@@ -131,3 +131,42 @@ def test_nav_without_a_simulator_says_what_it_looked_for(env: dict[str, str],
     assert len(lines) == 1, run.stderr
     assert f"no simulator or robot on ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}" in lines[0]
     assert "eddie nav bring its own with --world office" in lines[0]
+
+
+def test_vslam_without_a_simulator_says_what_it_looked_for(env: dict[str, str],
+                                                           tmp_path: Path) -> None:
+    t0 = time.monotonic()
+    run = subprocess.run([*EDDIE, "vslam", "--attach-timeout", "1.5", "--database",
+                          str(tmp_path / "rtabmap.db")], env=env, capture_output=True,
+                         text=True, timeout=30)
+    assert run.returncode == 2, run.stderr
+    assert time.monotonic() - t0 < 20.0
+    lines = _error_lines(run.stderr)
+    assert len(lines) == 1, run.stderr
+    assert f"eddie vslam: no simulator or robot on ROS_DOMAIN_ID {env['ROS_DOMAIN_ID']}" in lines[0]
+    assert "/clock or /odom publisher within 1.5 s" in lines[0]
+    assert "eddie vslam bring its own with --world office" in lines[0]
+    assert not (tmp_path / "rtabmap.db").exists()  # nothing was built
+
+
+def test_vslam_attaches_and_ctrl_c_leaves_the_simulator(sim: Proc, env: dict[str, str],
+                                                        tmp_path: Path) -> None:
+    from eddiebot.vslam.database import SessionDatabase
+
+    database = tmp_path / "rtabmap.db"
+    vslam = Proc([*EDDIE, "vslam", "--database", str(database)], env)
+    assert vslam.wait_for("attached to the simulator", timeout=30), vslam.stderr
+    attached = [line for line in vslam.lines if line.startswith("attached to")]
+    assert attached == [attached[0]] and "no /scan" not in attached[0]
+    deadline = time.monotonic() + 30
+    while "rtabmap in mapping mode" not in vslam.stderr and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert "rtabmap in mapping mode" in vslam.stderr, vslam.stderr
+    time.sleep(4.0)  # a few Kinect frames
+    vslam.popen.send_signal(signal.SIGINT)
+    assert vslam.popen.wait(timeout=30) == 0, vslam.stderr
+    assert sim.popen.poll() is None  # stopping vSLAM left the simulator running
+    # the rtabmap node alone, on the simulator's sensors: no second simulator, no base stack
+    assert "board on emulator" not in vslam.stderr and "already runs" not in vslam.stderr
+    with SessionDatabase(database, read_only=True) as db:
+        assert db.node_ids(), vslam.stderr  # frames were mapped

@@ -50,3 +50,17 @@ def test_node_started_from_the_launch_file_runs_the_profile(tmp_path):
     finally:
         node.destroy_node()
         context.shutdown()
+
+
+def test_vslam_launch_is_the_simulator_plus_rgbd_mapping(tmp_path):
+    """`eddie vslam` without --world runs rgbd_mapping.yaml alone: the same node, the same
+    parameters, on the robot's clock; without /scan it maps without it."""
+    full = parse_launch_file(find_launch_file("vslam"), {})
+    alone = parse_launch_file(find_launch_file("rgbd_mapping"),
+                              {"use_sim_time": "false", "subscribe_scan": "false"})
+    assert [n.type for n in alone.nodes] == ["eddiebot.vslam.rtabmap"]
+    assert "eddiebot.sim.simulator" in [n.type for n in full.nodes]
+    spec = alone.nodes[0].params
+    assert spec["use_sim_time"] is False and spec["subscribe_scan"] is False
+    ran = {**spec, "use_sim_time": True, "subscribe_scan": True}
+    assert ran == _launch_params()

@@ -4,7 +4,7 @@ From the transport's graph view (liveliness tokens, `eddiebot.transport.graph.Gr
 
 - `refuse_second_simulator` — a process about to publish ``/clock`` stops when another
   publishes it already (two simulators on one graph cross-wire every topic);
-- `wait_for_robot` — ``eddie slam`` / ``eddie nav`` without ``--world`` wait for the
+- `wait_for_robot` — ``eddie slam`` / ``nav`` / ``vslam`` without ``--world`` wait for the
   simulator (a ``/clock`` publisher) or a real robot's bring-up (an ``/odom`` publisher).
 
 With ``EDDIE_TRANSPORT=none`` (or ``--no-transport``) there is no graph: nothing to check,
@@ -27,7 +27,7 @@ if TYPE_CHECKING:
 __all__ = ["ATTACH_WAIT_S", "Robot", "graph_cache", "refuse_second_simulator",
            "wait_for_robot"]
 
-#: How long ``eddie slam`` / ``eddie nav`` without ``--world`` wait for a robot, s.
+#: How long ``eddie slam`` / ``nav`` / ``vslam`` without ``--world`` wait for a robot, s.
 ATTACH_WAIT_S = 10.0
 #: Once ``/odom`` is seen, how long a ``/clock`` publisher of the same start may lag, s.
 _CLOCK_GRACE_S = 1.0
@@ -59,7 +59,7 @@ def _process(cache: GraphCache, entity: GraphEntity) -> str:
 
 @dataclass(frozen=True)
 class Robot:
-    """What ``eddie slam`` / ``eddie nav`` attach to."""
+    """What ``eddie slam`` / ``nav`` / ``vslam`` attach to."""
 
     domain: int
     clock: GraphEntity | None
@@ -93,8 +93,8 @@ def refuse_second_simulator(context: Context, command: str) -> None:
     domain = int(context.domain_id)
     raise CliError(
         f"{command}: a simulator already runs on ROS_DOMAIN_ID {domain} (/clock from "
-        f"{_process(cache, clocks[0])}); attach to it (eddie slam / eddie nav without "
-        f"--world), stop it, or run beside it on another domain: "
+        f"{_process(cache, clocks[0])}); attach to it (eddie slam / nav / vslam "
+        f"without --world), stop it, or run beside it on another domain: "
         f"ROS_DOMAIN_ID={domain + 1} {command} …")
 
 

@@ -1,8 +1,9 @@
 """``eddie vslam``: RGB-D graph SLAM (rtabmap's role).
 
-    eddie vslam [sim] --world office [--rate N | --fast] [--seed S] [--dashboard]
-                      [--database FILE] [--delete_db_on_start] [--localization]
-                      [--map-topic /map]
+    eddie vslam [--world office | --attach-timeout S] [--rate N | --fast] [--seed S]
+                [--dashboard] [--database FILE] [--delete_db_on_start] [--localization]
+                [--map-topic /map]
+    eddie vslam sim [--world office] ...
     eddie vslam replay DIR|BAG [-o OUT] [--max-frames N] [--set Group/Name=VALUE ...]
                       [--depth-scale UNITS_PER_M] [--fx FX --fy FY --cx CX --cy CY |
                        --camera-info FILE.yaml]
@@ -10,9 +11,14 @@
     eddie vslam db info FILE
     eddie vslam db export FILE [--ply OUT.ply] [--poses OUT.tum]
 
-Without a sub-command (or with ``sim``) it runs the simulator, Eddie's base stack and the
-``rtabmap`` node with the report's parameters (``launch/vslam.yaml``); the grid is published on
-``/rtabmap/map``. ``replay`` runs visual odometry + SLAM over a TUM RGB-D folder, or the
+With ``--world`` (or ``sim``, default world office) it runs the simulator, Eddie's base stack
+and the ``rtabmap`` node with the report's parameters (``launch/vslam.yaml``). Without
+``--world`` it attaches to the simulator (``eddie sim``) or the real robot's bring-up already
+running on the same ROS_DOMAIN_ID (a ``/clock`` or ``/odom`` publisher within
+``--attach-timeout`` seconds, default 10; else one line and exit status 2) and runs the
+``rtabmap`` node alone (``launch/rgbd_mapping.yaml``), following ``/clock`` when there is one
+(without a ``/scan`` publisher it maps without the scan); stopping it leaves the robot running.
+The grid is published on ``/rtabmap/map``. ``replay`` runs visual odometry + SLAM over a TUM RGB-D folder, or the
 ``rtabmap`` node (the report's parameters) over a rosbag2 of our topics (``/image_raw``,
 ``/depth/image_raw``, camera infos, ``/tf``, ``/tf_static``, ``/odom``, ``/scan``), writing
 ``rtabmap.db``, ``poses.txt`` (every input frame) and ``keyframes.txt`` (TUM) into OUT. A TUM
@@ -44,11 +50,20 @@ REPORT_PARAMETERS = {
 }
 
 
-def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
+def _add_sim_arguments(parser: argparse.ArgumentParser, world: str | None = None) -> None:
     from eddiebot.cli._stack import add_run_arguments
 
-    parser.add_argument("--world", default="office",
-                        help="simulator world (eddie world list), or a world file")
+    if world is None:
+        parser.add_argument("--world", default=None,
+                            help="bring a simulator in this world (eddie world list, or a "
+                            "world file); without it, attach to the simulator or robot "
+                            "already running")
+        parser.add_argument("--attach-timeout", type=float, default=None,
+                            help="without --world: how long to wait for a simulator or "
+                            "robot, s (default 10)")
+    else:
+        parser.add_argument("--world", default=world,
+                            help="simulator world (eddie world list), or a world file")
     parser.add_argument("--camera", default="320x240@10",
                         help="Kinect resolution and rate, WxH@HZ (default 320x240@10)")
     parser.add_argument("--database", default="~/.local/share/eddiebot/rtabmap.db",
@@ -70,8 +85,8 @@ def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     _add_sim_arguments(parser)
     sub = parser.add_subparsers(dest="vslam_command")
-    sim = sub.add_parser("sim", help="simulator + vSLAM (the default)")
-    _add_sim_arguments(sim)
+    sim = sub.add_parser("sim", help="simulator + vSLAM (eddie vslam --world office)")
+    _add_sim_arguments(sim, world="office")
     rep = sub.add_parser("replay", help="replay a TUM RGB-D folder or a rosbag2 through vSLAM")
     rep.add_argument("source", type=Path, help="TUM RGB-D folder or rosbag2 (folder/.mcap/.db3)")
     rep.add_argument("-o", "--output", type=Path, default=None,
@@ -163,13 +178,54 @@ def _sim(args: argparse.Namespace) -> int:
         return 1
     delete = bool(args.delete_db_on_start) and not args.localization
     launch_args = {
-        "world": args.world, "seed": str(args.seed), "camera_width": width,
-        "camera_height": height, "camera_rate": rate, "database_path": args.database,
+        "database_path": args.database,
         "delete_db_on_start": "true" if delete else "false",
         "localization": "true" if args.localization else "false",
         "map_topic": args.map_topic, "rtabmap_args": args.rtabmap_args,
     }
+    if args.world is None:
+        return _run_attached(args, launch_args)
+    launch_args.update({"world": args.world, "seed": str(args.seed), "camera_width": width,
+                        "camera_height": height, "camera_rate": rate})
     return run_stack(args, "vslam", launch_args)
+
+
+#: Once attached, how long a ``/scan`` publisher of the robot may take to show, s.
+_SCAN_GRACE_S = 1.0
+
+
+def _run_attached(args: argparse.Namespace, launch_args: dict[str, str]) -> int:
+    """The ``rtabmap`` node alone, attached to the simulator or robot on this domain."""
+    from eddiebot.cli._attach import ATTACH_WAIT_S, graph_cache, wait_for_robot
+    from eddiebot.cli._common import connect_transport
+    from eddiebot.cli._stack import run_nodes
+    from eddiebot.core.context import Context
+    from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
+    from eddiebot.registry import NODES
+
+    context = Context(use_sim_time=True)
+    try:
+        if not args.no_transport:
+            connect_transport(context)
+        wait = ATTACH_WAIT_S if args.attach_timeout is None else args.attach_timeout
+        robot = wait_for_robot(context, "eddie vslam", wait)
+        context.use_sim_time = robot.simulated
+        cache = graph_cache(context)
+        scan = cache is not None and cache.wait_for(lambda: bool(cache.publishers("/scan")),
+                                                     _SCAN_GRACE_S)
+        print(f"attached to {robot.what}" + ("" if scan else " (no /scan: mapping without it)"),
+              flush=True)
+    except BaseException:
+        context.shutdown()
+        raise
+    launch_args = {**launch_args, "use_sim_time": "true" if robot.simulated else "false",
+                   "subscribe_scan": "true" if scan else "false"}
+
+    def build() -> list[Any]:
+        desc = parse_launch_file(find_launch_file("rgbd_mapping"), launch_args)
+        return build_nodes(desc, context, NODES)
+
+    return run_nodes(args, context, build, owns_sim_clock=False, connected=True)
 
 
 # -- replay ---------------------------------------------------------------------------------
