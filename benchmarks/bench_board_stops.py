@@ -31,7 +31,8 @@ from eddiebot.core.qos import qos_profile_latched
 from eddiebot.msgs.eddiebot_msgs import Velocity
 from eddiebot.msgs.std_msgs import Bool
 from eddiebot.robot.constants import FIRMWARE_1_1
-from eddiebot.robot.emulator import FirmwareEmulator, PtyServer
+from eddiebot.robot.emulator import FirmwareEmulator
+from eddiebot.robot.pty_server import PtyServer
 
 STOPS = (b"STOP 0", b"GOSPD 0 0")
 

@@ -13,7 +13,8 @@ import time
 import pytest
 
 from eddiebot.robot.constants import FIRMWARE_1_1
-from eddiebot.robot.emulator import FirmwareEmulator, PtyServer
+from eddiebot.robot.emulator import FirmwareEmulator
+from eddiebot.robot.pty_server import PtyServer
 
 
 class _Recorder:

@@ -16,8 +16,9 @@ from eddiebot.cli import emulator as emulator_cli
 from eddiebot.robot import errors
 from eddiebot.robot.board import Board, BoardEvent
 from eddiebot.robot.constants import FIRMWARE_1_3
-from eddiebot.robot.emulator import FirmwareEmulator, PtyServer
+from eddiebot.robot.emulator import FirmwareEmulator
 from eddiebot.robot.links import SerialLink
+from eddiebot.robot.pty_server import PtyServer
 from eddiebot.robot.timing import NO_TIMING
 
 

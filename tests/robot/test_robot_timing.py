@@ -11,10 +11,11 @@ from collections.abc import Callable, Iterator
 import pytest
 import serial
 
-from eddiebot.robot import emulator as emulator_module
+from eddiebot.robot import pty_server
 from eddiebot.robot.board import Board
-from eddiebot.robot.emulator import FirmwareEmulator, PtyServer, TimedWire
+from eddiebot.robot.emulator import FirmwareEmulator
 from eddiebot.robot.links import SerialLink
+from eddiebot.robot.pty_server import PtyServer, TimedWire
 from eddiebot.robot.timing import (
     DEFAULT_TIMING,
     NO_TIMING,
@@ -278,7 +279,7 @@ def test_a_quick_close_and_reopen_still_reboots() -> None:
 
 
 def test_opens_are_seen_by_polling_without_inotify(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(emulator_module._OpenWatch, "create",
+    monkeypatch.setattr(pty_server._OpenWatch, "create",
                         classmethod(lambda cls, path: None))
     emu = FirmwareEmulator()
     with _serving(PtyServer(emu, poll_s=0.005, timing=LinkTiming(boot_s=0.1))) as server:

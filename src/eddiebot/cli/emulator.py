@@ -13,7 +13,8 @@ import sys
 from types import FrameType
 
 from eddiebot.robot.constants import FIRMWARE_PROFILES
-from eddiebot.robot.emulator import FirmwareEmulator, FixedSensors, PtyServer
+from eddiebot.robot.emulator import FirmwareEmulator, FixedSensors
+from eddiebot.robot.pty_server import PtyServer
 from eddiebot.robot.timing import NO_TIMING
 
 __all__ = ["add_arguments", "main", "run"]

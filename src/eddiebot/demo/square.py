@@ -23,7 +23,8 @@ from eddiebot.geometry import quaternion_to_yaw, wrap_angle
 from eddiebot.msgs.geometry_msgs import Twist
 from eddiebot.msgs.nav_msgs import Odometry
 from eddiebot.registry import NODES
-from eddiebot.robot.emulator import FirmwareEmulator, FixedSensors, PtyServer
+from eddiebot.robot.emulator import FirmwareEmulator, FixedSensors
+from eddiebot.robot.pty_server import PtyServer
 
 __all__ = ["Corner", "SquareDriver", "SquareResult", "run_square"]
 

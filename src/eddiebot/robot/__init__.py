@@ -10,9 +10,10 @@ for tests, :mod:`~eddiebot.robot.fault_link`.
 
 from eddiebot.robot.board import Board, BoardEvent, ProtocolCore
 from eddiebot.robot.constants import FIRMWARE_1_1, FIRMWARE_1_3, FirmwareProfile
-from eddiebot.robot.emulator import FirmwareEmulator, FixedSensors, PtyServer, SensorSource
+from eddiebot.robot.emulator import FirmwareEmulator, FixedSensors, SensorSource
 from eddiebot.robot.links import EmulatorLink, Link, SerialLink
 from eddiebot.robot.plant import ControlMode, DrivePlant, PlantConfig
+from eddiebot.robot.pty_server import PtyServer
 
 __all__ = [
     "FIRMWARE_1_1",

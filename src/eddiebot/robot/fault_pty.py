@@ -3,7 +3,7 @@ must exercise the real serial path (pyserial, the reader thread, reconnection).
 
 :class:`FaultyPtyBoard` serves a :class:`~eddiebot.robot.emulator.FirmwareEmulator` on a
 pseudo-terminal (with the wire's timing and the DTR reboot on open, as
-:class:`~eddiebot.robot.emulator.PtyServer` does), reachable through a stable symlink
+:class:`~eddiebot.robot.pty_server.PtyServer` does), reachable through a stable symlink
 (:attr:`port`) the way udev names a board ``/dev/eddie``. It logs every line that reaches
 the board with its wall time (:attr:`lines`) and can
 
@@ -22,7 +22,8 @@ import time
 from pathlib import Path
 
 from eddiebot.robot.constants import FIRMWARE_1_1, FirmwareProfile
-from eddiebot.robot.emulator import FirmwareEmulator, PtyServer
+from eddiebot.robot.emulator import FirmwareEmulator
+from eddiebot.robot.pty_server import PtyServer
 
 __all__ = ["FaultyPtyBoard"]
 

@@ -27,7 +27,7 @@ back the same way.  The figures and where they come from:
   then are lost.
 
 :func:`reply_delay_s` adds these up for one request on an idle link;
-:class:`~eddiebot.robot.emulator.PtyServer` uses the parts to hold each reply until it
+:class:`~eddiebot.robot.pty_server.PtyServer` uses the parts to hold each reply until it
 would be readable on the host.  :data:`NO_TIMING` (all zero) turns the model off.
 """
 
