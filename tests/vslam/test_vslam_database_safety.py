@@ -67,17 +67,18 @@ def test_sim_keeps_the_database_unless_delete_db_on_start(tmp_path, monkeypatch,
                         lambda args, name, launch_args: launched.append(launch_args) or 0)
     ours = tmp_path / "map.db"
     write_session_database(ours, n=2)
-    assert _run(["--database", str(ours)]) == 0
+    assert _run(["--world", "office", "--database", str(ours)]) == 0
     assert launched[-1]["delete_db_on_start"] == "false"
     assert _run(["sim", "--database", str(ours), "--delete_db_on_start"]) == 0
     assert launched[-1]["delete_db_on_start"] == "true"
-    assert _run(["--database", str(ours), "--delete_db_on_start", "--localization"]) == 0
+    assert _run(["--world", "office", "--database", str(ours), "--delete_db_on_start",
+                 "--localization"]) == 0
     assert launched[-1]["delete_db_on_start"] == "false"
     # a file that is not ours is refused before anything starts, whatever the flags
     before = _digest(foreign)
     n = len(launched)
-    assert _run(["--database", str(foreign), "--delete_db_on_start"]) == 1
-    assert _run(["--database", str(foreign)]) == 1
+    assert _run(["--world", "office", "--database", str(foreign), "--delete_db_on_start"]) == 1
+    assert _run(["--world", "office", "--database", str(foreign)]) == 1
     assert len(launched) == n and _digest(foreign) == before
 
 
