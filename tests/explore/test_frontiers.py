@@ -168,6 +168,25 @@ def test_blacklist_and_choice() -> None:
     assert len(bl) == 1
 
 
+def test_blacklist_forgives_only_places_the_robot_could_not_get_to() -> None:
+    bl = Blacklist(radius=0.6)
+    bl.add((1.0, 1.0), "unproductive")
+    bl.add((3.0, 1.0), "no progress", retryable=True)
+    assert bl.forgive() == 1
+    assert bl.contains((1.0, 1.0)) and not bl.contains((3.0, 1.0))
+    assert bl.forgive() == 0
+
+
+def test_goals_keep_away_from_avoided_spots() -> None:
+    config = ExploreConfig()
+    grid = room()
+    before = search_frontiers(grid, (1.0, 2.5, 0.0), config).frontiers[0]
+    spot = before.viewpoint[:2]
+    after = search_frontiers(grid, (1.0, 2.5, 0.0), config, avoid=[spot]).frontiers[0]
+    assert math.dist(after.viewpoint[:2], spot) > config.avoid_radius
+    assert math.dist(after.entry, spot) > config.avoid_radius
+
+
 def test_progress_monitor_times_out_without_getting_closer() -> None:
     m = ProgressMonitor(timeout=30.0)
     m.reset(0.0)

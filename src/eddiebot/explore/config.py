@@ -55,6 +55,14 @@ class ExploreConfig:
     """Arrivals at a frontier that leave it in place before it is abandoned as unproductive."""
     min_gain: float = 0.05
     """Frontiers whose viewpoint would show less unknown area than this (m²) are skipped."""
+    stuck_strikes: int = 2
+    """``progress_timeout`` expiries before a frontier is abandoned; before that, the goal spot
+    the robot could not get closer to is avoided and the frontier gets another viewpoint."""
+    avoid_radius: float = 0.5
+    """Goals (viewpoints, entries) keep this far from the spots avoided after no progress, m."""
+    retry_rounds: int = 1
+    """Times the frontiers abandoned for no progress or a failed goal are tried again when
+    nothing else is left (the map around them has grown since)."""
     look_around: bool = True
     """Spin 360° in place before the first frontier (the Kinect sees 57°)."""
     time_limit: float = 0.0
@@ -75,6 +83,10 @@ class ExploreConfig:
             raise ExploreConfigError("sensor_min_range must be below sensor_max_range")
         if not 0 <= self.free_threshold < self.occupied_threshold <= 100:
             raise ExploreConfigError("need 0 ≤ free_threshold < occupied_threshold ≤ 100")
+        if self.stuck_strikes < 1:
+            raise ExploreConfigError(f"stuck_strikes must be ≥ 1, got {self.stuck_strikes}")
+        if self.retry_rounds < 0 or self.avoid_radius < 0.0:
+            raise ExploreConfigError("retry_rounds and avoid_radius must be ≥ 0")
         if self.max_visits < 1:
             raise ExploreConfigError(f"max_visits must be ≥ 1, got {self.max_visits}")
 

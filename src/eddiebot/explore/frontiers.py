@@ -350,12 +350,15 @@ def _padded(grid: OccupancyMap, passable: npt.NDArray[np.bool_] | None, pad: int
 
 
 def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: ExploreConfig,
-                     passable: npt.NDArray[np.bool_] | None = None) -> FrontierSearch:
+                     passable: npt.NDArray[np.bool_] | None = None,
+                     avoid: Sequence[Sequence[float]] = ()) -> FrontierSearch:
     """Every reachable frontier of ``grid`` seen from the robot at ``robot`` (x, y, yaw),
     cheapest first.
 
     ``passable``: where the robot's centre may go (default `reachable_mask`); a caller with
-    a costmap passes its non-lethal, non-inscribed cells here. The ``distance`` field refers to the grid padded with 2 unknown cells on every side.
+    a costmap passes its non-lethal, non-inscribed cells here. ``avoid``: spots (x, y) the
+    robot could not get to; no goal (viewpoint, entry) lies within ``avoid_radius`` of one.
+    The ``distance`` field refers to the grid padded with 2 unknown cells on every side.
     """
     res = grid.resolution
     # the map ends where the scans' end points did: free cells on its border face the
@@ -383,6 +386,13 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
                      else np.full(unknown.shape, np.inf))
     goal_ok = (np.isfinite(dist) & (clearance >= config.goal_clearance)
                & (unknown_clear >= config.robot_radius))
+    if len(avoid) and config.avoid_radius > 0.0:
+        spots = world_to_map(grid, np.asarray(avoid, dtype=np.float64).reshape(-1, 2))
+        marks = np.zeros(goal_ok.shape, dtype=bool)
+        inside = is_inside(grid, spots)
+        marks[spots[inside, 1], spots[inside, 0]] = True
+        if marks.any():
+            goal_ok &= ndimage.distance_transform_edt(~marks) * res > config.avoid_radius
     reach_cells = max(1, math.ceil(max(config.robot_radius, config.goal_clearance) / res) + 2)
     yy, xx = np.mgrid[-reach_cells:reach_cells + 1, -reach_cells:reach_cells + 1]
     disk = np.hypot(yy, xx) <= reach_cells

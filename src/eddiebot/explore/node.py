@@ -108,6 +108,9 @@ class ExploreNode(Node):
         self.path: list[tuple[float, float, float]] = []
         """The robot's positions (map frame, m) and times (s), every 0.1 m."""
         self._home_attempts = 0
+        self.avoid: list[tuple[float, float]] = []
+        """Goal spots given up for no progress; later goals keep ``avoid_radius`` from them."""
+        self.retries = 0
         self.create_timer(0.1, self._tick)
 
     # -- inputs -------------------------------------------------------------------------------
@@ -197,7 +200,7 @@ class ExploreNode(Node):
     def _explore(self, pose: tuple[float, float, float], now: float) -> None:
         assert self.grid is not None
         swept = mark_swept(self.grid, [(x, y) for x, y, _ in self.path], self.config.robot_radius)
-        search = search_frontiers(swept, pose, self.config)
+        search = search_frontiers(swept, pose, self.config, avoid=self.avoid)
         self.last_search = search
         self.searches += 1
         known = float(np.count_nonzero(self.grid.data >= 0)) * self.grid.resolution**2
@@ -212,8 +215,19 @@ class ExploreNode(Node):
         if self._target is not None and self._goal_handle is not None:
             goal = self.goals[-1].viewpoint
             if self._progress.update(math.hypot(goal[0] - pose[0], goal[1] - pose[1]), now):
-                self._abandon(self.goals[-1].centroid,
-                              f"no progress for {self.config.progress_timeout:.0f} s")
+                stuck = self.tracker.tracks.get(self._target)
+                strikes = 1
+                if stuck is not None:
+                    stuck.stuck += 1
+                    strikes = stuck.stuck
+                if strikes >= self.config.stuck_strikes:
+                    self._abandon(self.goals[-1].centroid,
+                                  f"no progress for {self.config.progress_timeout:.0f} s",
+                                  retryable=True)
+                else:
+                    self.get_logger().info(f"no progress for {self.config.progress_timeout:.0f} s "
+                                           f"towards ({goal[0]:.2f}, {goal[1]:.2f}): avoiding it")
+                self.avoid.append((goal[0], goal[1]))
                 self.goals[-1].outcome = "no progress"
                 self._cancel_goal()
         if self._target is not None and self._target not in ids:
@@ -221,6 +235,17 @@ class ExploreNode(Node):
             if self.goals:
                 self.goals[-1].outcome = "explored on the way"
         choice = choose_frontier(search.frontiers, ids, self.blacklist, self._target, self.config)
+        if choice is None and self.retries < self.config.retry_rounds:
+            forgiven = self.blacklist.forgive()
+            if forgiven:
+                self.retries += 1
+                self.avoid.clear()
+                for t in self.tracker.tracks.values():
+                    t.stuck = 0
+                self.get_logger().info(f"nothing else left: trying the {forgiven} frontiers "
+                                       "the robot could not get to again")
+                choice = choose_frontier(search.frontiers, ids, self.blacklist, self._target,
+                                         self.config)
         self._publish_markers(search.frontiers, ids)
         if choice is None:
             low = sum(f.gain < self.config.min_gain for f in search.frontiers)
@@ -283,15 +308,16 @@ class ExploreNode(Node):
                     track.arrived = True
             else:
                 record.outcome = f"failed ({status}, code {code})"
-                self._abandon(frontier.centroid, f"navigation failed (status {status}, code {code})")
+                self._abandon(frontier.centroid, f"navigation failed (status {status}, code {code})",
+                              retryable=True)
             self._target = None
             self._replan = True
 
         self._send(self._nav, NavigateToPose.Goal(pose=self._pose_stamped(x, y, yaw)), done)
 
-    def _abandon(self, point: tuple[float, float], reason: str) -> None:
+    def _abandon(self, point: tuple[float, float], reason: str, retryable: bool = False) -> None:
         self.get_logger().info(f"abandoning the frontier at ({point[0]:.2f}, {point[1]:.2f}): {reason}")
-        self.blacklist.add(point, reason)
+        self.blacklist.add(point, reason, retryable)
 
     def _finish(self, reason: str, pose: tuple[float, float, float]) -> None:
         self._cancel_goal()

@@ -35,6 +35,8 @@ class Track:
     known_at_goal: float = 0.0
     """Known map area (m²) when the robot set off to this frontier."""
     arrived: bool = False
+    stuck: int = 0
+    """Goals towards this frontier given up for no progress."""
 
     def judge_visit(self, known_now: float, min_revealed: float = 0.5) -> None:
         """After an arrival, on a map made since: a trip that added less than
@@ -102,6 +104,9 @@ class FrontierTracker:
 class BlacklistEntry:
     point: tuple[float, float]
     reason: str
+    retryable: bool = False
+    """Abandoned because the robot could not get there (no progress, goal failed), not
+    because looking showed nothing: worth another try once the map around it has grown."""
 
 
 @dataclass
@@ -111,8 +116,15 @@ class Blacklist:
     radius: float
     entries: list[BlacklistEntry] = field(default_factory=list)
 
-    def add(self, point: Sequence[float], reason: str) -> None:
-        self.entries.append(BlacklistEntry((float(point[0]), float(point[1])), reason))
+    def add(self, point: Sequence[float], reason: str, retryable: bool = False) -> None:
+        self.entries.append(BlacklistEntry((float(point[0]), float(point[1])), reason, retryable))
+
+    def forgive(self) -> int:
+        """Drop the retryable entries; returns how many."""
+        kept = [e for e in self.entries if not e.retryable]
+        dropped = len(self.entries) - len(kept)
+        self.entries = kept
+        return dropped
 
     def contains(self, point: Sequence[float]) -> bool:
         return any(math.hypot(point[0] - e.point[0], point[1] - e.point[1]) <= self.radius
