@@ -54,9 +54,16 @@ def machine() -> dict[str, Any]:
 
 
 def write_results(name: str, rows: list[dict[str, Any]]) -> Path:
+    return write_json(name, {"machine": machine(), "results": rows})
+
+
+def write_json(name: str, payload: dict[str, Any]) -> Path:
+    """``results/<name>.json``, replaced atomically (a rerun overwrites its file)."""
     RESULTS.mkdir(parents=True, exist_ok=True)
     path = RESULTS / f"{name}.json"
-    path.write_text(json.dumps({"machine": machine(), "results": rows}, indent=2) + "\n")
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(payload, indent=2) + "\n")
+    tmp.replace(path)
     return path
 
 

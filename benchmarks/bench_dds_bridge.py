@@ -35,6 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
+from _common import write_json  # noqa: E402
 from bench_transport import _free_port, _image, _stats_us, _wait_line, ping_pong  # noqa: E402
 
 PREFIX = "/bench_dds"
@@ -234,11 +235,7 @@ def main() -> int:
         r = results[f"bridge_images_614400B_{history}"]
         print(f"614,400-byte images to DDS, {history}: {r['rate_hz']:.0f} msg/s received, "
               f"{r['received']}/{r['sent']}, publisher {r['publish_rate_hz']:.0f} msg/s")
-    out = ROOT / "benchmarks" / "results" / "dds_bridge.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"meta": meta, "results": results}, indent=2) + "\n")
-    tmp.replace(out)
+    out = write_json("dds_bridge", {"meta": meta, "results": results})
     print(f"wrote {out.relative_to(ROOT)}")
     return 0
 

@@ -31,6 +31,8 @@ from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from _common import write_json  # noqa: E402
 
 IMAGE_W, IMAGE_H = 640, 480
 
@@ -318,11 +320,7 @@ def main() -> int:
         r["meets_target"] = bool(ok)
         print(f"{name:34s} {value:10.3f} {key.split('_')[-1]:>2s} {op}{target:>7g}  "
               f"{'yes' if ok else 'NO ':3s}  {detail}")
-    out = ROOT / "benchmarks" / "results" / "transport.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"meta": meta, "results": results}, indent=2) + "\n")
-    tmp.replace(out)
+    out = write_json("transport", {"meta": meta, "results": results})
     print(f"wrote {out.relative_to(ROOT)}")
     return 0
 

@@ -124,6 +124,23 @@ def reachable_mask(grid: OccupancyMap, config: ExploreConfig) -> npt.NDArray[np.
 
 
 @njit(cache=True)
+def _heap_push(hc: np.ndarray, hi: np.ndarray, n: int, cost: float, idx: int
+               ) -> int:  # pragma: no cover - compiled
+    """Push (cost, idx) on the binary min-heap held in ``hc``/``hi[:n]``; the new size."""
+    hc[n] = cost
+    hi[n] = idx
+    j = n
+    while j > 0:
+        p = (j - 1) // 2
+        if hc[p] <= hc[j]:
+            break
+        hc[p], hc[j] = hc[j], hc[p]
+        hi[p], hi[j] = hi[j], hi[p]
+        j = p
+    return n + 1
+
+
+@njit(cache=True)
 def _dijkstra(passable: np.ndarray, seeds_r: np.ndarray, seeds_c: np.ndarray,
               seed_cost: np.ndarray, seed_label: np.ndarray
               ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
@@ -140,18 +157,7 @@ def _dijkstra(passable: np.ndarray, seeds_r: np.ndarray, seeds_c: np.ndarray,
         if seed_cost[k] < dist[r, c]:
             dist[r, c] = seed_cost[k]
             label[r, c] = seed_label[k]
-            # push
-            hc[n] = seed_cost[k]
-            hi[n] = r * w + c
-            j = n
-            n += 1
-            while j > 0:
-                p = (j - 1) // 2
-                if hc[p] <= hc[j]:
-                    break
-                hc[p], hc[j] = hc[j], hc[p]
-                hi[p], hi[j] = hi[j], hi[p]
-                j = p
+            n = _heap_push(hc, hi, n, seed_cost[k], r * w + c)
     dr = np.array([-1, -1, -1, 0, 0, 1, 1, 1])
     dc = np.array([-1, 0, 1, -1, 1, -1, 0, 1])
     step = np.array([1.4142135623730951, 1.0, 1.4142135623730951, 1.0, 1.0,
@@ -187,19 +193,8 @@ def _dijkstra(passable: np.ndarray, seeds_r: np.ndarray, seeds_c: np.ndarray,
             if nc < dist[rr, cc]:
                 dist[rr, cc] = nc
                 label[rr, cc] = label[r, c]
-                if n >= cap:
-                    continue
-                hc[n] = nc
-                hi[n] = rr * w + cc
-                j = n
-                n += 1
-                while j > 0:
-                    p = (j - 1) // 2
-                    if hc[p] <= hc[j]:
-                        break
-                    hc[p], hc[j] = hc[j], hc[p]
-                    hi[p], hi[j] = hi[j], hi[p]
-                    j = p
+                if n < cap:
+                    n = _heap_push(hc, hi, n, nc, rr * w + cc)
     return dist, label
 
 
