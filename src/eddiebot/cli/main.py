@@ -16,8 +16,9 @@ How every command ends, decided here once:
   SIGPIPE, as a program killed by SIGPIPE), quietly, also when the write happened in a
   subscription callback;
 - run as the program, a Zenoh session still closing (a peer that does not answer) gets at
-  most ``EDDIE_ZENOH_CLOSE_TIMEOUT`` (0.5 s) and is then left behind: the process exits
-  without waiting for it.
+  most ``EDDIE_ZENOH_CLOSE_TIMEOUT`` (0.5 s) and is then left behind; once Zenoh's native
+  library is loaded the process always ends with ``os._exit`` (see
+  `_exit_without_waiting_for_zenoh`).
 """
 
 from __future__ import annotations
@@ -277,11 +278,17 @@ def _stdout_closed(stdout: TextIO) -> int:
 
 
 def _exit_without_waiting_for_zenoh(code: int) -> None:
-    """Exit now if a Zenoh session is still opening or closing in a helper thread:
-    waiting would hang, and letting the interpreter shut down around it can abort."""
-    zenoh_transport = sys.modules.get("eddiebot.transport.zenoh")
-    if zenoh_transport is None or not zenoh_transport.sessions_still_closing():
+    """Exit now, without the interpreter's shutdown, once Zenoh's native library is loaded.
+
+    A session opening or closing in a helper thread would hang the exit; and any thread
+    that comes back from Zenoh into Python while the interpreter shuts down (a session
+    open that finished just after Ctrl-C, a subscription callback) is ended by a forced
+    unwind that Zenoh's Rust frames turn into an abort ("FATAL: exception not rethrown",
+    SIGABRT). Every command has closed its own files by the time it returns here.
+    """
+    if "zenoh" not in sys.modules:
         return
+    logging.shutdown()
     for stream in (sys.stdout, sys.stderr):
         try:
             stream.flush()
