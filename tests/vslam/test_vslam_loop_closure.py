@@ -1,5 +1,5 @@
 import numpy as np
-from vslam_synthetic import frame, kinect_camera, planar_pose
+from vslam_synthetic import box_scan, frame, kinect_camera, planar_pose
 
 from eddiebot.vslam.bayes import VIRTUAL_PLACE_ID, BayesFilter, adjust_likelihood, tfidf_scores
 from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
@@ -159,3 +159,54 @@ def test_proximity_by_space_links_nearby_node():
     assert any(got[5:])
     _, links = slam.graph()
     assert any(lk.type == 2 for lk in links)
+
+
+
+def _proximity_run(extra, *, odom_y=0.02, scans=False):
+    """Out and back along x in the box room; the return leg's odometry is off by `odom_y`
+    per frame in y (drift). Returns the proximity ids and the core."""
+    params = {**REPORT, "RGBD/ProximityBySpace": "true", "Mem/STMSize": "2",
+              "Rtabmap/LoopThr": "1.1", **extra}  # no global closures: only proximity links
+    slam = Rtabmap(params)
+    xs = [0.0, 0.3, 0.6, 0.9, 1.2, 0.9, 0.6, 0.3, 0.05]
+    got = []
+    for k, x in enumerate(xs):
+        scan = box_scan(2.0 + x, 3.0, 0.0) if scans else None
+        r = slam.process(*frame(3, 2.0 + x, 3.0, 0.0), CAM, planar_pose(x, odom_y * k, 0),
+                         k * 1_000_000_000, scan=scan)
+        got.append(r.proximity_id)
+    return got, slam
+
+
+def test_proximity_candidates_are_within_the_local_radius():
+    got, _ = _proximity_run({"RGBD/LocalRadius": "10"})
+    assert any(got[5:])
+    got, _ = _proximity_run({"RGBD/LocalRadius": "0.01"})  # nothing within 1 cm
+    assert not any(got)
+
+
+def test_proximity_candidates_are_within_the_graph_depth():
+    # the return frames are 2 to 8 links from the outbound nodes that face them
+    got, _ = _proximity_run({"RGBD/ProximityMaxGraphDepth": "1"})
+    assert not any(got)
+    got, _ = _proximity_run({"RGBD/ProximityMaxGraphDepth": "50"})
+    assert any(got[5:])
+
+
+def test_proximity_scan_pass_links_when_vision_cannot():
+    # Vis/MinInliers beyond any frame's features: only the merged-scan ICP can link; odometry
+    # drifts 0.03 m per frame sideways, the scans see the true poses
+    extra = {"Vis/MinInliers": "5000", "RGBD/ProximityPathMaxNeighbors": "3"}
+    got, slam = _proximity_run(extra, odom_y=0.03, scans=True)
+    assert any(got[5:])
+    _, links = slam.graph()
+    prox = [lk for lk in links if lk.type == 2]
+    assert prox
+    for lk in prox:
+        # the new node is (true) at the same y as the old one; the link says so within 3 cm
+        # although odometry put them up to 0.24 m apart
+        rel = lk.transform
+        assert abs(rel[1, 3]) < 0.03
+    # without the scan pass nothing links
+    got, _ = _proximity_run({"Vis/MinInliers": "5000"}, odom_y=0.03, scans=True)
+    assert not any(got)

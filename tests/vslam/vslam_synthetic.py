@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.memory import Link
+from eddiebot.vslam.occupancy import Scan2D
 from eddiebot.vslam.transforms import OPTICAL_ROTATION, from_xyz_yaw
 
 TEXELS_PER_M = 100.0
@@ -154,3 +155,14 @@ def graph_neighbours(links: dict[int, set[int]], wm: set[int], i: int, depth_max
                     nxt.append(m)
         frontier = nxt
     return out
+
+
+def box_scan(x: float, y: float, yaw: float, size: tuple[float, float] = (8.0, 6.0)) -> Scan2D:
+    """A 181-ray, 180° scan from (x, y, yaw) inside an axis-aligned box room (m)."""
+    angles = -np.pi / 2 + np.arange(181) * np.pi / 180
+    d = np.stack([np.cos(angles + yaw), np.sin(angles + yaw)], axis=1)
+    with np.errstate(divide="ignore"):
+        tx = np.where(d[:, 0] > 0, (size[0] - x) / d[:, 0], -x / d[:, 0])
+        ty = np.where(d[:, 1] > 0, (size[1] - y) / d[:, 1], -y / d[:, 1])
+    ranges = np.minimum(np.abs(tx), np.abs(ty)).astype(np.float32)
+    return Scan2D(ranges, -np.pi / 2, np.pi / 180, 0.1, 10.0)

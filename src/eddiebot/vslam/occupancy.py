@@ -28,6 +28,7 @@ __all__ = [
     "local_grid_from_points",
     "local_grid_from_scan",
     "merge_local_grids",
+    "ray_cells",
     "voxel_first_indices",
 ]
 
@@ -127,6 +128,22 @@ def _without(cells: F32, blocked: F32, cell: float) -> F32:
     return cells[keep].reshape(-1, 2)
 
 
+def ray_cells(origin: NDArray[np.floating], ends: NDArray[np.floating], cell: float) -> F32:
+    """Centres of the cells the segments `origin` → each of `ends` (N, 2) cross, the end
+    cells excluded (2D ray tracing, half-cell steps; m)."""
+    o = np.asarray(origin, np.float64)[:2]
+    e = np.asarray(ends, np.float64).reshape(-1, 2)
+    if e.shape[0] == 0:
+        return np.zeros((0, 2), np.float32)
+    steps = np.maximum(1, np.ceil(np.linalg.norm(e - o, axis=1) / (cell * 0.5))).astype(np.int64)
+    ray = np.repeat(np.arange(e.shape[0]), steps)
+    start = np.cumsum(steps) - steps
+    k = np.arange(int(steps.sum())) - np.repeat(start, steps)
+    frac = (k / np.repeat(steps, steps))[:, None]
+    pts = o + (e[ray] - o) * frac
+    return _without(_unique_cells(pts, cell), _unique_cells(e, cell), cell)
+
+
 def depth_cloud(
     depth: NDArray[np.generic],
     camera: CameraIntrinsics,
@@ -168,7 +185,8 @@ def depth_cloud(
 def local_grid_from_depth(
     depth: NDArray[np.generic], camera: CameraIntrinsics, params: RtabmapParameters
 ) -> LocalGrid:
-    """Ground/obstacle cells from depth (z-band segmentation, no ray tracing)."""
+    """Ground/obstacle (and, with `Grid/RayTracing`, empty) cells from depth (z-band
+    segmentation)."""
     xyz, _ = depth_cloud(depth, camera, params.grid_depth_decimation,
                          params.grid_range_min, params.grid_range_max)
     return local_grid_from_points(xyz, camera.local_transform[:3, 3], params)
@@ -177,7 +195,9 @@ def local_grid_from_depth(
 def local_grid_from_points(
     xyz: F64, view_point: NDArray[np.float64], params: RtabmapParameters
 ) -> LocalGrid:
-    """Ground/obstacle cells from a base-frame cloud (already range-filtered)."""
+    """Ground/obstacle cells from a base-frame cloud (already range-filtered); with
+    `Grid/RayTracing` (2D, `Grid/3D` false) the cells between the view point and each obstacle
+    cell are empty, as upstream's 2D ray tracing of the projected obstacles."""
     cell = params.grid_cell_size
     if xyz.shape[0]:
         first = voxel_first_indices(xyz, cell)
@@ -194,7 +214,11 @@ def local_grid_from_points(
     obstacles = _unique_cells(xyz[~ground_mask, :2], cell)
     ground = _without(_unique_cells(xyz[ground_mask, :2], cell), obstacles, cell)
     vp = np.asarray(view_point, np.float32)
-    return LocalGrid(ground.reshape(-1, 2), obstacles.reshape(-1, 2), np.zeros((0, 2), np.float32),
+    empty = np.zeros((0, 2), np.float32)
+    if params.grid_ray_tracing and obstacles.shape[0]:
+        traced = _without(ray_cells(vp[:2], obstacles, cell), obstacles, cell)
+        empty = _without(traced, ground, cell)
+    return LocalGrid(ground.reshape(-1, 2), obstacles.reshape(-1, 2), empty.reshape(-1, 2),
                      cell, vp)
 
 
@@ -209,12 +233,7 @@ def local_grid_from_scan(scan: Scan2D, params: RtabmapParameters) -> LocalGrid:
     ok &= rng <= min(rmax, scan.range_max)
     pts = pts[ok]
     obstacles = _unique_cells(pts, cell)
-    if pts.shape[0]:
-        steps = np.maximum(1, np.ceil(np.linalg.norm(pts - origin, axis=1) / (cell * 0.5))).astype(int)
-        rays = [origin + (p - origin) * (np.arange(n)[:, None] / n) for p, n in zip(pts, steps)]
-        free = _without(_unique_cells(np.concatenate(rays), cell), obstacles, cell)
-    else:
-        free = np.zeros((0, 2), np.float32)
+    free = _without(ray_cells(origin, pts, cell), obstacles, cell)
     vp = scan.local_transform[:3, 3].astype(np.float32)
     return LocalGrid(np.zeros((0, 2), np.float32), obstacles, free, cell, vp)
 

@@ -195,6 +195,10 @@ class RtabmapParameters:
     rgbd_proximity_path_filtering_radius: float = _p(
         "RGBD/ProximityPathFilteringRadius", 1.0, "m"
     )
+    rgbd_proximity_path_max_neighbors: int = _p(
+        "RGBD/ProximityPathMaxNeighbors", 0,
+        "scan pass of proximity detection, 0 = off: the scans of this many path nodes around "
+        "the nearest one, merged, registered by 2D ICP against the new node's scan")
     rgbd_neighbor_link_refining: bool = _p(
         "RGBD/NeighborLinkRefining", False, "refine neighbour links with the 2D scan (ICP)"
     )
@@ -208,6 +212,11 @@ class RtabmapParameters:
     grid_min_ground_height: float = _p("Grid/MinGroundHeight", 0.0, "m, 0 = unbounded")
     grid_max_ground_height: float = _p("Grid/MaxGroundHeight", 0.0, "m; 0 = one cell size")
     grid_max_obstacle_height: float = _p("Grid/MaxObstacleHeight", 0.0, "m, 0 = unbounded")
+    grid_ray_tracing: bool = _p(
+        "Grid/RayTracing", False,
+        "cells between the sensor and each obstacle cell become empty (2D ray tracing)")
+    grid_3d: bool = _p("Grid/3D", False, "false = 2D grid (the cloud projected on xy); true "
+                       "(an OctoMap) is not supported")
     # --- optimiser ---
     optimizer_iterations: int = _p("Optimizer/Iterations", 20, "")
     optimizer_epsilon: float = _p("Optimizer/Epsilon", 1e-5, "")
@@ -235,6 +244,13 @@ class RtabmapParameters:
             raise ParameterError("Mem/ImageCompressionFormat must be .jpg or .png")
         if self.mem_depth_compression_format != ".png":
             raise ParameterError("Mem/DepthCompressionFormat: only .png is supported")
+        if self.grid_3d:
+            raise ParameterError("Grid/3D=true (a 3D OctoMap grid) is not supported: set "
+                                 "Grid/3D false for the 2D grid")
+        if self.rgbd_proximity_path_max_neighbors < 0:
+            raise ParameterError("RGBD/ProximityPathMaxNeighbors must be >= 0")
+        if self.rgbd_local_radius < 0:
+            raise ParameterError("RGBD/LocalRadius must be >= 0")
         if self.grid_sensor not in (0, 1, 2):
             raise ParameterError("Grid/Sensor must be 0, 1 or 2")
         if self.rgbd_odom_heading_sigma < 0:
