@@ -63,7 +63,19 @@ from eddiebot.core.tf import (
     TransformBroadcaster,
     TransformListener,
 )
-from eddiebot.core.time import Clock, ClockType, Duration, SimClock, Time, ns_to_stamp, stamp_to_ns
+from eddiebot.core.time import (
+    Clock,
+    ClockChange,
+    ClockType,
+    Duration,
+    JumpHandle,
+    JumpThreshold,
+    SimClock,
+    Time,
+    TimeJump,
+    ns_to_stamp,
+    stamp_to_ns,
+)
 
 __all__ = [
     "ActionClient",
@@ -73,6 +85,7 @@ __all__ = [
     "CancelResponse",
     "Client",
     "Clock",
+    "ClockChange",
     "ClockType",
     "Context",
     "DurabilityPolicy",
@@ -84,6 +97,8 @@ __all__ = [
     "HistoryPolicy",
     "InvalidParameterTypeError",
     "InvalidParameterValueError",
+    "JumpHandle",
+    "JumpThreshold",
     "LifecycleNode",
     "MultiThreadedExecutor",
     "MutuallyExclusiveCallbackGroup",
@@ -108,6 +123,7 @@ __all__ = [
     "Subscription",
     "Task",
     "Time",
+    "TimeJump",
     "Timer",
     "TopicTypeMismatchError",
     "TransformBroadcaster",

@@ -173,7 +173,7 @@ class _DeferredService(Service):
         try:
             self._responder(request, done)
         except Exception as exc:
-            self.node.get_logger().error(f"service {self.srv_name!r} callback raised: {exc!r}")
+            self.log_failure(exc)
             done(None, exc)
 
     def execute(self) -> None:

@@ -139,31 +139,36 @@ class Executor:
             cache = self._timer_cache = [t for n in self._nodes for t in n.timers]
         return cache
 
+    def _idle_timers(self) -> list[Timer]:
+        """Timers this executor may hand out now (a multi-threaded one leaves out those
+        running or waiting for their group)."""
+        return self._timers()
+
     def _earliest_timer(self) -> Timer | None:
         best: Timer | None = None
         best_ns = 0
-        for t in self._timers():
+        for t in self._idle_timers():
             if not t.canceled and (best is None or t.next_call_ns < best_ns):
                 best, best_ns = t, t.next_call_ns
         return best
 
     def _due_timer(self) -> Timer | None:
         best: Timer | None = None
-        for t in self._timers():
+        for t in self._idle_timers():
             if t.is_ready(t.clock.now_ns()) and (best is None or t.next_call_ns < best.next_call_ns):
                 best = t
         return best
 
     def _next_sim_due(self) -> int | None:
         sim = self.context.sim_clock
-        due = [t.next_call_ns for t in self._timers() if t.clock is sim]
+        due = [t.next_call_ns for t in self._idle_timers() if t.clock is sim and not t.canceled]
         return min(due) if due else None
 
     def _wall_wait_s(self) -> float | None:
         waits = [
             (t.next_call_ns - t.clock.now_ns()) / 1e9
-            for t in self._timers()
-            if not t.clock.is_sim
+            for t in self._idle_timers()
+            if not t.clock.is_sim and not t.canceled
         ]
         return max(0.0, min(waits)) if waits else None
 
@@ -359,7 +364,11 @@ class SingleThreadedExecutor(Executor):
 
 
 class MultiThreadedExecutor(Executor):
-    """Runs callbacks on ``num_threads`` workers, honouring callback groups."""
+    """Runs callbacks on ``num_threads`` workers, honouring callback groups.
+
+    Work whose mutually exclusive group is busy waits beside its group and goes back to
+    the front of the ready queue the moment the running callback of that group returns,
+    so it starts as soon as the group frees (not on a polling tick)."""
 
     def __init__(self, num_threads: int | None = None, **kwargs: Any) -> None:
         super().__init__(**kwargs)
@@ -367,7 +376,10 @@ class MultiThreadedExecutor(Executor):
 
         self.num_threads = num_threads or max(2, os.cpu_count() or 2)
         self._pool = ThreadPoolExecutor(self.num_threads, thread_name_prefix="eddie-exec")
-        self._blocked: deque[Any] = deque()
+        #: id(group) → work that found the group busy, in arrival order
+        self._blocked: dict[int, deque[Any]] = {}
+        #: ids of entities waiting in ``_blocked`` (a due timer is not handed out twice)
+        self._waiting: set[int] = set()
         self._inflight: set[int] = set()
         self._inflight_lock = threading.Lock()
 
@@ -375,11 +387,6 @@ class MultiThreadedExecutor(Executor):
         me = threading.get_ident()
         self._spinning.add(me)
         try:
-            # retry work whose group was busy
-            for _ in range(len(self._blocked)):
-                entity = self._blocked.popleft()
-                if self._dispatch(entity):
-                    return True
             entity = self._next_work(timeout_sec)
             if entity is None:
                 return False
@@ -389,13 +396,18 @@ class MultiThreadedExecutor(Executor):
 
     def _dispatch(self, entity: Any) -> bool:
         key = id(entity)
+        group = getattr(entity, "callback_group", None)
+        group_lock: threading.Lock | None = (
+            group.lock if group is not None and not group.reentrant else None)
+        exclusive = group_lock is not None
         with self._inflight_lock:
             if key in self._inflight and not hasattr(entity, "take"):
                 # a timer already running; it will be re-evaluated when it finishes
                 return False
-            group = getattr(entity, "callback_group", None)
-            if group is not None and not group.reentrant and not group.lock.acquire(blocking=False):
-                self._blocked.append(entity)
+            if group_lock is not None and not group_lock.acquire(blocking=False):
+                if key not in self._waiting or hasattr(entity, "take"):
+                    self._blocked.setdefault(id(group), deque()).append(entity)
+                    self._waiting.add(key)
                 return False
             self._inflight.add(key)
 
@@ -408,23 +420,25 @@ class MultiThreadedExecutor(Executor):
                 self._spinning.discard(me)
                 with self._inflight_lock:
                     self._inflight.discard(key)
-                if group is not None and not group.reentrant:
-                    group.lock.release()
-                self.wake()
+                    waiting = self._blocked.pop(id(group), None) if exclusive else None
+                    if group_lock is not None:
+                        group_lock.release()
+                    if waiting:
+                        self._waiting.difference_update(id(e) for e in waiting)
+                with self._cond:
+                    if waiting:
+                        self._ready.extendleft(reversed(waiting))
+                    self._cond.notify_all()
 
         self._pool.submit(run)
         return True
 
-    def _due_timer(self) -> Timer | None:
-        best = None
+    def _idle_timers(self) -> list[Timer]:
         with self._inflight_lock:
-            inflight = set(self._inflight)
-        for t in self._timers():
-            if id(t) in inflight:
-                continue
-            if t.is_ready(t.clock.now_ns()) and (best is None or t.next_call_ns < best.next_call_ns):
-                best = t
-        return best
+            if not self._inflight and not self._waiting:
+                return self._timers()
+            busy = self._inflight | self._waiting
+        return [t for t in self._timers() if id(t) not in busy]
 
     def shutdown(self, timeout_sec: float | None = None) -> bool:
         super().shutdown(timeout_sec)

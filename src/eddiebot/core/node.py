@@ -37,7 +37,7 @@ from eddiebot.core.parameters import (
 )
 from eddiebot.core.qos import QoSProfile, as_qos
 from eddiebot.core.task import Future
-from eddiebot.core.time import Clock, Time
+from eddiebot.core.time import Clock, Duration, JumpThreshold, Time, TimeJump
 from eddiebot.msgs import ServiceType, type_name
 
 if TYPE_CHECKING:
@@ -155,6 +155,10 @@ class Subscription(Entity):
         self.raw = raw
         self._queue: deque[Any] = deque(maxlen=qos.queue_size)
         self._lock = threading.Lock()
+        #: times this subscription waits in the executor's ready queue; never more than
+        #: the messages it holds, so a full queue adds no work (the executor's ready
+        #: queue is bounded by the subscriptions' depths)
+        self._scheduled = 0
         self._destroyed = False
 
     @property
@@ -167,6 +171,9 @@ class Subscription(Entity):
             return
         with self._lock:
             self._queue.append(msg)
+            if self._scheduled >= len(self._queue):
+                return  # the oldest was dropped: the work already queued takes the newest
+            self._scheduled += 1
         self._notify()
 
     def take(self) -> Any | None:
@@ -174,6 +181,9 @@ class Subscription(Entity):
             return self._queue.popleft() if self._queue else None
 
     def execute(self) -> None:
+        with self._lock:
+            if self._scheduled > 0:
+                self._scheduled -= 1
         msg = self.take()
         if msg is not None:
             self.node._run_callback(self.callback, (msg,), f"topic {self.topic_name!r}")
@@ -204,10 +214,15 @@ class Timer(Entity):
         self.callback_group = group
         self.clock = clock
         self.oneshot = oneshot
-        self.next_call_ns = clock.now_ns() + self.period_ns
+        now = clock.now_ns()
+        self.next_call_ns = now + self.period_ns
         self.last_call_ns: int | None = None
+        #: when the current period began (creation, reset or last call; rcl's last_call_time)
+        self._period_start_ns = now
         self.canceled = False
         self._destroyed = False
+        self._jump_handle = clock.create_jump_callback(
+            JumpThreshold(Duration(1), Duration(-1)), post_callback=self._on_time_jump)
 
     @property
     def timer_period_ns(self) -> int:
@@ -226,14 +241,29 @@ class Timer(Entity):
 
     def reset(self) -> None:
         self.canceled = False
-        self.next_call_ns = self.clock.now_ns() + self.period_ns
+        now = self.clock.now_ns()
+        self.next_call_ns = now + self.period_ns
+        self._period_start_ns = now
         self.node._timers_changed()
+
+    def _on_time_jump(self, jump: TimeJump) -> None:
+        # As rcl: time went back before the current period began (a bag looping, a
+        # simulator reset): the next call is one period from the new now, instead of
+        # waiting for the clock to catch up with the old schedule.
+        now = self.clock.now_ns()
+        if jump.delta.nanoseconds < 0 and now < self._period_start_ns:
+            self.next_call_ns = now + self.period_ns
+            self._period_start_ns = now
+            self.node._timers_changed()
+        elif jump.delta.nanoseconds > 0 and now >= self.next_call_ns:
+            self.node._timers_changed()
 
     def execute(self) -> None:
         now = self.clock.now_ns()
         if not self.is_ready(now):
             return
         self.last_call_ns = now
+        self._period_start_ns = now
         # As rcl: skip whole missed periods instead of bursting to catch up.
         missed = (now - self.next_call_ns) // self.period_ns
         self.next_call_ns += (missed + 1) * self.period_ns
@@ -245,6 +275,7 @@ class Timer(Entity):
         if not self._destroyed:
             self._destroyed = True
             self.canceled = True
+            self._jump_handle.unregister()
             self.node._remove_timer(self)
 
 
@@ -319,13 +350,24 @@ class Service(Entity):
         return response
 
     def handle_async(self, request: Any, done: Callable[[Any, BaseException | None], None]) -> None:
-        """Answer through ``done(response, error)``; a subclass may answer later (actions)."""
+        """Answer through ``done(response, error)``; a subclass may answer later (actions).
+
+        A callback that raises is logged with the node and service name and answered with
+        the error (our clients raise it at once; a ROS client, which has no error reply,
+        times out as it would against rclpy); the server goes on serving."""
         try:
             response = self.handle(request)
         except Exception as exc:
+            self.log_failure(exc)
             done(None, exc)
             return
         done(response, None)
+
+    def log_failure(self, exc: BaseException) -> None:
+        """One log line for a callback that raised: node, service, exception."""
+        self.node.get_logger().error(
+            f"node {self.node.fully_qualified_name}: service {self.srv_name} callback raised "
+            f"{type(exc).__name__}: {exc}; the call fails, the service goes on serving")
 
     def enqueue(self, request: Any, done: Callable[[Any, BaseException | None], None]) -> None:
         """Queue a request; ``done(response, error)`` is called after the callback ran."""
@@ -338,13 +380,7 @@ class Service(Entity):
             if not self._queue:
                 return
             request, done = self._queue.popleft()
-        try:
-            response = self.handle(request)
-        except Exception as exc:
-            self.node.get_logger().error(f"service {self.srv_name!r} callback raised: {exc!r}")
-            done(None, exc)
-            return
-        done(response, None)
+        self.handle_async(request, done)
 
     def destroy(self) -> None:
         if not self._destroyed:
@@ -398,7 +434,7 @@ class Client:
                 local.enqueue(request, done)
             return future
         for t in self.node.context.transports:
-            if t.call_service(self.srv_name, self.srv_type, request, done):
+            if t.call_service(self.srv_name, self.srv_type, request, done, client=self):
                 return future
         future.set_exception(ServiceUnavailableError(f"service {self.srv_name!r} is not available"))
         return future

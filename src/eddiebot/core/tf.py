@@ -30,7 +30,16 @@ from typing import TYPE_CHECKING, Any
 
 from eddiebot.core.qos import DurabilityPolicy, QoSProfile
 from eddiebot.core.task import Future
-from eddiebot.core.time import NS_PER_S, Duration, Time, ns_to_stamp, stamp_to_ns
+from eddiebot.core.time import (
+    NS_PER_S,
+    Duration,
+    JumpHandle,
+    JumpThreshold,
+    Time,
+    TimeJump,
+    ns_to_stamp,
+    stamp_to_ns,
+)
 
 if TYPE_CHECKING:
     from eddiebot.core.node import Node
@@ -297,7 +306,25 @@ class Buffer:
         self._cond = threading.Condition(threading.RLock())
         self._waiters: list[tuple[str, str, int, Future]] = []
         #: Node whose executor a blocking lookup with a timeout may spin.
+        self.node: Node | None = None
+        self._jump_handle: JumpHandle | None = None
+        if node is not None:
+            self.set_node(node)
+
+    def set_node(self, node: Node) -> None:
+        """Use ``node``'s executor for blocking lookups and watch its clock: when time
+        jumps back (a bag looping, a simulator reset) the buffer is cleared, as tf2_ros
+        does — transforms from the future of the new time would be used otherwise."""
         self.node = node
+        if self._jump_handle is not None:
+            self._jump_handle.unregister()
+        self._jump_handle = node.get_clock().create_jump_callback(
+            JumpThreshold(None, Duration(-1)), post_callback=self._on_time_jump)
+
+    def _on_time_jump(self, jump: TimeJump) -> None:
+        _log.warning(f"detected a jump back in time of {-jump.delta.to_seconds():.3f} s; "
+                     "clearing the tf buffer")
+        self.clear()
 
     # -- filling ------------------------------------------------------------------------
     def set_transform(self, transform: Any, authority: str = "default_authority") -> bool:
@@ -645,7 +672,7 @@ class TransformListener:
         self.buffer = buffer
         self.node = node
         if buffer.node is None:
-            buffer.node = node
+            buffer.set_node(node)
         self.tf_sub = node.create_subscription(TFMessage, "/tf", self._on_tf, qos)
         self.tf_static_sub = node.create_subscription(
             TFMessage, "/tf_static", self._on_tf_static, static_qos

@@ -10,6 +10,7 @@ from __future__ import annotations
 import enum
 import threading
 import time as _time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -107,11 +108,69 @@ def ns_to_stamp(ns: int) -> Any:
     return TimeMsg(sec=sec, nanosec=nsec)
 
 
+class ClockChange(enum.IntEnum):
+    """What kind of jump a :class:`TimeJump` is (rcl's ``rcl_clock_change_t``)."""
+
+    ROS_TIME_NO_CHANGE = 1
+    ROS_TIME_ACTIVATED = 2
+    ROS_TIME_DEACTIVATED = 3
+    SYSTEM_TIME_NO_CHANGE = 4
+
+
+@dataclass(frozen=True)
+class TimeJump:
+    """A discontinuity of a clock: ``delta`` is new time minus old time."""
+
+    clock_change: ClockChange
+    delta: Duration
+
+
+@dataclass(frozen=True)
+class JumpThreshold:
+    """When a jump callback fires, as rclpy: a forward jump of at least ``min_forward``, a
+    backward jump of at least ``|min_backward|`` (a negative duration), or a change of
+    time source. None or a zero duration disables that direction."""
+
+    min_forward: Duration | None
+    min_backward: Duration | None
+    on_clock_change: bool = True
+
+    def __post_init__(self) -> None:
+        if self.min_forward is not None and self.min_forward.nanoseconds < 0:
+            raise ValueError(f"min_forward must be positive or zero, got {self.min_forward}")
+        if self.min_backward is not None and self.min_backward.nanoseconds > 0:
+            raise ValueError(f"min_backward must be negative or zero, got {self.min_backward}")
+
+    def exceeded_by(self, jump: TimeJump) -> bool:
+        if jump.clock_change in (ClockChange.ROS_TIME_ACTIVATED, ClockChange.ROS_TIME_DEACTIVATED):
+            return self.on_clock_change
+        ns = jump.delta.nanoseconds
+        fwd = self.min_forward.nanoseconds if self.min_forward is not None else 0
+        back = self.min_backward.nanoseconds if self.min_backward is not None else 0
+        return (fwd > 0 and ns >= fwd) or (back < 0 and ns <= back)
+
+
+class JumpHandle:
+    """A registered jump callback; :meth:`unregister` removes it (rclpy's JumpHandle)."""
+
+    def __init__(self, clock: Clock, threshold: JumpThreshold,
+                 pre_callback: Callable[[], Any] | None,
+                 post_callback: Callable[[TimeJump], Any] | None) -> None:
+        self.clock = clock
+        self.threshold = threshold
+        self.pre_callback = pre_callback
+        self.post_callback = post_callback
+
+    def unregister(self) -> None:
+        self.clock._remove_jump_handle(self)
+
+
 class Clock:
     """Wall-clock time (system or steady)."""
 
     def __init__(self, clock_type: ClockType = ClockType.SYSTEM_TIME) -> None:
         self.clock_type = clock_type
+        self._jump_handles: list[JumpHandle] = []
 
     @property
     def is_sim(self) -> bool:
@@ -124,6 +183,33 @@ class Clock:
 
     def now(self) -> Time:
         return Time(self.now_ns(), self.clock_type)
+
+    def create_jump_callback(
+        self,
+        threshold: JumpThreshold,
+        *,
+        pre_callback: Callable[[], Any] | None = None,
+        post_callback: Callable[[TimeJump], Any] | None = None,
+    ) -> JumpHandle:
+        """Call ``pre_callback()`` before and ``post_callback(jump)`` after a jump that
+        exceeds ``threshold`` (rclpy's ``Clock.create_jump_callback``). Wall clocks are
+        taken as they come (no jumps are reported); a ``SimClock`` reports the jumps of
+        :meth:`SimClock.reset` — its ordinary forward moves are not jumps."""
+        handle = JumpHandle(self, threshold, pre_callback, post_callback)
+        self._jump_handles = [*self._jump_handles, handle]
+        return handle
+
+    def _remove_jump_handle(self, handle: JumpHandle) -> None:
+        self._jump_handles = [h for h in self._jump_handles if h is not handle]
+
+    def _jumped(self, jump: TimeJump, *, before: bool) -> None:
+        for h in self._jump_handles:
+            if not h.threshold.exceeded_by(jump):
+                continue
+            if before and h.pre_callback is not None:
+                h.pre_callback()
+            elif not before and h.post_callback is not None:
+                h.post_callback(jump)
 
 
 class SimClock(Clock):
@@ -158,10 +244,17 @@ class SimClock(Clock):
         self.set_ns(self._ns + int(duration_ns))
 
     def reset(self, ns: int = 0) -> None:
-        """Jump back (a bag replay restarting); listeners see time move backwards once."""
+        """Jump to ``ns``, backwards too (a bag replay looping, a simulator reset). Jump
+        callbacks run around it, in the calling thread: timers restart their period and
+        tf buffers forget what they held when time went back (as rcl and tf2_ros do)."""
+        jump = TimeJump(ClockChange.ROS_TIME_NO_CHANGE, Duration(int(ns) - self._ns))
+        if jump.delta.nanoseconds == 0:
+            return
+        self._jumped(jump, before=True)
         with self._cond:
             self._ns = int(ns)
             self._cond.notify_all()
+        self._jumped(jump, before=False)
 
     def wait_until(self, ns: int, timeout_s: float | None = None) -> bool:
         """Block a thread until the sim time reaches ``ns`` (another thread advances it)."""

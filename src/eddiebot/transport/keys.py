@@ -15,13 +15,13 @@ Everything that names a key lives here, so the layout is one module away from rm
 from __future__ import annotations
 
 import functools
-import hashlib
 import struct
 from dataclasses import dataclass
 from typing import Any
 
 from eddiebot.core.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from eddiebot.msgs import TYPESTORE, UnknownTypeError, load_type, normalize_type_name, type_hash
+from eddiebot.transport._xxh3 import xxh3_128
 
 __all__ = [
     "ADMIN_SPACE",
@@ -281,8 +281,10 @@ def parse_liveliness_key(key: str) -> GraphEntity | None:
 
 
 def entity_gid(key: str) -> bytes:
-    """A 16-byte GID derived from the entity's liveliness key (stable, unique per entity)."""
-    return hashlib.blake2b(key.encode(), digest_size=16).digest()
+    """The entity's 16-byte GID as rmw_zenoh makes it: XXH3-128 of its liveliness key, the
+    low 64 bits then the high 64 bits, each little-endian."""
+    low, high = xxh3_128(key.encode())
+    return low.to_bytes(8, "little") + high.to_bytes(8, "little")
 
 
 def encode_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:

@@ -15,7 +15,11 @@
   on the hash;
 - transient-local publishers keep their last ``depth`` samples in a Zenoh publication
   cache (the advanced publisher), which late-joining subscribers query, as in rmw_zenoh;
-- reliable QoS is Zenoh reliable with congestion control *block*; best effort *drops*;
+- reliable QoS is Zenoh reliable; as in rmw_zenoh, a publisher blocks on congestion only
+  when it is reliable *and* KEEP_ALL, every other one drops (a KEEP_LAST queue is allowed
+  to lose the oldest samples; a slow link must not stall the publishing callback);
+- every entity's GID is the XXH3-128 hash of its liveliness key, as rmw_zenoh computes it
+  (``keys.entity_gid``); each service client has its own, sent in its calls' attachment;
 - services are queryables; a call is a ``get`` whose reply completes the client's future.
 
 Opening and closing the session run in a helper thread that the caller waits for: inside
@@ -38,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 import zenoh
 
 from eddiebot.core.errors import ServiceCallTimeoutError, TopicTypeMismatchError
-from eddiebot.core.qos import QoSProfile, ReliabilityPolicy
+from eddiebot.core.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from eddiebot.msgs import deserialize, serialize
 from eddiebot.transport.config import ZenohConfig
 from eddiebot.transport.errors import RemoteServiceError
@@ -64,7 +68,7 @@ if TYPE_CHECKING:
     from eddiebot.core.context import Context
     from eddiebot.core.node import Node, Publisher, Service, Subscription
 
-__all__ = ["ZenohTransport", "sessions_still_closing"]
+__all__ = ["ZenohTransport", "publisher_congestion_control", "sessions_still_closing"]
 
 log = logging.getLogger("eddiebot.transport")
 
@@ -188,8 +192,10 @@ class ZenohTransport:
         self.undecoded: dict[str, int] = {}
         #: topic → the hash whose samples raw subscriptions of an undescribed type take
         self._raw_hashes: dict[str, str] = {}
-        self._call_seq = itertools.count(1)
-        self._client_gid = entity_gid(f"{self.zid}/clients")
+        #: id(client) → (its GID, its request sequence numbers), as rmw_zenoh's clients
+        self._clients: dict[int, tuple[bytes, itertools.count[int]]] = {}
+        #: calls from no announced client (a transport used directly)
+        self._anonymous_client = (entity_gid(f"{self.zid}/anonymous client"), itertools.count(1))
         self._closed = False
         lv = self.session.liveliness()
         prefix = liveliness_prefix(self.domain)
@@ -318,7 +324,7 @@ class ZenohTransport:
         key = topic_key(self.domain, pub.topic_name, pub.type_name)
         reliable = pub.qos.reliability != ReliabilityPolicy.BEST_EFFORT
         rel = zenoh.Reliability.RELIABLE if reliable else zenoh.Reliability.BEST_EFFORT
-        cc = zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
+        cc = publisher_congestion_control(pub.qos)
         tl = pub.qos.transient_local
         zpub: Any
         if tl:
@@ -551,14 +557,7 @@ class ZenohTransport:
             executor = srv.node.executor
             if executor is None or not executor.is_spinning():
                 # nobody runs this node's callbacks: answer here, as a local call would
-                handle_async = getattr(srv, "handle_async", None)
-                if handle_async is not None:
-                    handle_async(request, done)
-                else:
-                    try:
-                        done(srv.handle(request), None)
-                    except Exception as exc:
-                        done(None, exc)
+                srv.handle_async(request, done)
             else:
                 srv.enqueue(request, done)
 
@@ -568,18 +567,22 @@ class ZenohTransport:
         """Announce a service client (``SC`` token) — call from ``Node.create_client``."""
         if self._closed:
             return
-        self._declare_token(client, self._entity_key(client.node, "SC", client.srv_name,
-                                                     client.srv_type.name, None))
+        key = self._entity_key(client.node, "SC", client.srv_name, client.srv_type.name, None)
+        with self._lock:
+            self._clients[id(client)] = (entity_gid(key), itertools.count(1))
+        self._declare_token(client, key)
 
     def on_client_removed(self, client: Any) -> None:
         self._drop_token(client)
+        with self._lock:
+            self._clients.pop(id(client), None)
 
     def service_is_ready(self, name: str) -> bool:
         return self.cache.has_service(name)
 
     def call_service(
         self, name: str, srv_type: Any, request: Any,
-        done: Callable[[Any, BaseException | None], None],
+        done: Callable[[Any, BaseException | None], None], *, client: Any = None,
     ) -> bool:
         servers = self.cache.services(name)
         if not servers or self._closed:
@@ -612,8 +615,8 @@ class ZenohTransport:
                 finish(None, exc)
 
         payload = serialize(request, srv_type.Request.__msgtype__)
-        att = ATTACHMENT.pack(next(self._call_seq), self.context.system_clock.now_ns(), 16,
-                              self._client_gid)
+        gid, seq = self._clients.get(id(client), self._anonymous_client)
+        att = ATTACHMENT.pack(next(seq), self.context.system_clock.now_ns(), 16, gid)
         started = time.monotonic()
 
         def on_end() -> None:
@@ -672,6 +675,13 @@ class ZenohTransport:
 
     def __repr__(self) -> str:
         return f"<ZenohTransport zid={self.zid} domain={self.domain} router={self.config.router}>"
+
+
+def publisher_congestion_control(qos: QoSProfile) -> Any:
+    """rmw_zenoh's rule: BLOCK only for reliable KEEP_ALL publishers, else DROP."""
+    if qos.reliability != ReliabilityPolicy.BEST_EFFORT and qos.history == HistoryPolicy.KEEP_ALL:
+        return zenoh.CongestionControl.BLOCK
+    return zenoh.CongestionControl.DROP
 
 
 def _undeclare(handle: Any) -> None:
