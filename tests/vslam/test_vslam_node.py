@@ -236,3 +236,49 @@ def test_incremental_graph_matches_batch_and_survives_a_removed_closure():
     again = inc.optimize(poses, links, 1, 20)
     assert inc.rebuilds >= 1
     assert max(np.linalg.norm(again[i][:2, 3] - ref[i][:2, 3]) for i in ref) < 0.01
+
+
+def test_publishes_grid_on_map_graph_data_and_info(tmp_path):
+    from eddiebot.msgs import serialize
+    from eddiebot.msgs.nav_msgs import OccupancyGrid
+    from eddiebot.msgs.rtabmap_msgs import Info, MapData, MapGraph
+
+    rig = Rig(tmp_path, **{"Grid/RayTracing": "true", "map_update_interval": 0.5})
+    got: dict[str, list] = {"map": [], "graph": [], "data": [], "info": []}
+    sub = Node("viewer", context=rig.context)
+    rig.ex.add_node(sub)
+    try:
+        for k in range(5):
+            rig.frame(SEC + k * SEC, 0.2 * k)
+        assert rig.slam.map_topic == "/map"
+        # late subscribers of the latched topics get the last message
+        sub.create_subscription(OccupancyGrid, "/map", got["map"].append, qos_profile_latched)
+        sub.create_subscription(MapGraph, "/rtabmap/mapGraph", got["graph"].append,
+                                qos_profile_latched)
+        sub.create_subscription(MapData, "/rtabmap/mapData", got["data"].append,
+                                qos_profile_latched)
+        sub.create_subscription(Info, "/rtabmap/info", got["info"].append, 10)
+        rig.frame(6 * SEC, 1.0)
+        rig.ex.spin_for(1.0)
+        assert got["map"] and got["map"][-1].header.frame_id == "map"
+        grid = np.asarray(got["map"][-1].data)
+        assert (grid == 0).sum() > 100 and (grid == 100).sum() > 20
+        graph = got["graph"][-1]
+        ids = [int(i) for i in graph.poses_id]
+        assert ids == sorted(rig.slam.core.optimized_poses)
+        assert len(graph.links) == len(ids) - 1  # a chain of neighbour links
+        assert all(lk.type == 0 and lk.to_id == lk.from_id + 1 for lk in graph.links)
+        assert abs(graph.poses[-1].position.x - 1.0) < 0.05
+        # every node went out once in mapData
+        sent = [n.id for m in got["data"] for n in m.nodes]
+        assert len(sent) == len(set(sent))
+        info = got["info"][-1]
+        assert info.ref_id == ids[-1]
+        assert "Timing/Total/ms" in info.stats_keys
+        assert sorted(info.wm_state) == ids
+        for msg, name in ((graph, "rtabmap_msgs/msg/MapGraph"), (info, "rtabmap_msgs/msg/Info"),
+                          (got["data"][-1], "rtabmap_msgs/msg/MapData")):
+            assert len(serialize(msg, name)) > 100
+    finally:
+        sub.destroy_node()
+        rig.close()

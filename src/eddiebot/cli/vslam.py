@@ -2,7 +2,7 @@
 
     eddie vslam [--world office | --attach-timeout S] [--rate N | --fast] [--seed S]
                 [--dashboard] [--database FILE] [--delete_db_on_start] [--localization]
-                [--map-topic /map]
+                [--map-topic /rtabmap/map]
     eddie vslam sim [--world office] ...
     eddie vslam replay DIR|BAG [-o OUT] [--max-frames N] [--set Group/Name=VALUE ...]
                       [--depth-scale UNITS_PER_M] [--fx FX --fy FY --cx CX --cy CY |
@@ -18,7 +18,7 @@ running on the same ROS_DOMAIN_ID (a ``/clock`` or ``/odom`` publisher within
 ``--attach-timeout`` seconds, default 10; else one line and exit status 2) and runs the
 ``rtabmap`` node alone (``launch/rgbd_mapping.yaml``), following ``/clock`` when there is one
 (without a ``/scan`` publisher it maps without the scan); stopping it leaves the robot running.
-The grid is published on ``/rtabmap/map``. ``replay`` runs visual odometry + SLAM over a TUM RGB-D folder, or the
+The grid is published on ``/map`` (``--map-topic``). ``replay`` runs visual odometry + SLAM over a TUM RGB-D folder, or the
 ``rtabmap`` node (the report's parameters) over a rosbag2 of our topics (``/image_raw``,
 ``/depth/image_raw``, camera infos, ``/tf``, ``/tf_static``, ``/odom``, ``/scan``), writing
 ``rtabmap.db``, ``poses.txt`` (every input frame) and ``keyframes.txt`` (TUM) into OUT. A TUM
@@ -75,8 +75,9 @@ def _add_sim_arguments(parser: argparse.ArgumentParser, world: str | None = None
                         help=argparse.SUPPRESS)  # the default now; kept for old scripts
     parser.add_argument("--localization", action="store_true",
                         help="localize in the database's map (Mem/IncrementalMemory false)")
-    parser.add_argument("--map-topic", default="/rtabmap/map",
-                        help="occupancy grid topic (default /rtabmap/map; /map to replace 2D SLAM)")
+    parser.add_argument("--map-topic", default="/map",
+                        help="occupancy grid topic (default /map: vSLAM is the mapper; "
+                             "/rtabmap/map beside 2D SLAM)")
     parser.add_argument("--rtabmap-args", default="",
                         help="upstream-style arguments, e.g. \"--Vis/MinInliers 15\"")
     add_run_arguments(parser)

@@ -21,8 +21,12 @@ unregistered), ``/scan``, ``/odom`` (only to notice lost odometry). Sets are pai
 ``Rtabmap/DetectionRate`` and wait up to ``wait_for_transform`` for TF ``odom → frame_id`` at the
 image stamp; the camera's and the laser's poses in ``frame_id`` come from TF.
 
-Output: TF ``map → odom`` every ``tf_delay``; ``map_topic`` (default ``/rtabmap/map``, latched;
-``/map`` to replace 2D SLAM); ``~/mapGraph`` (MarkerArray: nodes, neighbour and loop links);
+Output: TF ``map → odom`` every ``tf_delay``; ``map_topic`` (default ``/map``, latched: vSLAM is
+the mapper; ``/rtabmap/map`` to run beside 2D SLAM), the 2D grid (``Grid/RayTracing``,
+``Grid/3D`` false); ``~/mapGraph`` (rtabmap_msgs/MapGraph) and ``~/mapData``
+(rtabmap_msgs/MapData: the graph and the nodes added since the last one) with the map,
+``~/info`` (rtabmap_msgs/Info) after every processed frame, ``~/graph_markers`` (MarkerArray:
+nodes, neighbour and loop links; not upstream, for viewers without rtabmap's plugins);
 ``~/cloud_map`` (PointCloud2, on ``~/publish_map``). Services (std_srvs/Empty unless named):
 ``~/reset`` (empties memory and database), ``~/pause``, ``~/resume``, ``~/publish_map``,
 ``~/set_mode_localization``, ``~/set_mode_mapping``, ``~/save_map`` (nav2_msgs/SaveMap:
@@ -48,12 +52,13 @@ from eddiebot.core.node import Node
 from eddiebot.core.parameters import ParameterDescriptor
 from eddiebot.core.qos import qos_profile_latched, qos_profile_sensor_data
 from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, make_transform
-from eddiebot.core.time import stamp_to_ns
+from eddiebot.core.time import ns_to_stamp, stamp_to_ns
 from eddiebot.geometry import matrix_to_quaternion, se3_from_tq
 from eddiebot.maps import map_to_msg, save_map
 from eddiebot.msgs.geometry_msgs import Point
 from eddiebot.msgs.nav2_msgs import SaveMap as Nav2SaveMap
 from eddiebot.msgs.nav_msgs import OccupancyGrid, Odometry
+from eddiebot.msgs.rtabmap_msgs import Info, MapData, MapGraph
 from eddiebot.msgs.sensor_msgs import CameraInfo, Image, LaserScan, PointCloud2, PointField
 from eddiebot.msgs.slam_toolbox import SaveMap as PathRequest
 from eddiebot.msgs.std_msgs import Header
@@ -67,6 +72,7 @@ from eddiebot.vslam.export import write_ply
 from eddiebot.vslam.memory import LinkType
 from eddiebot.vslam.occupancy import Scan2D
 from eddiebot.vslam.parameters import RtabmapParameters, parameter_names
+from eddiebot.vslam.ros_messages import graph_message, info_message, map_data_message
 from eddiebot.vslam.rtabmap import ProcessResult, Rtabmap
 
 __all__ = ["DEFAULT_DATABASE_PATH", "RtabmapNode", "parse_rtabmap_args"]
@@ -161,7 +167,7 @@ class RtabmapNode(Node):
         self.odom_stamp_offset = float(p("odom_stamp_offset", 0.0))
         self.odom_tf_linear_variance = float(p("odom_tf_linear_variance", 0.001))
         self.odom_tf_angular_variance = float(p("odom_tf_angular_variance", 0.001))
-        self.map_topic = str(p("map_topic", "/rtabmap/map"))
+        self.map_topic = str(p("map_topic", "/map"))
         self.map_update_interval = float(p("map_update_interval", 1.0))
         self.cloud_voxel_size = float(p("cloud_voxel_size", 0.05))
         self.database_path = str(p("database_path", DEFAULT_DATABASE_PATH))
@@ -207,7 +213,12 @@ class RtabmapNode(Node):
         self.tf_listener = TransformListener(self.tf_buffer, self)
         self.tf_broadcaster = TransformBroadcaster(self)
         self.map_pub = self.create_publisher(OccupancyGrid, self.map_topic, qos_profile_latched)
-        self.graph_pub = self.create_publisher(MarkerArray, "~/mapGraph", qos_profile_latched)
+        self.graph_pub = self.create_publisher(MapGraph, "~/mapGraph", qos_profile_latched)
+        self.map_data_pub = self.create_publisher(MapData, "~/mapData", qos_profile_latched)
+        self.info_pub = self.create_publisher(Info, "~/info", 10)
+        self.markers_pub = self.create_publisher(MarkerArray, "~/graph_markers",
+                                                 qos_profile_latched)
+        self._published_nodes: set[int] = set()
         self.cloud_pub = self.create_publisher(PointCloud2, "~/cloud_map", qos_profile_latched)
         sensor = qos_profile_sensor_data
         self.create_subscription(Image, rgb_topic, self._on_rgb, sensor)
@@ -509,6 +520,7 @@ class RtabmapNode(Node):
         self._last_processed_ns = t
         self.frames_processed += 1
         self.last_result = result
+        self._publish_info(result, t)
         if result.pose is None:
             self._warn_once("rejected", f"frame rejected: {result.rejection_reason}")
             return
@@ -573,8 +585,31 @@ class RtabmapNode(Node):
         self._map_dirty = False
         self._publish_graph()
 
+    def _publish_info(self, result: ProcessResult, t: int) -> None:
+        header = Header(stamp=ns_to_stamp(t), frame_id=self.map_frame_id)
+        core = self.core
+        loop_tf = None
+        partner = result.loop_closure_id
+        if partner and result.node_id:
+            link = core.memory.links.get(result.node_id, {}).get(partner)
+            loop_tf = None if link is None else link.transform
+        weights = {i: n.weight for i, n in core.memory.nodes.items()}
+        self.info_pub.publish(info_message(
+            header, result, [*core.memory.wm, *core.memory.stm], core.bayes.posterior_arrays(),
+            weights, loop_tf))
+
     def _publish_graph(self) -> None:
         poses, links = self.core.graph()
+        header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.map_frame_id)
+        graph = graph_message(header, self.core.map_to_odom, poses, links)
+        self.graph_pub.publish(graph)
+        fresh = [n for i, n in sorted(self.core.memory.nodes.items())
+                 if i in poses and i not in self._published_nodes]
+        self.map_data_pub.publish(map_data_message(header, graph, fresh))
+        self._published_nodes.update(n.id for n in fresh)
+        self._publish_markers(poses, links)
+
+    def _publish_markers(self, poses: dict[int, np.ndarray], links: list[Any]) -> None:
         header = Header(frame_id=self.map_frame_id)
         nodes = Marker(header=header, ns="rtabmap_nodes", id=0, type=Marker.SPHERE_LIST,
                        action=Marker.ADD)
@@ -601,7 +636,7 @@ class RtabmapNode(Node):
                         Point(x=float(b[0, 3]), y=float(b[1, 3]), z=float(b[2, 3]))]
             m.points = pts
             out.append(m)
-        self.graph_pub.publish(MarkerArray(markers=out))
+        self.markers_pub.publish(MarkerArray(markers=out))
 
     def cloud_message(self) -> Any:
         """The assembled cloud (map frame) as PointCloud2 with x, y, z and packed rgb."""
@@ -623,6 +658,7 @@ class RtabmapNode(Node):
     def _srv_reset(self, req: Any, res: Any) -> Any:
         self._close_db()
         self.core = self._make_core(True)
+        self._published_nodes.clear()
         self._pending.clear()
         self._last_set_ns = self._last_processed_ns = None
         self._map_dirty = True
