@@ -8,15 +8,21 @@ Zenoh transport) and a ROS 2-like DDS participant (Cyclone DDS: ``rt/`` names,
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import os
 import random
 import signal
+import struct
 import sys
+import tempfile
+import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import pytest
-from _procs import Proc
+from _procs import Proc, private_router
 
 cyclonedds = pytest.importorskip("cyclonedds")
 
@@ -107,9 +113,12 @@ class RosPeer:
                           qos=self.qos(ros_type, **kw))
 
     @staticmethod
+    def pad(cdr: bytes) -> bytes:
+        return cdr.ljust(-(-len(cdr) // 4) * 4, b"\0")
+
+    @staticmethod
     def write(writer: Any, msg: Any) -> None:
-        cdr = serialize(msg)
-        assert ddspy_write(writer._ref, cdr.ljust(-(-len(cdr) // 4) * 4, b"\0")) == 0
+        assert ddspy_write(writer._ref, RosPeer.pad(serialize(msg))) == 0
 
     @staticmethod
     def take(reader: Any, ros_type: str) -> list[Any]:
@@ -178,9 +187,38 @@ def test_topic_filters() -> None:
 
 
 # -- through the bridge process ------------------------------------------------------------
+@contextlib.contextmanager
+def _private_dds_domain() -> Iterator[int]:
+    """A DDS domain id no other test process on this machine holds (a lock file per id,
+    held while the block runs)."""
+    ids = list(range(100, 230))
+    random.shuffle(ids)
+    for domain in ids:
+        path = os.path.join(tempfile.gettempdir(), f"eddie-dds-domain-{domain}.lock")
+        with open(path, "w") as lock:
+            try:
+                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                continue
+            try:
+                yield domain
+            finally:
+                fcntl.flock(lock, fcntl.LOCK_UN)
+            return
+    pytest.skip("no free DDS domain id")
+
+
 @pytest.fixture(scope="module")
-def dds_domain() -> int:
-    return random.randint(100, 200)
+def zenoh_env() -> Iterator[dict[str, str]]:
+    """This module's own Zenoh router: no other test's endpoints reach the bridge."""
+    with private_router() as env:
+        yield env
+
+
+@pytest.fixture(scope="module")
+def dds_domain() -> Iterator[int]:
+    with _private_dds_domain() as domain:
+        yield domain
 
 
 @pytest.fixture(scope="module")
@@ -354,8 +392,6 @@ def test_ros2_client_on_dds_calls_a_service_of_our_graph(
         ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
     """rmw_cyclonedds's request/reply: ``rq/<name>Request`` / ``rr/<name>Reply``, the CDR
     body after the client's {uint64 guid; int64 seq}, which the reply carries back."""
-    import struct
-
     from eddiebot.msgs.std_srvs import SetBool
     from eddiebot.transport.keys import service_type_hash
 
@@ -403,3 +439,257 @@ def test_ros2_client_on_dds_calls_a_service_of_our_graph(
     response = TYPESTORE.deserialize_cdr(raw[:4] + raw[20:], "std_srvs/srv/SetBool_Response")
     assert (response.success, response.message) == (True, "led on")
     assert calls == [True]
+
+
+# -- the ROS graph -------------------------------------------------------------------------
+# rmw_dds_common's discovery types (Jazzy: 16-byte GIDs), as a ROS 2 node declares them
+_Gid = make_idl_struct("Gid_", "rmw_dds_common::msg::dds_::Gid_",
+                       {"data": idl.array[idl.uint8, 16]})
+_NodeInfo = make_idl_struct("NodeEntitiesInfo_", "rmw_dds_common::msg::dds_::NodeEntitiesInfo_", {
+    "node_namespace": idl.bounded_str[256], "node_name": idl.bounded_str[256],
+    "reader_gid_seq": idl.sequence[_Gid], "writer_gid_seq": idl.sequence[_Gid]})
+_ParticipantInfo = make_idl_struct(
+    "ParticipantEntitiesInfo_", "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_",
+    {"gid": _Gid, "node_entities_info_seq": idl.sequence[_NodeInfo]})
+_DISCOVERY_QOS = Qos(Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+                     Policy.Durability.TransientLocal, Policy.History.KeepLast(1),
+                     Policy.DataRepresentation(use_cdrv0_representation=True))
+
+
+def _gid(guid: Any) -> Any:
+    return _Gid(data=list(guid.bytes))
+
+
+def _infos(peer: RosPeer) -> dict[bytes, Any]:
+    """Every participant's latest ros_discovery_info sample, by participant GID."""
+    if not hasattr(peer, "info_reader"):
+        topic = peer._topic("ros_discovery_info", _ParticipantInfo)
+        peer.info_reader = DataReader(peer.participant, topic, qos=Qos(
+            Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+            Policy.Durability.TransientLocal, Policy.History.KeepAll,
+            Policy.DataRepresentation(use_cdrv0_representation=True)))
+        peer.infos = {}
+    for sample in peer.info_reader.take(N=100):
+        peer.infos[bytes(sample.gid.data)] = sample
+    return dict(peer.infos)
+
+
+def test_ros_discovery_info_lists_our_nodes_with_the_bridges_gids(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    """What ``ros2 node list`` / ``ros2 topic info -v`` read: the bridge's participant lists
+    our node, and under it the GID of the DDS writer that carries its topic."""
+    _ctx, node, _t = ours
+    topic = f"{PREFIX}/graph_out"
+    node.create_publisher(String, topic, 10)
+    assert _wait(lambda: bool(ros_peer.publications_on("rt" + topic))), bridge.stderr
+    [ep] = ros_peer.publications_on("rt" + topic)
+
+    def listed() -> Any:
+        info = _infos(ros_peer).get(ep.participant_key.bytes)
+        if info is None:
+            return None
+        nodes = {(n.node_namespace, n.node_name): n for n in info.node_entities_info_seq}
+        mine = nodes.get(("/", "dds_test_node"))
+        if mine is None or ep.key.bytes not in [bytes(g.data) for g in mine.writer_gid_seq]:
+            return None
+        return nodes
+
+    assert _wait(lambda: listed() is not None), bridge.stderr
+    nodes = listed()
+    assert ("/", "eddie_bridge_dds") in nodes
+    # the writer is listed under the node that publishes, not under the bridge
+    bridge_writers = [bytes(g.data) for g in nodes[("/", "eddie_bridge_dds")].writer_gid_seq]
+    assert ep.key.bytes not in bridge_writers
+
+
+def test_dds_nodes_and_their_endpoints_appear_on_our_graph(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    """A ROS 2 node's ros_discovery_info → our node list; its writer and reader → publisher
+    and subscription tokens under that node; gone when it says so."""
+    _ctx, _node, transport = ours
+    talk, listen = f"{PREFIX}/talk", f"{PREFIX}/listen"
+    writer = ros_peer.writer(talk, _String, "std_msgs/msg/String")
+    reader = ros_peer.reader(listen, _String, "std_msgs/msg/String")
+    info_writer = DataWriter(ros_peer.participant,
+                             ros_peer._topic("ros_discovery_info", _ParticipantInfo),
+                             qos=_DISCOVERY_QOS)
+
+    def announce(nodes: list[Any]) -> None:
+        info_writer.write(_ParticipantInfo(gid=_gid(ros_peer.participant.guid),
+                                           node_entities_info_seq=nodes))
+
+    announce([_NodeInfo(node_namespace="/dds", node_name="talker",
+                        reader_gid_seq=[_gid(reader.guid)], writer_gid_seq=[_gid(writer.guid)])])
+    cache = transport.cache
+
+    def node_of(entities: list[Any]) -> set[str]:
+        return {e.node for e in entities}
+
+    assert _wait(lambda: "/dds/talker" in {n.node for n in cache.nodes()}
+                 and node_of(cache.publishers(talk)) == {"/dds/talker"}
+                 and node_of(cache.subscriptions(listen)) == {"/dds/talker"}), (
+        [e.key for e in cache.entities()], bridge.stderr)
+    [pub] = cache.publishers(talk)
+    assert pub.type_name == "std_msgs/msg/String"
+    assert pub.type_hash == str(type_hash("std_msgs/msg/String"))
+    writer.__del__()
+    assert _wait(lambda: not cache.publishers(talk)), bridge.stderr
+    assert node_of(cache.subscriptions(listen)) == {"/dds/talker"}
+    announce([])
+    assert _wait(lambda: "/dds/talker" not in {n.node for n in cache.nodes()}), bridge.stderr
+    # the reader stays, now under the bridge's node (no ROS node claims it)
+    assert _wait(lambda: node_of(cache.subscriptions(listen)) == {"/eddie_bridge_dds"})
+    reader.__del__()
+    assert _wait(lambda: not cache.subscriptions(listen)), bridge.stderr
+
+
+def test_one_bridged_endpoint_per_topic_and_type(
+        ours: Any, ros_peer: RosPeer, bridge: Proc, zenoh_config: Any) -> None:
+    """Two publishers of ours → one DDS writer; two DDS writers → each sample once here."""
+    ctx, node, transport = ours
+    out_topic, in_topic = f"{PREFIX}/two_out", f"{PREFIX}/two_in"
+    other_ctx = Context(domain_id=0)
+    other = Node("dds_test_other", context=other_ctx)
+    connect(other_ctx, zenoh_config, required=True)
+    try:
+        node.create_publisher(String, out_topic, 10)
+        other.create_publisher(String, out_topic, 10)
+        assert _wait(lambda: len(transport.cache.publishers(out_topic)) == 1
+                     and bool(ros_peer.publications_on("rt" + out_topic))), bridge.stderr
+        time.sleep(0.5)  # a second route, were there one, would be up by now
+        assert len(ros_peer.publications_on("rt" + out_topic)) == 1
+
+        got: list[str] = []
+        node.create_subscription(String, in_topic, lambda m: got.append(m.data), 100)
+        writers = [ros_peer.writer(in_topic, _String, "std_msgs/msg/String", depth=100)
+                   for _ in range(2)]
+        ex = SingleThreadedExecutor(context=ctx)
+        ex.add_node(node)
+        assert _wait(lambda: len(transport.cache.publishers(in_topic)) == 2), bridge.stderr
+        n = 0
+
+        def warm() -> bool:
+            nonlocal n
+            n += 1
+            RosPeer.write(writers[0], String(data=f"warm-{n}"))
+            ex.spin_once(timeout_sec=0.05)
+            return bool(got)
+
+        assert _wait(warm), bridge.stderr
+        for i in range(10):
+            RosPeer.write(writers[i % 2], String(data=f"s-{i}"))
+        end = time.monotonic() + 1.5
+        while time.monotonic() < end:
+            ex.spin_once(timeout_sec=0.05)
+        assert sorted(s for s in got if s.startswith("s-")) == sorted(f"s-{i}" for i in range(10))
+    finally:
+        other_ctx.shutdown()
+
+
+def test_our_client_calls_a_service_served_on_dds(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    """An rmw_cyclonedds server: requests on rq/<name>Request with {guid, seq} before the
+    body, replies on rr/<name>Reply bearing them back; our client calls it as any service."""
+    from eddiebot.msgs.std_srvs import SetBool
+    from eddiebot.transport.keys import service_type_hash
+
+    _ctx, node, transport = ours
+    name = f"{PREFIX}/dds_led"
+    header = {"rmw_request_guid": idl.uint64, "rmw_request_seq": idl.int64}
+    req_t = make_idl_struct("SetBool_Request_", "std_srvs::srv::dds_::SetBool_Request_",
+                            {**header, "data": bool})
+    res_t = make_idl_struct("SetBool_Response_", "std_srvs::srv::dds_::SetBool_Response_",
+                            {**header, "success": bool, "message": str})
+    qos = Qos(Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+              Policy.History.KeepLast(10),
+              Policy.DataRepresentation(use_cdrv0_representation=True),
+              Policy.Userdata(f"typehash={service_type_hash('std_srvs/srv/SetBool')};".encode()))
+    dds_name = name.lstrip("/")
+    requests = DataReader(ros_peer.participant, Topic(
+        ros_peer.participant, f"rq/{dds_name}Request", req_t), qos=qos)
+    replies = DataWriter(ros_peer.participant, Topic(
+        ros_peer.participant, f"rr/{dds_name}Reply", res_t), qos=qos)
+    headers: list[tuple[int, int]] = []
+    stop = threading.Event()
+
+    def serve() -> None:
+        while not stop.is_set():
+            for data, info in ddspy_take(requests._ref, _ANY, 10):
+                raw = bytes(data)
+                if not info.valid_data:
+                    continue
+                guid, seq = struct.unpack_from("<Qq", raw, 4)
+                headers.append((guid, seq))
+                request = TYPESTORE.deserialize_cdr(raw[:4] + raw[20:],
+                                                    "std_srvs/srv/SetBool_Request")
+                body = serialize(SetBool.Response(success=bool(request.data),
+                                                  message=f"dds led {request.data}"))
+                ddspy_write(replies._ref, RosPeer.pad(body[:4] + raw[4:20] + body[4:]))
+            time.sleep(0.005)
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    try:
+        client = node.create_client(SetBool, name)
+        assert client.wait_for_service(timeout_sec=15), bridge.stderr
+        [entity] = transport.cache.services(name)
+        assert entity.type_name == "std_srvs/srv/SetBool"
+        first = client.call(SetBool.Request(data=True), timeout_sec=10)
+        second = client.call(SetBool.Request(data=False), timeout_sec=10)
+    finally:
+        stop.set()
+        server.join(2)
+    assert (first.success, first.message) == (True, "dds led True")
+    assert (second.success, second.message) == (False, "dds led False")
+    # one client (the bridge's) calling in sequence
+    assert [seq for _g, seq in headers] == [1, 2] and headers[0][0] == headers[1][0] != 0
+
+
+def test_service_names_and_vendors() -> None:
+    from eddiebot.transport.dds import service_names, vendor_of
+
+    assert service_names("rq/eddie/set_ledRequest", "std_srvs::srv::dds_::SetBool_Request_") \
+        == ("/eddie/set_led", "std_srvs/srv/SetBool", "request")
+    assert service_names("rr/eddie/set_ledReply", "std_srvs::srv::dds_::SetBool_Response_") \
+        == ("/eddie/set_led", "std_srvs/srv/SetBool", "reply")
+    assert service_names("rt/chatter", "std_msgs::msg::dds_::String_") is None
+    assert service_names("rq/xRequest", "std_msgs::msg::dds_::String_") is None
+    assert vendor_of(bytes.fromhex("010f" + "00" * 14)) == "Fast DDS"
+    assert vendor_of(bytes.fromhex("0110" + "00" * 14)) == "Cyclone DDS"
+
+
+def test_a_call_of_a_fast_dds_server_says_why_it_cannot_work(zenoh_config: Any) -> None:
+    """Fast DDS servers correlate in RTPS inline QoS: the bridge offers the service on our
+    graph (so it is listed) and answers each call at once with the reason, in one line."""
+    from eddiebot.msgs.std_srvs import SetBool
+    from eddiebot.transport.dds import DdsBridge, DdsEndpoint
+    from eddiebot.transport.errors import RemoteServiceError
+
+    name = f"{PREFIX}/fast_led"
+    bridge_ctx, client_ctx = Context(domain_id=0), Context(domain_id=0)
+    transport = connect(bridge_ctx, zenoh_config, required=True)
+    connect(client_ctx, zenoh_config, required=True)
+    with _private_dds_domain() as domain:
+        dds = DdsBridge(bridge_ctx, transport, DdsBridgeConfig(domain_id=domain, allow=PREFIX))
+        try:
+            fast_server = DdsEndpoint(
+                bytes.fromhex("010f" + "ab" * 10 + "00000104"), bytes.fromhex("010f" + "ab" * 14),
+                "rq/ddstest/fast_ledRequest", "std_srvs::srv::dds_::SetBool_Request_", None,
+                "Fast DDS")
+            dds.discovery.subscriptions = lambda: [fast_server]
+            dds.step()
+            assert [(r.topic, r.direction) for r in dds.routes()] == [
+                (name, "unreachable_service")]
+            client = Node("dds_fast_client", context=client_ctx).create_client(SetBool, name)
+            assert client.wait_for_service(timeout_sec=15)
+            with pytest.raises(RemoteServiceError) as err:
+                client.call(SetBool.Request(data=True), timeout_sec=10)
+            text = str(err.value)
+            assert "Fast DDS" in text and name in text and "\n" not in text
+            dds.discovery.subscriptions = list
+            dds.step()
+            assert dds.routes() == []
+        finally:
+            dds.close()
+            bridge_ctx.shutdown()
+            client_ctx.shutdown()

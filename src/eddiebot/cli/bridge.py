@@ -5,8 +5,9 @@ The process joins our graph through the Zenoh transport and DDS domain ``--domai
 ``rmw_cyclonedds`` sees them (``rt/<name>``, ``<pkg>::msg::dds_::<Type>_``, raw CDR); see
 `eddiebot.transport.dds`. Loopback only unless ``EDDIE_NETWORK=lan``: a ROS 2 node on the
 same machine then needs ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``. Services of our graph
-are offered to ROS 2 clients on Cyclone DDS (not to Fast DDS ones). Ctrl-C (or SIGTERM) stops
-it cleanly.
+are offered to ROS 2 clients on Cyclone DDS, services on Cyclone DDS to our clients (not Fast
+DDS ones either way: a call says why); ``ros2 node list`` shows our nodes, ``eddie node list``
+theirs. Ctrl-C (or SIGTERM) stops it cleanly.
 """
 
 from __future__ import annotations
@@ -97,8 +98,7 @@ def _bridge(args: argparse.Namespace, topics: dict[str, str] | None) -> int:
             time.sleep(0.1)
             now_routes = {(r.topic, r.type_name, r.direction) for r in bridge.routes()}
             for topic, type_name, direction in sorted(now_routes - seen):
-                arrow = "->" if direction == "to_dds" else "<-"
-                print(f"bridged {topic} [{type_name}] {arrow} dds", flush=True)
+                print(f"bridged {_describe(topic, type_name, direction)}", flush=True)
             for topic, type_name, direction in sorted(seen - now_routes):
                 print(f"unbridged {topic} [{type_name}] ({direction})", flush=True)
             seen = now_routes
@@ -114,6 +114,18 @@ def _bridge(args: argparse.Namespace, topics: dict[str, str] | None) -> int:
         context.shutdown()
         signal.signal(signal.SIGTERM, previous)
     return 0
+
+
+def _describe(name: str, type_name: str, direction: str) -> str:
+    """One route as the bridge prints it: ``/odom [nav_msgs/msg/Odometry] -> dds``."""
+    return {
+        "to_dds": f"{name} [{type_name}] -> dds",
+        "from_dds": f"{name} [{type_name}] <- dds",
+        "service": f"service {name} [{type_name}] -> dds",
+        "dds_service": f"service {name} [{type_name}] <- dds",
+        "unreachable_service": f"service {name} [{type_name}] <- dds (not callable: "
+                               "served by another DDS vendor only)",
+    }.get(direction, f"{name} [{type_name}] ({direction})")
 
 
 def _stop_on_sigterm() -> Any:
