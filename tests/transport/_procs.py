@@ -109,7 +109,8 @@ def session_env(port: int) -> dict[str, str]:
         "PYTHONUNBUFFERED": "1",
     }
     env.pop("EDDIE_TRANSPORT", None)
-    env.pop("EDDIE_ZENOH_CONFIG", None)
+    for name in ("EDDIE_ZENOH_CONFIG", "ZENOH_SESSION_CONFIG_URI", "ZENOH_CONFIG_OVERRIDE"):
+        env.pop(name, None)
     return env
 
 

@@ -214,7 +214,7 @@ class ZenohTransport:
         deadline = time.monotonic() + timeout_s
         info = self.session.info
         while True:
-            open_mesh = self.config.lan or self.config.config_file is not None
+            open_mesh = self.config.lan or self.config.customised
             if list(info.routers_zid()) or (open_mesh and list(info.peers_zid())):
                 return True
             if time.monotonic() >= deadline:
