@@ -1,8 +1,9 @@
-"""``eddie topic list|echo|hz|bw|info|pub`` — as ``ros2 topic``.
+"""``eddie topic list|echo|hz|bw|delay|info|pub`` — as ``ros2 topic``.
 
 ``hz``, ``bw`` take samples raw (CDR bytes), so they work on any type, described here or
-not; ``echo`` decodes, so it needs the type's definition (shipped, or an interface file on
-``EDDIE_INTERFACE_PATH``/``AMENT_PREFIX_PATH``) and says so in one line when there is none.
+not; ``echo`` and ``delay`` decode, so they need the type's definition (shipped, or an
+interface file on ``EDDIE_INTERFACE_PATH``/``AMENT_PREFIX_PATH``) and say so in one line
+when there is none.
 """
 
 from __future__ import annotations
@@ -25,7 +26,20 @@ from eddiebot.cli._common import (
 )
 from eddiebot.msgs.errors import UnknownTypeError
 
-__all__ = ["add_arguments", "run"]
+__all__ = ["DelayStats", "add_arguments", "run"]
+
+#: ``ros2 topic delay``'s default window, in messages.
+DELAY_WINDOW = 10000
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"wants a positive integer, got {text!r}")
+    return value
 
 
 def _qos_args(p: argparse.ArgumentParser) -> None:
@@ -66,6 +80,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--window", "-w", type=int, default=100, help="samples in the window")
     p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
 
+    p = sub.add_parser("delay", help="print the delay between header stamps and receipt")
+    p.add_argument("topic_name")
+    p.add_argument("--window", "-w", type=_positive_int, default=DELAY_WINDOW,
+                   help=f"samples in the window (default {DELAY_WINDOW})")
+    p.add_argument("--use-sim-time", action="store_true",
+                   help="measure against /clock instead of the system clock")
+    p.add_argument("--duration", type=float, default=None, help="stop after this many seconds")
+
     p = sub.add_parser("type", help="the type of a topic")
     p.add_argument("topic_name")
     p = sub.add_parser("find", help="the topics of a type")
@@ -102,8 +124,8 @@ def run(args: argparse.Namespace) -> int:
         args._parser.print_help()
         return 0
     try:
-        return int({"list": _list, "echo": _echo, "hz": _hz, "bw": _bw, "info": _info,
-                    "pub": _pub, "type": _type, "find": _find}[verb](args))
+        return int({"list": _list, "echo": _echo, "hz": _hz, "bw": _bw, "delay": _delay,
+                    "info": _info, "pub": _pub, "type": _type, "find": _find}[verb](args))
     except (ValueError, UnknownTypeError) as exc:
         print(f"eddie topic {verb}: {exc}", file=sys.stderr)
         return 2
@@ -233,9 +255,11 @@ def _raw_type(s: CliSession, topic: str, type_name: str) -> Any:
 
 
 def _measure(args: argparse.Namespace, verb: str, on_sample: Any, report: Any,
-             banner: str | None = None) -> int:
+             banner: str | None = None, prepare: Any = None) -> int:
     """Subscribe raw to the topic (no decoding: any type, described here or not), feed each
-    sample to ``on_sample``, and print ``report()`` every second and at the end."""
+    sample to ``on_sample``, and print ``report()`` every second and at the end (nothing
+    when it is None). ``prepare(session, type_name)``, if given, runs before subscribing
+    (a ValueError from it is the command's one-line error)."""
     from eddiebot.core import SingleThreadedExecutor
 
     topic = args.topic_name if args.topic_name.startswith("/") else "/" + args.topic_name
@@ -244,6 +268,8 @@ def _measure(args: argparse.Namespace, verb: str, on_sample: Any, report: Any,
         if type_name is None:
             print(f"eddie topic {verb}: topic {topic} did not appear", file=sys.stderr)
             return 1
+        if prepare is not None:
+            prepare(s, type_name)
         _tl, be = _publisher_qos_hint(s, topic)
         s.node.create_subscription(_raw_type(s, topic, type_name), topic, on_sample,
                                    10 if not be else _qos_be(), raw=True)
@@ -257,11 +283,16 @@ def _measure(args: argparse.Namespace, verb: str, on_sample: Any, report: Any,
             now = time.monotonic()
             if now >= next_print + 1.0:
                 next_print = now
-                print(report(), flush=True)
+                _print_report(report())
             if args.duration is not None and now - start >= args.duration:
                 break
-        print(report(), flush=True)
+        _print_report(report())
     return 0
+
+
+def _print_report(text: str | None) -> None:
+    if text is not None:
+        print(text, flush=True)
 
 
 def _hz(args: argparse.Namespace) -> int:
@@ -320,6 +351,95 @@ def _rate_report(stamps: list[float]) -> str:
     rate = 1.0 / mean if mean > 0 else float("inf")
     return (f"average rate: {rate:.3f}\n\tmin: {min(gaps):.3f}s max: {max(gaps):.3f}s "
             f"std dev: {std:.5f}s window: {len(stamps)}")
+
+
+# -- delay ----------------------------------------------------------------------------
+class DelayStats:
+    """``ros2 topic delay``'s figures: receipt time minus header stamp (ns) over the last
+    ``window`` messages. The first message (and the first after time went backwards, as
+    with a bag replayed in a loop) starts the window; a receipt at time zero (no ``/clock``
+    yet) is not counted."""
+
+    def __init__(self, window: int = DELAY_WINDOW) -> None:
+        self.delays: deque[int] = deque(maxlen=max(1, window))
+        self._first_ns = -1
+        self._last_ns = 0
+        self._reported_ns = 0
+        self.resets = 0
+
+    def add(self, now_ns: int, stamp_ns: int) -> None:
+        if now_ns == 0:
+            if self.delays:
+                self.resets += 1
+                self.delays.clear()
+            return
+        if self._first_ns < 0 or self._first_ns > now_ns:
+            if self._first_ns > now_ns:
+                self.resets += 1
+            self._first_ns = self._last_ns = now_ns
+            self.delays.clear()
+            return
+        self.delays.append(now_ns - stamp_ns)
+        self._last_ns = now_ns
+
+    def figures(self) -> tuple[float, float, float, float, int] | None:
+        """(mean, min, max, standard deviation) in seconds and the window's size; None
+        before the first delay."""
+        if not self.delays:
+            return None
+        n = len(self.delays)
+        mean = sum(self.delays) / n
+        std = math.sqrt(sum((d - mean) ** 2 for d in self.delays) / n)
+        return mean * 1e-9, min(self.delays) * 1e-9, max(self.delays) * 1e-9, std * 1e-9, n
+
+    def report(self) -> str | None:
+        """ros2's lines; "no new messages" when nothing came since the last report; None
+        before the first delay."""
+        got = self.figures()
+        if got is None:
+            return None
+        if self._last_ns == self._reported_ns:
+            return "no new messages"
+        self._reported_ns = self._last_ns
+        mean, lo, hi, std, n = got
+        return (f"average delay: {mean:.3f}\n\tmin: {lo:.3f}s max: {hi:.3f}s "
+                f"std dev: {std:.5f}s window: {n}")
+
+
+def _delay(args: argparse.Namespace) -> int:
+    from eddiebot.core.time import stamp_to_ns
+    from eddiebot.msgs import TYPESTORE, deserialize
+
+    stats = DelayStats(args.window)
+    state: dict[str, Any] = {}
+
+    def prepare(s: CliSession, type_name: str) -> None:
+        fields = [name for name, _desc in TYPESTORE.fielddefs[type_name][1]] \
+            if type_name in TYPESTORE.fielddefs else None
+        if fields is None:
+            from eddiebot.msgs import get_message
+
+            get_message(type_name)  # loads it from an interface file, or says it cannot
+            fields = [name for name, _desc in TYPESTORE.fielddefs[type_name][1]]
+        if "header" not in fields:
+            raise ValueError(f"{type_name} has no header: the delay is measured from "
+                             "header.stamp")
+        state["type"] = type_name
+        if args.use_sim_time:
+            from eddiebot.core.clock_node import ClockFollower
+
+            state["follower"] = ClockFollower(s.node)
+            state["clock"] = s.context.sim_clock
+        else:
+            state["clock"] = s.context.system_clock
+
+    def on_sample(data: Any) -> None:
+        # bytes from another process; a message object from this one (by reference)
+        msg = deserialize(bytes(data), state["type"]) \
+            if isinstance(data, (bytes, bytearray, memoryview)) else data
+        stats.add(state["clock"].now_ns(), stamp_to_ns(msg.header.stamp))
+
+    return _measure(args, "delay", on_sample, stats.report, prepare=prepare)
 
 
 # -- type / find ----------------------------------------------------------------------
