@@ -7,8 +7,8 @@ from typing import Any
 
 import pytest
 
+from eddiebot.core._xxh3 import xxh3_128
 from eddiebot.core.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from eddiebot.transport._xxh3 import xxh3_128
 from eddiebot.transport.keys import entity_gid, node_liveliness_key
 
 _DATA = bytes(range(256)) * 3

@@ -25,6 +25,7 @@ from eddiebot.core.errors import (
     ServiceUnavailableError,
     TopicTypeMismatchError,
 )
+from eddiebot.core.graph import GraphQueries
 from eddiebot.core.names import apply_remaps, normalize_namespace, resolve_name, validate_node_name
 from eddiebot.core.parameters import (
     Parameter,
@@ -42,6 +43,7 @@ from eddiebot.msgs import ServiceType, type_name
 
 if TYPE_CHECKING:
     from eddiebot.core.executors import Executor
+    from eddiebot.core.rate import Rate
 
 __all__ = [
     "CallbackGroup",
@@ -511,8 +513,8 @@ class NodeLogger:
 _ParamCallback = Callable[[list[Parameter]], SetParametersResult]
 
 
-class Node:
-    """A participant in the graph, as ``rclpy.node.Node``."""
+class Node(GraphQueries):
+    """A participant in the graph, as ``rclpy.node.Node`` (graph queries: ``core.graph``)."""
 
     def __init__(
         self,
@@ -661,6 +663,12 @@ class Node:
             self.timers.append(timer)
         self._timers_changed()
         return timer
+
+    def create_rate(self, frequency: float, clock: Clock | None = None) -> Rate:
+        """A :class:`~eddiebot.core.rate.Rate` of ``frequency`` Hz on this node's clock."""
+        from eddiebot.core.rate import Rate
+
+        return Rate(self, frequency, clock)
 
     def create_service(
         self,

@@ -19,9 +19,9 @@ import struct
 from dataclasses import dataclass
 from typing import Any
 
+from eddiebot.core._xxh3 import xxh3_128
 from eddiebot.core.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from eddiebot.msgs import TYPESTORE, UnknownTypeError, load_type, normalize_type_name, type_hash
-from eddiebot.transport._xxh3 import xxh3_128
 
 __all__ = [
     "ADMIN_SPACE",
@@ -250,6 +250,10 @@ class GraphEntity:
     @property
     def gid(self) -> bytes:
         return entity_gid(self.key)
+
+    @property
+    def qos_profile(self) -> QoSProfile:
+        return qos_from_keyexpr(self.qos)
 
 
 def parse_liveliness_key(key: str) -> GraphEntity | None:

@@ -182,6 +182,7 @@ class ZenohTransport:
         self._ids = itertools.count()
         self._node_ids: dict[int, int] = {}
         self._tokens: dict[int, Any] = {}
+        self._token_keys: dict[int, str] = {}
         self._pubs: dict[int, _PubState] = {}
         self._pub_topics: dict[str, int] = {}
         self._topic_subs: dict[str, _TopicSub] = {}
@@ -289,12 +290,20 @@ class ZenohTransport:
         with self._lock:
             old = self._tokens.pop(id(owner), None)
             self._tokens[id(owner)] = token
+            self._token_keys[id(owner)] = key
         if old is not None:
             _undeclare(old)
         return token
 
+    def entity_gid_of(self, owner: Any) -> bytes | None:
+        """The GID of a local node, publisher, subscription, service or client (XXH3-128
+        of the liveliness key it announced), None if it announced none."""
+        key = self._token_keys.get(id(owner))
+        return entity_gid(key) if key is not None else None
+
     def _drop_token(self, owner: Any) -> None:
         with self._lock:
+            self._token_keys.pop(id(owner), None)
             token = self._tokens.pop(id(owner), None)
         if token is not None:
             _undeclare(token)
