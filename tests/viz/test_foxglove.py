@@ -183,3 +183,86 @@ def test_vanished_topic_is_withdrawn(bridge: tuple[FoxgloveBridge, Node]) -> Non
     while "/short_lived" in b._topics and time.monotonic() < deadline + 3:
         time.sleep(0.05)
     assert "/short_lived" not in b._topics
+
+
+def _parameter_reply(ws: ClientConnection, request_id: str) -> dict[str, Any]:
+    deadline = time.monotonic() + 15
+    while True:
+        frame = ws.recv(timeout=max(0.01, deadline - time.monotonic()))
+        if isinstance(frame, str):
+            msg = json.loads(frame)
+            if msg.get("op") == "parameterValues" and msg.get("id") == request_id:
+                return {p["name"]: p.get("value") for p in msg["parameters"]}
+
+
+def test_parameter_names_split_at_the_node() -> None:
+    from eddiebot.viz.foxglove_bridge import split_parameter_name
+
+    assert split_parameter_name("/controller_server.FollowPath.max_vel_x") == (
+        "/controller_server", "FollowPath.max_vel_x")
+    assert split_parameter_name("/eddie/ns/slam.resolution") == ("/eddie/ns/slam", "resolution")
+    assert split_parameter_name("no_node") == ("", "no_node")
+
+
+def test_distro_goes_in_the_server_metadata_when_the_sdk_takes_it() -> None:
+    from eddiebot.viz.foxglove_bridge import _server_metadata
+
+    def newer(*, name: str | None = None, server_info: dict[str, str] | None = None) -> None:
+        return None
+
+    def older(*, name: str | None = None) -> None:
+        return None
+
+    assert _server_metadata(newer) == {"server_info": {"ROS_DISTRO": "jazzy"}}
+    assert _server_metadata(older) == {}
+
+
+@pytest.fixture
+def remote_graph(monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[FoxgloveBridge, Node]]:
+    """A bridge in one context and, in another (another Zenoh session: another process as far
+    as the graph goes), a node with parameters, both on a private router."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "transport"))
+    from _procs import private_router
+
+    from eddiebot.transport import ZenohConfig, connect
+
+    monkeypatch.delenv("EDDIE_TRANSPORT", raising=False)
+    with private_router() as env:
+        config = ZenohConfig.from_env(env)
+        remote_ctx, bridge_ctx = Context(), Context()
+        remote = Node("remote_params", context=remote_ctx)
+        remote.declare_parameter("max_speed", 0.3)
+        remote.declare_parameter("FollowPath.max_vel_x", 0.26)
+        remote.declare_parameter("frames", ["map", "odom"])
+        connect(remote_ctx, config, required=True)
+        connect(bridge_ctx, config, required=True)
+        b = FoxgloveBridge(bridge_ctx, BridgeConfig(port=0, discovery_period_s=0.2))
+        try:
+            yield b, remote
+        finally:
+            b.stop()
+            bridge_ctx.shutdown()
+            remote_ctx.shutdown()
+
+
+def test_parameters_of_nodes_in_other_processes(
+        remote_graph: tuple[FoxgloveBridge, Node]) -> None:
+    b, remote = remote_graph
+    deadline = time.monotonic() + 15
+    while "/remote_params" not in b._remote_nodes() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    with connect(f"ws://127.0.0.1:{b.port}", subprotocols=SUBPROTOCOLS) as ws:  # type: ignore[arg-type]
+        json.loads(ws.recv(timeout=5))
+        ws.send(json.dumps({"op": "getParameters", "parameterNames": [], "id": "all"}))
+        values = _parameter_reply(ws, "all")
+        assert values["/remote_params.max_speed"] == 0.3
+        assert values["/remote_params.FollowPath.max_vel_x"] == 0.26
+        assert values["/remote_params.frames"] == ["map", "odom"]
+        assert values["/remote_params.use_sim_time"] is False
+        ws.send(json.dumps({"op": "setParameters", "id": "set", "parameters": [
+            {"name": "/remote_params.FollowPath.max_vel_x", "value": 0.4}]}))
+        assert _parameter_reply(ws, "set") == {"/remote_params.FollowPath.max_vel_x": 0.4}
+    assert remote.get_parameter("FollowPath.max_vel_x").value == 0.4

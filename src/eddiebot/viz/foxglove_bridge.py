@@ -9,20 +9,25 @@ subscribes to a topic only while some Foxglove client subscribes to it.
 - Transient-local topics (``/tf_static``, ``/map``, ``/robot_description``, ...) are held
   from the start and replayed to every late subscriber.
 - Services of the graph are callable from Foxglove's Service Call panel (CDR).
-- Parameters of the nodes in this process are listed and settable (``/node.param``).
+- Parameters of every node on the graph are listed and settable (``/node.param``, as ROS 2's
+  foxglove_bridge names them): this process's nodes directly, the others through their
+  parameter services (``list_parameters``, ``get_parameters``, ``set_parameters``).
 - Client-published topics are accepted (CDR or JSON); ``/cmd_vel`` from a client goes to
   ``/cmd_vel_teleop`` so the Teleop panel drives through the twist mux like every other
   source.
 
-Known limit (foxglove-sdk 0.30): the 3D panel's click-to-publish ("Publish point / pose /
-pose estimate") is enabled by the Foxglove app only for servers that announce a ROS distro
-(ROS 2's foxglove_bridge does, through server metadata); the SDK's ``start_server`` cannot
-set that metadata, so those buttons stay greyed out. Use the Teleop panel, the Publish panel
-or the eddie web dashboard for goals and initial poses.
+The ROS distribution (``ROS_DISTRO``: jazzy, that of our message definitions) is announced in
+the server's metadata, as ROS 2's foxglove_bridge does, when the SDK's ``start_server`` takes
+``server_info``; the Foxglove app enables the 3D panel's click-to-publish ("Publish point /
+pose / pose estimate") only for such servers. foxglove-sdk 0.30's Python ``start_server``
+has no such argument (its Rust core has, unexposed), so with it those buttons stay greyed
+out: use the Teleop panel, the Publish panel or the eddie web dashboard for goals and
+initial poses.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 import threading
 import time
@@ -32,6 +37,8 @@ from typing import Any
 from eddiebot.core.context import Context
 from eddiebot.core.executors import SingleThreadedExecutor
 from eddiebot.core.node import Node, Subscription
+from eddiebot.core.param_services import ParameterClient
+from eddiebot.core.parameters import Parameter, value_from_msg
 from eddiebot.core.qos import DurabilityPolicy, QoSProfile
 from eddiebot.msgs import (
     SERVICES,
@@ -43,7 +50,11 @@ from eddiebot.msgs import (
     serialize,
 )
 
-__all__ = ["DEFAULT_REMAP", "LATCHED_TOPICS", "BridgeConfig", "FoxgloveBridge", "msg_from_dict"]
+__all__ = ["DEFAULT_REMAP", "LATCHED_TOPICS", "ROS_DISTRO", "BridgeConfig", "FoxgloveBridge",
+           "msg_from_dict", "split_parameter_name"]
+
+#: The ROS 2 distribution whose message definitions we speak.
+ROS_DISTRO = "jazzy"
 
 #: Topics whose last messages a late subscriber receives (transient-local in ROS 2).
 LATCHED_TOPICS = ("/tf_static", "/map", "/robot_description", "/map_metadata",
@@ -65,6 +76,28 @@ class BridgeConfig:
     #: seconds between graph scans for new topics and services
     discovery_period_s: float = 1.0
     service_timeout_s: float = 5.0
+    #: seconds a parameter request waits for other processes' nodes to answer
+    param_timeout_s: float = 5.0
+
+
+def split_parameter_name(full: str) -> tuple[str, str]:
+    """``/controller_server.FollowPath.max_vel_x`` → (``/controller_server``,
+    ``FollowPath.max_vel_x``): the node is everything up to the first dot after its last
+    slash (node names have no dots; parameter names may)."""
+    slash = full.rfind("/")
+    dot = full.find(".", slash + 1)
+    if slash < 0 or dot < 0:
+        return "", full
+    return full[:dot], full[dot + 1:]
+
+
+def _server_metadata(start_server: Any) -> dict[str, Any]:
+    """The keyword that announces ``ROS_DISTRO``, if this SDK's ``start_server`` has one."""
+    try:
+        params = inspect.signature(start_server).parameters
+    except (TypeError, ValueError):
+        return {}
+    return {"server_info": {"ROS_DISTRO": ROS_DISTRO}} if "server_info" in params else {}
 
 
 def msg_from_dict(type_name: str, values: dict[str, Any]) -> Any:
@@ -125,13 +158,15 @@ class FoxgloveBridge:
         self._client_channels: dict[tuple[int, int], tuple[Any, str, str]] = {}
         self._publishers: dict[str, Any] = {}
         self._clients: dict[str, Any] = {}
+        self._param_clients: dict[str, ParameterClient] = {}
         self._fg_context = foxglove.Context()
         self.server = foxglove.start_server(
             name=cfg.name, host=cfg.host, port=cfg.port,
             capabilities=[Capability.ClientPublish, Capability.Services, Capability.Parameters],
             server_listener=self,  # type: ignore[arg-type]
             supported_encodings=["cdr", "json"],
-            context=self._fg_context)
+            context=self._fg_context,
+            **_server_metadata(foxglove.start_server))
         self.executor = SingleThreadedExecutor(context=context, drive_sim_time=False)
         self.executor.add_node(self.node)
         self.discover()
@@ -314,39 +349,122 @@ class FoxgloveBridge:
         self._services[name] = svc
         return svc
 
-    # -- parameters (nodes of this process) --------------------------------------------------------
+    # -- parameters (every node on the graph) ---------------------------------------------------
     def _local_nodes(self) -> list[Node]:
         return [n for n in list(self.context.nodes) if n is not self.node]
 
+    def _remote_nodes(self) -> list[str]:
+        """Fully qualified names of the other processes' nodes that serve parameters."""
+        local = {n.fully_qualified_name for n in self.context.nodes}
+        out: set[str] = set()
+        for t in self.context.transports:
+            cache = getattr(t, "cache", None)
+            if cache is None:
+                continue
+            for e in cache.nodes():
+                name = e.node
+                if (name not in local and not e.node_name.startswith("_")
+                        and cache.has_service(f"{name}/list_parameters")
+                        and cache.has_service(f"{name}/get_parameters")):
+                    out.add(name)
+        return sorted(out)
+
+    def _param_client(self, node_name: str) -> ParameterClient:
+        with self._lock:
+            client = self._param_clients.get(node_name)
+            if client is None:
+                client = self._param_clients[node_name] = ParameterClient(
+                    self.node, node_name, timeout_sec=self.config.param_timeout_s)
+            return client
+
+    def _remote_values(self, wanted: dict[str, list[str]]) -> list[tuple[str, Any]]:
+        """(``/node.param``, value) of remote nodes: ``wanted`` maps a node to the names
+        asked for (empty: all its parameters). Every node is asked at once; one that does
+        not answer within ``param_timeout_s`` is left out, as foxglove_bridge does."""
+        deadline = time.monotonic() + self.config.param_timeout_s
+
+        def remaining() -> float:
+            return max(0.0, deadline - time.monotonic())
+
+        listings = {n: self._param_client(n).list_parameters_async([], 0)
+                    for n, names in wanted.items() if not names}
+        names = {n: list(ns) for n, ns in wanted.items() if ns}
+        for n, future in listings.items():
+            if future.wait(remaining()) and future.exception() is None:
+                names[n] = list(future.result().result.names)
+        gets = {n: self._param_client(n).get_parameters_async(ns)
+                for n, ns in names.items() if ns}
+        out: list[tuple[str, Any]] = []
+        for n, future in gets.items():
+            if not future.wait(remaining()) or future.exception() is not None:
+                self.node.get_logger().warning(f"foxglove: no parameters from {n}")
+                continue
+            for pname, value in zip(names[n], future.result().values, strict=False):
+                out.append((f"{n}.{pname}", value_from_msg(value)))
+        return out
+
+    def _fg_parameters(self, values: list[tuple[str, Any]]) -> list[Any]:
+        out = []
+        for full, value in values:
+            if value is None or (isinstance(value, list) and not value):
+                continue
+            try:
+                out.append(self._fg.Parameter(full, value=value))
+            except Exception:  # a value the SDK cannot carry
+                continue
+        return out
+
     def on_get_parameters(self, client: Any, param_names: list[str],
                           request_id: str | None = None) -> list[Any]:
-        out = []
+        asked: dict[str, list[str]] = {}
+        for full in param_names:
+            node_name, pname = split_parameter_name(full)
+            asked.setdefault(node_name, []).append(pname)
+        values: list[tuple[str, Any]] = []
         for node in self._local_nodes():
+            fq = node.fully_qualified_name
+            if param_names and fq not in asked:
+                continue
             for pname, p in node.parameters.items():
-                full = f"{node.fully_qualified_name}.{pname}"
-                if param_names and full not in param_names:
-                    continue
-                value = p.value
-                if value is None or (isinstance(value, list) and not value):
-                    continue
-                try:
-                    out.append(self._fg.Parameter(full, value=value))
-                except Exception:  # a value the SDK cannot carry
-                    continue
-        return out
+                if not param_names or pname in asked[fq]:
+                    values.append((f"{fq}.{pname}", p.value))
+        remote = self._remote_nodes()
+        wanted = {n: [] for n in remote} if not param_names else {
+            n: names for n, names in asked.items() if n in remote}
+        if wanted:
+            values.extend(self._remote_values(wanted))
+        return self._fg_parameters(values)
 
     def on_set_parameters(self, client: Any, parameters: list[Any],
                           request_id: str | None = None) -> list[Any]:
-        nodes = {n.fully_qualified_name: n for n in self._local_nodes()}
+        local = {n.fully_qualified_name: n for n in self._local_nodes()}
+        remote: dict[str, list[Parameter]] = {}
         for p in parameters:
-            node_name, _, pname = p.name.rpartition(".")
-            node = nodes.get(node_name)
-            if node is None or not node.has_parameter(pname):
-                continue
+            node_name, pname = split_parameter_name(p.name)
             value = p.get_value() if hasattr(p, "get_value") else p.value
+            node = local.get(node_name)
+            if node is None:
+                remote.setdefault(node_name, []).append(Parameter(pname, value))
+                continue
+            if not node.has_parameter(pname):
+                continue
             result = node.set_parameter(pname, value)
             if not result.successful:
                 self.server.publish_status(f"{p.name}: {result.reason}", self._fg.StatusLevel.Warning)
+        known = set(self._remote_nodes())
+        futures = {n: self._param_client(n).set_parameters_async(ps)
+                   for n, ps in remote.items() if n in known}
+        deadline = time.monotonic() + self.config.param_timeout_s
+        for n, future in futures.items():
+            if not future.wait(max(0.0, deadline - time.monotonic())) \
+                    or future.exception() is not None:
+                self.server.publish_status(f"{n}: parameters not set (no answer)",
+                                           self._fg.StatusLevel.Warning)
+                continue
+            for p, r in zip(remote[n], future.result().results, strict=False):
+                if not r.successful:
+                    self.server.publish_status(f"{n}.{p.name}: {r.reason}",
+                                               self._fg.StatusLevel.Warning)
         return self.on_get_parameters(client, [p.name for p in parameters], request_id)
 
     # -- life ------------------------------------------------------------------------------------
