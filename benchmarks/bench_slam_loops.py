@@ -89,12 +89,12 @@ class _LoopLog:
 
 
 def main() -> int:
+    from eddiebot.bag import BagReader
     from eddiebot.cli.slam import _default_params
     from eddiebot.sim.worlds import load_world
     from eddiebot.slam import load_slam_config
     from eddiebot.slam.pose_graph import EdgeKind
     from eddiebot.slam.replay import check_bag_topics, scans_from_messages
-    from eddiebot.viz.bag import BagReader
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("drive", type=Path, help="a --keep DIR of bench_slam_sim.py --record")

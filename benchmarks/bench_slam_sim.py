@@ -148,8 +148,8 @@ def run_one(name: str, out: Path, seed: int, params: Path | None,
 
 
 def _series(bag: Path, topic: str) -> tuple[np.ndarray, np.ndarray]:
+    from eddiebot.bag import BagReader
     from eddiebot.geometry import quaternion_to_yaw
-    from eddiebot.viz.bag import BagReader
 
     t, p = [], []
     with BagReader(bag) as reader:
@@ -183,12 +183,12 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
     every odometry pose gets seeded N(0, `PERTURBATION_SIGMA`) noise, one ensemble member;
     ``optimum_every`` N > 0: every N nodes, how far iSAM2's estimate is from the batch optimum
     of the factors it holds, `_isam_gap`)."""
+    from eddiebot.bag import BagReader
     from eddiebot.cli.slam import _default_params
     from eddiebot.geometry import se2_compose
     from eddiebot.sim.worlds import load_world
     from eddiebot.slam import load_slam_config
     from eddiebot.slam.replay import check_bag_topics, replay_scans, scans_from_messages
-    from eddiebot.viz.bag import BagReader
 
     start = np.array(load_world(RUNS[name][0]).start, dtype=np.float64)
     config = load_slam_config(_default_params(), overrides=overrides)

@@ -14,7 +14,7 @@ TIERS: tuple[tuple[str, ...], ...] = (
     ("geometry",),
     ("msgs",),
     ("core",),
-    ("transport", "maps", "perception"),
+    ("transport", "maps", "perception", "bag"),
     ("robot",),
     ("base", "sim"),
     ("slam", "nav", "vslam"),
@@ -45,15 +45,26 @@ def test_every_package_has_a_tier():
     assert packages <= set(TIER), f"packages without a tier: {sorted(packages - set(TIER))}"
 
 
-def test_lower_never_imports_higher():
-    violations = []
+def _package_imports() -> list[tuple[str, str, str]]:
+    """(file relative to the package root, its package, an eddiebot package it imports)."""
+    out = []
     for path in SRC.rglob("*.py"):
         rel = path.relative_to(SRC)
         pkg = rel.parts[0] if len(rel.parts) > 1 else rel.stem
-        if pkg not in TIER:
-            continue
-        for target in _imports(path):
-            if target == pkg or target not in TIER or TIER[target] <= TIER[pkg]:
-                continue
-            violations.append(f"{rel.as_posix()} ({pkg}) imports eddiebot.{target}")
+        if pkg in TIER:
+            out.extend((rel.as_posix(), pkg, target) for target in _imports(path)
+                       if target != pkg and target in TIER)
+    return out
+
+
+def test_lower_never_imports_higher():
+    violations = [f"{rel} ({pkg}) imports eddiebot.{target}"
+                  for rel, pkg, target in _package_imports() if TIER[target] > TIER[pkg]]
     assert not violations, "\n".join(sorted(violations))
+
+
+def test_packages_of_one_tier_never_import_each_other_both_ways():
+    edges = {(pkg, target) for _, pkg, target in _package_imports()
+             if TIER[target] == TIER[pkg]}
+    both = sorted(f"{a} <-> {b}" for a, b in edges if (b, a) in edges and a < b)
+    assert not both, "\n".join(both)

@@ -42,7 +42,8 @@ NODES: dict[str, str] = {
     "eddiebot.nav.waypoint_follower": "eddiebot.nav.nodes.waypoint_follower:WaypointFollower",
     "eddiebot.explore.explore": "eddiebot.explore.node:ExploreNode",
     # tools
-    "eddiebot.viz.recorder": "eddiebot.viz.bag:RecorderNode",
+    "eddiebot.bag.recorder": "eddiebot.bag.recorder:RecorderNode",
+    "eddiebot.viz.recorder": "eddiebot.bag.recorder:RecorderNode",  # its name before bag/
 }
 
 __all__ = ["NODES"]

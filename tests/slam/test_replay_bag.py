@@ -92,7 +92,7 @@ def _messages(scan_topic: str = "/scan", odometry: str = "/odom"):
 
 
 def _write_mcap(path: Path, messages) -> None:
-    from eddiebot.viz.bag import BagWriter
+    from eddiebot.bag import BagWriter
 
     with BagWriter(path) as w:
         for topic, _, t, msg in messages:

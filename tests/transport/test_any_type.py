@@ -112,7 +112,7 @@ def test_record_of_an_undescribed_type_keeps_raw_cdr_and_an_empty_schema(
 ) -> None:
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    from eddiebot.viz.bag import BagReader
+    from eddiebot.bag import BagReader
 
     env = _env(zenoh_env, EDDIE_INTERFACE_PATH=str(interfaces["empty"]))
     bag = tmp_path / "bag"

@@ -9,13 +9,13 @@ import cv2
 import numpy as np
 import pytest
 
+from eddiebot.bag import BagWriter
 from eddiebot.geometry import yaw_to_quaternion
 from eddiebot.maps import OccupancyMap, map_to_msg, map_to_world, save_map
 from eddiebot.msgs.geometry_msgs import TransformStamped
 from eddiebot.msgs.nav_msgs import Odometry
 from eddiebot.msgs.sensor_msgs import LaserScan
 from eddiebot.msgs.tf2_msgs import TFMessage
-from eddiebot.viz.bag import BagWriter
 from eddiebot.viz.snapshot import (
     FREE_BGR,
     OCCUPIED_BGR,

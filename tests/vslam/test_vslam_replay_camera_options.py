@@ -96,8 +96,8 @@ def test_intrinsics_from_options_and_camera_info_yaml(tmp_path, capsys):
 
 
 def _depth_bag(path: Path, millimetres: float) -> Path:
+    from eddiebot.bag import BagWriter
     from eddiebot.msgs.sensor_msgs import CameraInfo, Image
-    from eddiebot.viz.bag import BagWriter
 
     depth = np.full((48, 64), millimetres, np.uint16)
     with BagWriter(path) as w:
@@ -110,7 +110,7 @@ def _depth_bag(path: Path, millimetres: float) -> Path:
 
 
 def test_a_bag_reports_its_camera_info_and_refuses_implausible_depth(tmp_path, capsys):
-    from eddiebot.viz.bag import BagReader
+    from eddiebot.bag import BagReader
     from eddiebot.vslam.errors import DepthScaleError
 
     with BagReader(_depth_bag(tmp_path / "ok", 1500)) as reader:

@@ -14,7 +14,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from eddiebot.viz.bag import BagError, bag_info, format_bag_info
+    from eddiebot.bag import BagError, bag_info, format_bag_info
 
     if args.bag_command != "info":  # pragma: no cover - argparse enforces the choice
         return 2

@@ -28,9 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from eddiebot.bag import BagError, Player
     from eddiebot.core.context import Context
     from eddiebot.core.launch import spin_nodes
-    from eddiebot.viz.bag import BagError, Player
 
     context = Context()
     if not args.no_transport:

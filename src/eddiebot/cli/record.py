@@ -32,10 +32,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from eddiebot.bag import BagError, RecorderNode
     from eddiebot.core.context import Context
     from eddiebot.core.errors import ParameterError
     from eddiebot.core.launch import spin_nodes
-    from eddiebot.viz.bag import BagError, RecorderNode
 
     if not args.all and not args.topics:
         print("eddie record: give topics or -a/--all", file=sys.stderr)

@@ -173,9 +173,9 @@ def replay_bag(
 
     Raises `eddiebot.slam.SlamError` (`BagInputError` for a missing or mistyped topic).
     """
+    from eddiebot.bag import BagError, BagReader
     from eddiebot.slam import SlamError
     from eddiebot.slam.replay import check_bag_topics, replay_scans, scans_from_messages
-    from eddiebot.viz.bag import BagError, BagReader
 
     try:
         reader = BagReader(path)

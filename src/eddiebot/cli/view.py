@@ -27,8 +27,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from eddiebot.bag import BagError
     from eddiebot.maps import MapError
-    from eddiebot.viz.bag import BagError
     from eddiebot.viz.snapshot import render_bag, render_map, render_trajectories
 
     src: Path = args.file

@@ -355,11 +355,11 @@ def replay_bag(bag: Path, out_dir: Path, parameters: dict[str, str] | None = Non
                ) -> dict[str, Any]:
     """Run the ``rtabmap`` node over a rosbag2 of our topics on the bag's clock; writes
     ``rtabmap.db`` and ``poses.txt`` (base poses, map frame, TUM) into ``out_dir``."""
+    from eddiebot.bag import BagReader
     from eddiebot.core.context import Context
     from eddiebot.core.executors import SingleThreadedExecutor
     from eddiebot.core.node import Node
     from eddiebot.core.qos import qos_profile_latched
-    from eddiebot.viz.bag import BagReader
     from eddiebot.vslam.node import RtabmapNode
     from eddiebot.vslam.tum import write_tum_trajectory
 

@@ -173,7 +173,7 @@ def run_mapping(out_dir: Path, *, world: str = "office", route: tuple[Waypoint, 
                               lambda m: odom.append((probe.get_clock().now_ns(), _pose_of(m))), 50)
     nodes.append(probe)
     if record:
-        from eddiebot.viz.bag import RecorderNode
+        from eddiebot.bag import RecorderNode
 
         bag = out_dir / "mapping_bag"
         if bag.exists():

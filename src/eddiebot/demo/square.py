@@ -177,7 +177,7 @@ def run_square(out_dir: Path, *, side: float = 1.0, firmware: str = "1.1",
 def _recorder(context: Context, path: Path) -> Node | None:
     """A recorder of every topic, if the bag module is installed."""
     try:
-        from eddiebot.viz.bag import RecorderNode  # type: ignore[attr-defined]
+        from eddiebot.bag import RecorderNode
     except ImportError:
         return None
     if path.exists():

@@ -431,7 +431,7 @@ def render_bag(
     ``/ground_truth/odom`` are added when recorded. Extra ``trajectories`` (TUM files,
     arrays) are drawn as given. A damaged bag is drawn up to the damage.
     """
-    from eddiebot.viz.bag import BagReader
+    from eddiebot.bag import BagReader
 
     wanted = [map_topic, odom_topic, scan_topic, plan_topic, ground_truth_topic, "/tf"]
     grid_msg = None
