@@ -31,6 +31,7 @@ from cyclonedds.builtin import (  # noqa: E402
     BuiltinDataReader,
     BuiltinTopicDcpsParticipant,
     BuiltinTopicDcpsPublication,
+    BuiltinTopicDcpsSubscription,
 )
 from cyclonedds.core import InstanceState, SampleState, ViewState  # noqa: E402
 from cyclonedds.domain import Domain, DomainParticipant  # noqa: E402
@@ -643,6 +644,34 @@ def test_our_client_calls_a_service_served_on_dds(
     assert (second.success, second.message) == (False, "dds led False")
     # one client (the bridge's) calling in sequence
     assert [seq for _g, seq in headers] == [1, 2] and headers[0][0] == headers[1][0] != 0
+    # the server goes: so does the service on our graph
+    requests.__del__()
+    replies.__del__()
+    assert _wait(lambda: not transport.cache.services(name)), bridge.stderr
+    assert not client.service_is_ready()
+
+
+def test_a_service_of_ours_that_goes_leaves_dds(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    from eddiebot.msgs.std_srvs import Trigger
+
+    _ctx, node, _t = ours
+    srv = node.create_service(Trigger, f"{PREFIX}/short_lived",
+                              lambda req, res: Trigger.Response(success=True))
+    subscriptions = BuiltinDataReader(ros_peer.participant, BuiltinTopicDcpsSubscription)
+    alive: dict[str, str] = {}
+
+    def request_readers() -> set[str]:
+        for sample in subscriptions.take(N=200):
+            if sample.sample_info.instance_state == InstanceState.Alive:
+                alive[str(sample.key)] = sample.topic_name
+            else:
+                alive.pop(str(sample.key), None)
+        return {k for k, t in alive.items() if t == "rq/ddstest/short_livedRequest"}
+
+    assert _wait(lambda: len(request_readers()) == 1), bridge.stderr
+    node.destroy_service(srv)
+    assert _wait(lambda: not request_readers()), bridge.stderr
 
 
 def test_service_names_and_vendors() -> None:
@@ -693,3 +722,92 @@ def test_a_call_of_a_fast_dds_server_says_why_it_cannot_work(zenoh_config: Any) 
             dds.close()
             bridge_ctx.shutdown()
             client_ctx.shutdown()
+
+
+def test_our_action_client_drives_an_action_server_on_dds(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    """An action served on DDS is its three services and feedback topic: a goal from our
+    ActionClient is accepted, its feedback arrives in order, its result comes back."""
+    from eddiebot.core.action import ActionClient
+    from eddiebot.msgs import get_action
+    from eddiebot.transport.dds.types import service_dds_type
+
+    ctx, node, transport = ours
+    action = get_action("nav2_msgs/action/Wait")
+    prefix = f"{PREFIX}/wait/_action"
+    dds_prefix = prefix.lstrip("/")
+    qos = Qos(Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+              Policy.History.KeepLast(10),
+              Policy.DataRepresentation(use_cdrv0_representation=True))
+    servers: dict[str, tuple[Any, Any, str]] = {}
+    for srv, type_name in (("send_goal", "nav2_msgs/action/Wait_SendGoal"),
+                           ("get_result", "nav2_msgs/action/Wait_GetResult"),
+                           ("cancel_goal", "action_msgs/srv/CancelGoal")):
+        req = Topic(ros_peer.participant, f"rq/{dds_prefix}/{srv}Request",
+                    service_dds_type(type_name + "_Request"))
+        res = Topic(ros_peer.participant, f"rr/{dds_prefix}/{srv}Reply",
+                    service_dds_type(type_name + "_Response"))
+        servers[srv] = (DataReader(ros_peer.participant, req, qos=qos),
+                        DataWriter(ros_peer.participant, res, qos=qos), type_name)
+    _Uuid = make_idl_struct("UUID_", "unique_identifier_msgs::msg::dds_::UUID_",
+                            {"uuid": idl.array[idl.uint8, 16]})
+    _Duration = make_idl_struct("Duration_", "builtin_interfaces::msg::dds_::Duration_",
+                                {"sec": idl.int32, "nanosec": idl.uint32})
+    _WaitFeedback = make_idl_struct("Wait_Feedback_", "nav2_msgs::action::dds_::Wait_Feedback_",
+                                    {"time_left": _Duration})
+    _FeedbackMessage = make_idl_struct(
+        "Wait_FeedbackMessage_", "nav2_msgs::action::dds_::Wait_FeedbackMessage_",
+        {"goal_id": _Uuid, "feedback": _WaitFeedback})
+    feedback = ros_peer.writer(f"{prefix}/feedback", _FeedbackMessage,
+                               "nav2_msgs/action/Wait_FeedbackMessage")
+    stop = threading.Event()
+    goals: list[bytes] = []
+
+    def answer(srv: str, raw: bytes, response: Any) -> None:
+        _reader, writer, type_name = servers[srv]
+        body = serialize(response, type_name + "_Response")
+        ddspy_write(writer._ref, RosPeer.pad(body[:4] + raw[4:20] + body[4:]))
+
+    def serve() -> None:
+        while not stop.is_set():
+            for srv, (reader, _writer, type_name) in servers.items():
+                for data, info in ddspy_take(reader._ref, _ANY, 10):
+                    raw = bytes(data)
+                    if not info.valid_data:
+                        continue
+                    request = TYPESTORE.deserialize_cdr(raw[:4] + raw[20:], type_name + "_Request")
+                    if srv == "send_goal":
+                        goals.append(bytes(request.goal_id.uuid))
+                        answer(srv, raw, action.SendGoal.Response(accepted=True))
+                        for left in (2, 1, 0):
+                            msg = action.FeedbackMessage(goal_id=request.goal_id)
+                            msg.feedback.time_left.sec = left
+                            RosPeer.write(feedback, msg)
+                    elif srv == "get_result":
+                        response = action.GetResult.Response(status=4)
+                        response.result.total_elapsed_time.sec = int(request.goal_id.uuid[0])
+                        answer(srv, raw, response)
+            time.sleep(0.005)
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    spinner = threading.Thread(target=ex.spin, daemon=True)
+    try:
+        client = ActionClient(node, action, f"{PREFIX}/wait")
+        assert client.wait_for_server(timeout_sec=15), bridge.stderr
+        assert _wait(lambda: bool(transport.cache.publishers(f"{prefix}/feedback"))), bridge.stderr
+        spinner.start()
+        left: list[int] = []
+        goal = action.Goal()
+        goal.time.sec = 3
+        result = client.send_goal(goal, lambda m: left.append(int(m.feedback.time_left.sec)),
+                                  timeout_sec=10)
+    finally:
+        stop.set()
+        server.join(2)
+        ex.shutdown()
+    assert result is not None and int(result.status) == 4
+    assert len(goals) == 1 and result.result.total_elapsed_time.sec == goals[0][0]
+    assert left == [2, 1, 0]
