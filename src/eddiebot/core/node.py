@@ -578,6 +578,12 @@ class Node(GraphQueries):
         self._parameter_service: ParameterService | None = (
             ParameterService(self) if start_parameter_services else None
         )
+        # ~/get_type_description, as every rclpy node (Iron and later) serves it
+        from eddiebot.core.type_description import TypeDescriptionService
+
+        self._type_description_service: TypeDescriptionService | None = (
+            TypeDescriptionService(self) if start_parameter_services else None
+        )
 
     # -- identity -----------------------------------------------------------------------
     def get_name(self) -> str:

@@ -21,6 +21,7 @@ from typing import Any
 
 from eddiebot.core._xxh3 import xxh3_128
 from eddiebot.core.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from eddiebot.core.type_description import describe, rihs01, service_fielddefs
 from eddiebot.msgs import TYPESTORE, UnknownTypeError, load_type, normalize_type_name, type_hash
 
 __all__ = [
@@ -101,32 +102,8 @@ def service_hash_from(fielddefs: Any, srv_type: str) -> str:
 
     Raises ``UnknownTypeError`` when they do not describe the service completely.
     """
-    from rosbags.interfaces import Nodetype
-    from rosbags.typesys.store import Typestore
-
-    req, res, event = f"{srv_type}_Request", f"{srv_type}_Response", f"{srv_type}_Event"
-    store = Typestore()
-    store.fielddefs.update(fielddefs)
-    # rosidl describes ServiceEventInfo's ``char[16] client_gid`` as uint8[16]
-    info = "service_msgs/msg/ServiceEventInfo"
-    if info in store.fielddefs:
-        consts, fields = store.fielddefs[info]
-        store.fielddefs[info] = (consts, [
-            (n, (Nodetype.ARRAY, ((Nodetype.BASE, ("uint8", 0)), 16)))
-            if n == "client_gid" else (n, d) for n, d in fields
-        ])
-    store.fielddefs[event] = ([], [
-        ("info", (Nodetype.NAME, info)),
-        ("request", (Nodetype.SEQUENCE, ((Nodetype.NAME, req), 1))),
-        ("response", (Nodetype.SEQUENCE, ((Nodetype.NAME, res), 1))),
-    ])
-    store.fielddefs[srv_type] = ([], [
-        ("request_message", (Nodetype.NAME, req)),
-        ("response_message", (Nodetype.NAME, res)),
-        ("event_message", (Nodetype.NAME, event)),
-    ])
     try:
-        return str(store.hash_rihs01(srv_type))
+        return rihs01(describe(service_fielddefs(fielddefs, srv_type), srv_type))
     except KeyError as exc:
         raise UnknownTypeError(srv_type, "service", f"its definition uses {exc}, which is not "
                                "described") from None
