@@ -395,3 +395,101 @@ def test_sim_time_context_is_not_driven_by_the_dashboard() -> None:
         recv_until(ws, "status")  # wall-clock timers tick on a sim-time context
         assert context.sim_clock.now_ns() == 0
     context.shutdown()
+
+
+# -- layers and views ----------------------------------------------------------------------
+def test_view_commands_parse_and_urdf_footprint() -> None:
+    from eddiebot.robot.urdf import BASE_RADIUS_M, eddie_urdf
+    from eddiebot.viz.dashboard.node import footprint_from_urdf
+
+    cmd = parse_command(json.dumps({"op": "view", "name": "cloud", "engage": True}))
+    assert (cmd.op, cmd.name, cmd.engage) == ("view", "cloud", True)
+    for bad in ({"op": "view", "name": "camera", "engage": True},
+                {"op": "view", "name": "tf", "engage": 1}, {"op": "view", "name": "tf"}):
+        with pytest.raises(CommandError, match="view"):
+            parse_command(json.dumps(bad))
+    assert footprint_from_urdf(eddie_urdf()) == BASE_RADIUS_M == 0.2245
+    assert footprint_from_urdf("<robot name='r'><link name='base_link'/></robot>") is None
+    with pytest.raises(ValueError, match="not valid XML"):
+        footprint_from_urdf("<robot")
+
+
+def test_hub_sends_view_frames_only_to_pages_that_opened_the_view() -> None:
+    import asyncio
+
+    from eddiebot.viz.dashboard import Hub
+
+    async def run() -> tuple[list[Any], list[Any], int, list[Any]]:
+        hub = Hub()
+        loop = asyncio.get_running_loop()
+        a, b = hub.attach(loop), hub.attach(loop)
+        hub.post("pose", "p0")
+        assert not hub.view_open("cloud")
+        hub.post("cloud:points", b"c0", view="cloud")  # nobody has it open: retained only
+        opened = hub.set_view(a, "cloud", True)
+        hub.post("cloud:points", b"c1", view="cloud")
+        got_a, got_b = await a.next_batch(), await b.next_batch()
+        hub.set_view(a, "cloud", False)
+        hub.post("cloud:points", b"c2", view="cloud")
+        hub.post("pose", "p1")
+        return got_a, got_b, opened, await a.next_batch()
+
+    got_a, got_b, opened, later = asyncio.run(run())
+    assert opened == 1
+    assert got_a == ["p0", b"c1"] and got_b == ["p0"]
+    assert later == ["p1"]
+
+
+def test_read_only_page_opens_views_particles_decimated_and_mux_source(graph: Graph) -> None:
+    from eddiebot.msgs.geometry_msgs import Point, Pose, Quaternion
+    from eddiebot.msgs.nav2_msgs import Particle, ParticleCloud
+    from eddiebot.msgs.sensor_msgs import PointCloud2, PointField
+    from eddiebot.msgs.std_msgs import Header
+    from eddiebot.viz.dashboard.node import MAX_CLOUD_POINTS, MAX_PARTICLES
+
+    graph.publish_world()
+    n_part = 3 * MAX_PARTICLES + 7
+    cloud_pub = graph.node.create_publisher(ParticleCloud, "/particle_cloud", 10)
+    points_pub = graph.node.create_publisher(PointCloud2, "/points", 10)
+    n_pts = 2 * MAX_CLOUD_POINTS + 1
+    xyz = np.zeros((n_pts, 3), np.float32)
+    xyz[:, 0] = np.arange(n_pts) * 1e-4
+    xyz[6] = np.nan  # an invalid point is left out
+    fields = [PointField(name=k, offset=4 * i, datatype=PointField.FLOAT32, count=1)
+              for i, k in enumerate("xyz")]
+    with start_dashboard(graph.context, "127.0.0.1", 0, read_only=True, print_url=False) as dash, \
+            connect(ws_url(dash.url), origin=origin_of(dash.url)) as ws:  # type: ignore[arg-type]
+        recv_until(ws, "pose")
+        cloud_pub.publish(ParticleCloud(header=Header(frame_id="odom"), particles=[
+            Particle(pose=Pose(position=Point(x=0.5, y=0.0, z=0.0),
+                               orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)), weight=1.0)
+            for _ in range(n_part)]))
+        head = recv_until(ws, "particles")
+        assert (head["total"], head["n"]) == (n_part, math.ceil(n_part / 4))  # every 4th
+        status = recv_until(ws, "status")
+        assert status["mux"] == {"active": None, "topic": None, "locks": [],
+                                 "table": "twist_mux defaults"}
+        points_pub.publish(PointCloud2(
+            header=Header(frame_id="base_footprint"), height=1, width=n_pts, fields=fields,
+            is_bigendian=False, point_step=12, row_step=12 * n_pts,
+            data=xyz.view(np.uint8).reshape(-1), is_dense=False))
+        ws.send(json.dumps({"op": "view", "name": "cloud", "engage": True}))
+        assert recv_until(ws, "ack")["msg"] == "cloud view opened"  # read-only may look
+        deadline = time.monotonic() + 3.0
+        cloud = None
+        while cloud is None and time.monotonic() < deadline:
+            frame = ws.recv(timeout=3.0)
+            if isinstance(frame, bytes) and split_binary_frame(frame)[0]["t"] == "cloud":
+                cloud = split_binary_frame(frame)
+        assert cloud is not None
+        head, payload = cloud
+        # every 3rd point, less the invalid one
+        assert (head["name"], head["total"], head["n"]) == ("points", n_pts, math.ceil(n_pts / 3) - 1)
+        pts = np.frombuffer(payload, np.float32).reshape(-1, 3)
+        assert len(pts) == head["n"]
+        # pts[2] is point 9, in the robot's frame at (1, 2) heading 0.5 rad in the map
+        x9 = 9e-4
+        assert pts[2] == pytest.approx([1.0 + x9 * math.cos(0.5), 2.0 + x9 * math.sin(0.5), 0.0],
+                                       abs=1e-5)
+        ws.send(json.dumps({"op": "goal", "x": 1.0, "y": 1.0, "yaw": 0.0}))
+        assert "read-only" in recv_until(ws, "error")["msg"]

@@ -20,6 +20,7 @@ from eddiebot.viz.dashboard.errors import CommandError, RateLimitedError
 
 __all__ = [
     "MAX_COMMAND_BYTES",
+    "VIEWS",
     "Command",
     "GridMeta",
     "TileCache",
@@ -127,7 +128,10 @@ class Command:
     name: str = ""
 
 
-_OPS = {"goal", "initialpose", "teleop", "estop", "cancel", "save_map", "ping"}
+_OPS = {"goal", "initialpose", "teleop", "estop", "cancel", "save_map", "ping", "view"}
+#: views a connection opens on request (``{"op": "view", "name": ..., "engage": bool}``);
+#: they change what the page receives, never the robot, so a read-only page may open them
+VIEWS = ("tf", "cloud")
 
 
 def _finite(obj: dict[str, Any], key: str) -> float:
@@ -194,6 +198,13 @@ def _parse_op(op: str, obj: dict[str, Any],
         if not isinstance(name, str) or len(name) > 200 or "\x00" in name:
             raise CommandError("save_map: 'name' must be a short string")
         return Command(op, name=name)
+    if op == "view":
+        name, engage = obj.get("name"), obj.get("engage")
+        if name not in VIEWS:
+            raise CommandError(f"view: 'name' must be one of {', '.join(VIEWS)}, got {name!r}")
+        if not isinstance(engage, bool):
+            raise CommandError("view: 'engage' must be true or false")
+        return Command(op, name=str(name), engage=engage)
     return Command(op)
 
 

@@ -4,6 +4,10 @@ Frames are keyed (``"pose"``, ``"scan"``, ``"tile:map:3:2"``, ...). A connection
 behind keeps only the newest frame per key, so a slow browser sees fewer updates instead of
 an ever longer queue; the hub keeps the newest frame of each retained key so that a new
 connection starts with the whole picture.
+
+Some frames belong to a *view* a connection opens on request (``"tf"``, ``"cloud"``): they go
+only to the connections that opened it, and the node builds them only while one has, so a
+closed view costs nothing.
 """
 
 from __future__ import annotations
@@ -25,6 +29,8 @@ class Outbox:
         self._pending: dict[str, Frame] = {}
         self._event = asyncio.Event()
         self._signalled = False
+        #: on-demand views this connection opened
+        self.views: set[str] = set()
 
     def _push(self, key: str, frame: Frame) -> None:
         # called with the hub lock held; an updated key keeps its place, so a grid's
@@ -55,15 +61,42 @@ class Hub:
     def __init__(self) -> None:
         self.lock = threading.Lock()
         self._retained: dict[str, Frame] = {}
+        #: view → key → newest frame, sent to a connection when it opens the view
+        self._view_retained: dict[str, dict[str, Frame]] = {}
         self._outboxes: set[Outbox] = set()
 
-    def post(self, key: str, frame: Frame, *, retain: bool = True) -> None:
-        """Send ``frame`` to every connection (replacing an unsent frame of the same key)."""
+    def post(self, key: str, frame: Frame, *, retain: bool = True, view: str | None = None) -> None:
+        """Send ``frame`` to every connection (replacing an unsent frame of the same key);
+        with ``view``, only to the connections that opened that view."""
         with self.lock:
+            if view is not None:
+                if retain:
+                    self._view_retained.setdefault(view, {})[key] = frame
+                for box in self._outboxes:
+                    if view in box.views:
+                        box._push(key, frame)
+                return
             if retain:
                 self._retained[key] = frame
             for box in self._outboxes:
                 box._push(key, frame)
+
+    def set_view(self, box: Outbox, view: str, on: bool) -> int:
+        """Open or close ``view`` for one connection; the number of connections that have it
+        open. Opening it sends the view's retained frames at once."""
+        with self.lock:
+            if on and view not in box.views:
+                box.views.add(view)
+                for key, frame in self._view_retained.get(view, {}).items():
+                    box._push(key, frame)
+            elif not on:
+                box.views.discard(view)
+            return sum(view in b.views for b in self._outboxes)
+
+    def view_open(self, view: str) -> bool:
+        """True while at least one connection has ``view`` open."""
+        with self.lock:
+            return any(view in b.views for b in self._outboxes)
 
     def drop_prefix(self, prefix: str) -> None:
         """Forget retained and unsent frames whose key starts with ``prefix``."""

@@ -4,6 +4,13 @@ Everything the browser draws is expressed in one *display frame*: ``map`` when T
 ``map`` to ``base_footprint``, else ``odom``. Callbacks run on the dashboard's own executor
 thread and hand ready-made frames to the :class:`~eddiebot.viz.dashboard.hub.Hub`; commands
 arrive from the web server's thread and publish directly.
+
+Heavy layers are throttled and decimated before they travel: AMCL's particle cloud (at most
+``MAX_PARTICLES`` at 5 Hz), the vSLAM graph (1 Hz), and the point clouds of the 3D view, which
+are converted only while a page has that view open (at most ``MAX_CLOUD_POINTS``, 2 Hz). The
+velocity source that holds ``cmd_vel`` is worked out as twist_mux does, from the mux's own
+parameters (read from the running ``twist_mux`` node, twist_mux's defaults until it answers)
+and the commands and locks seen on its input topics.
 """
 
 from __future__ import annotations
@@ -15,17 +22,23 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
+from xml.etree import ElementTree
 
 import numpy as np
 
+from eddiebot.base.twist_mux import DEFAULT_LOCKS, DEFAULT_TOPICS, MuxInput, TwistMux
 from eddiebot.core.action import ActionClient
+from eddiebot.core.clock_node import ROSOUT_QOS
 from eddiebot.core.context import Context
 from eddiebot.core.errors import TopicTypeMismatchError
 from eddiebot.core.node import Node
+from eddiebot.core.param_services import ParameterClient
+from eddiebot.core.parameters import value_from_msg
 from eddiebot.core.qos import QoSProfile, qos_profile_latched, qos_profile_sensor_data
 from eddiebot.core.task import Future
 from eddiebot.core.tf import Buffer, TransformException
 from eddiebot.msgs import get_action, get_message, get_service
+from eddiebot.robot.urdf import BASE_RADIUS_M
 from eddiebot.viz.dashboard.core import (
     GridMeta,
     TileCache,
@@ -39,16 +52,25 @@ from eddiebot.viz.dashboard.core import (
 from eddiebot.viz.dashboard.errors import CommandError
 from eddiebot.viz.dashboard.hub import Hub
 
-__all__ = ["FOOTPRINT_RADIUS", "GRID_LAYERS", "RANGE_TOPICS", "DashboardNode", "DashboardTopics"]
+__all__ = ["FOOTPRINT_RADIUS", "GRID_LAYERS", "MAX_CLOUD_POINTS", "MAX_PARTICLES", "RANGE_TOPICS",
+           "DashboardNode", "DashboardTopics", "footprint_from_urdf"]
 
-#: Eddie's footprint (m), as in the nav2 parameters.
-FOOTPRINT_RADIUS = 0.2245
+#: Eddie's footprint radius (m): the URDF's base_link cylinder, until /robot_description says.
+FOOTPRINT_RADIUS = BASE_RADIUS_M
 RANGE_TOPICS = ("/eddie/ir/left", "/eddie/ir/center", "/eddie/ir/right",
                 "/eddie/ping/left", "/eddie/ping/right")
-#: layer name → topic
+#: layer name → topic (vslam_map: rtabmap's grid at its default ``map_topic``)
 GRID_LAYERS = {"map": "/map", "global_costmap": "/global_costmap/costmap",
-               "local_costmap": "/local_costmap/costmap"}
+               "local_costmap": "/local_costmap/costmap", "vslam_map": "/rtabmap/map"}
+#: particles sent per cloud (more are decimated evenly)
+MAX_PARTICLES = 5000
+#: points sent per 3D cloud (more are decimated evenly)
+MAX_CLOUD_POINTS = 60000
+#: points (or segment ends) sent per graph marker
+_MAX_MARKER_POINTS = 20000
 _NS = 1_000_000_000
+_POINT_MARKERS = {6, 7, 8}  # CUBE_LIST, SPHERE_LIST, POINTS
+_LINE_MARKERS = {4, 5}  # LINE_STRIP, LINE_LIST
 
 
 @dataclass(frozen=True)
@@ -72,6 +94,39 @@ class DashboardTopics:
     navigate_action: str = "navigate_to_pose"
     map_saver: str = "/map_saver/save_map"
     slam_saver: str = "/slam_toolbox/save_map"
+    particle_cloud: str = "/particle_cloud"
+    lookahead: str = "/lookahead_point"
+    footprint: str = "/local_costmap/published_footprint"
+    robot_description: str = "/robot_description"
+    vslam_graph: str = "/rtabmap/mapGraph"
+    cloud_map: str = "/rtabmap/cloud_map"
+    points: str = "/points"
+    twist_mux: str = "/twist_mux"
+
+
+def footprint_from_urdf(text: str) -> float | None:
+    """Footprint radius (m) of a URDF: base_link's collision (else visual) cylinder; None
+    when the description has none. Raises ``ValueError`` on malformed XML."""
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError as exc:
+        raise ValueError(f"robot_description is not valid XML: {exc}") from None
+    for link in root.iter("link"):
+        if link.get("name") != "base_link":
+            continue
+        for part in ("collision", "visual"):
+            for cyl in link.findall(f"{part}/geometry/cylinder"):
+                r = float(cyl.get("radius", "nan"))
+                if math.isfinite(r) and r > 0:
+                    return r
+    return None
+
+
+def _quat_matrix(x: float, y: float, z: float, w: float) -> np.ndarray:
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
 def _yaw(q: Any) -> float:
@@ -133,6 +188,20 @@ class DashboardNode(Node):
         self._status: dict[str, Any] = {"battery": None, "linear": None, "angular": None,
                                         "collisions": None}
         self._logs: deque[dict[str, Any]] = deque(maxlen=200)
+        self.footprint_radius = FOOTPRINT_RADIUS
+        self.footprint_source = "URDF (built in)"
+        self._last_layer_ns: dict[str, int] = {}
+        #: latched-style layers (plans, lookahead): the newest message, re-placed when the
+        #: display frame changes or when TF for it arrives after the message did
+        self._replay: dict[str, tuple[Callable[[Any], None], Any]] = {}
+        self._unplaced: set[str] = set()
+        self._clouds: dict[str, Any] = {}
+        self._cloud_sent: dict[str, int] = {}
+        self._mux = TwistMux(*self._mux_inputs(None))
+        self._mux_source = "twist_mux defaults"
+        self._mux_subs: dict[str, Any] = {}
+        self._mux_params: ParameterClient | None = None
+        self._mux_query: Future | None = None
         self._logs_dirty = False
         self._goal: dict[str, Any] | None = None
         self._estop = False
@@ -176,11 +245,28 @@ class DashboardNode(Node):
         self._sub(msg("eddiebot_msgs/msg/BatteryLevel"), t.battery, self._on_battery, 5)
         self._sub(msg("nav_msgs/msg/Odometry"), t.odom, self._on_odom, 10)
         self._sub(msg("std_msgs/msg/UInt32"), t.collisions, self._on_collisions, 5)
-        self._sub(msg("rcl_interfaces/msg/Log"), t.rosout, self._on_log, 100)
+        self._sub(msg("rcl_interfaces/msg/Log"), t.rosout, self._on_log, ROSOUT_QOS)
         self._sub(self._bool_cls, t.e_stop, self._on_estop, qos_profile_latched)
+        self._sub(msg("nav2_msgs/msg/ParticleCloud"), t.particle_cloud, self._on_particles,
+                  qos_profile_sensor_data)
+        self._sub(msg("geometry_msgs/msg/PointStamped"), t.lookahead, self._on_lookahead, 5)
+        self._sub(msg("geometry_msgs/msg/PolygonStamped"), t.footprint, self._on_footprint, 5)
+        self._sub(msg("std_msgs/msg/String"), t.robot_description, self._on_description,
+                  qos_profile_latched)
+        self._sub(msg("visualization_msgs/msg/MarkerArray"), t.vslam_graph, self._on_graph,
+                  qos_profile_latched)
+        cloud = msg("sensor_msgs/msg/PointCloud2")
+        self._sub(cloud, t.cloud_map, functools.partial(self._on_cloud, "cloud_map"), qos_profile_latched)
+        self._sub(cloud, t.points, functools.partial(self._on_cloud, "points"), qos_profile_sensor_data)
+        self._subscribe_mux()
+        try:
+            self._mux_params = ParameterClient(self, t.twist_mux)
+        except TopicTypeMismatchError as exc:
+            self._problems[t.twist_mux] = str(exc)
         self.create_timer(0.2, self._status_tick, clock=self._wall)
         self.create_timer(0.1, self._teleop_tick, clock=self._wall)
         self.hub.post("estop", text_frame("estop", locked=False))
+        self._post_robot()
 
     # -- plumbing -------------------------------------------------------------------------
     def _sub(self, cls: Any, topic: str, cb: Callable[[Any], None], qos: Any) -> None:
@@ -212,6 +298,13 @@ class DashboardNode(Node):
             self._place_grids()
             self.hub.drop_prefix("path:")
             self.hub.drop_prefix("range:")
+            self._unplaced.update(self._replay)
+
+    def _replay_unplaced(self) -> None:
+        for key in list(self._unplaced):
+            handler, msg = self._replay[key]
+            self._last_layer_ns.pop(key, None)
+            handler(msg)
 
     # -- TF and pose ----------------------------------------------------------------------
     def _on_tf(self, msg: Any) -> None:
@@ -320,12 +413,16 @@ class DashboardNode(Node):
             range=_r(msg.range), min=_r(msg.min_range), max=_r(msg.max_range)))
 
     def _on_path(self, name: str, topic: str, msg: Any) -> None:
+        key = f"path:{name}"
+        self._replay[key] = (functools.partial(self._on_path, name, topic), msg)
         frame = msg.header.frame_id or (msg.poses[0].header.frame_id if msg.poses else "")
         where = self._to_display(frame)
         if where is None:
             self._problems[topic] = f"no TF from {frame!r} to {self.display_frame!r}"
+            self._unplaced.add(key)
             return
         self._problems.pop(topic, None)
+        self._unplaced.discard(key)
         poses = msg.poses
         step = max(1, len(poses) // 400)
         pts = []
@@ -390,6 +487,272 @@ class DashboardNode(Node):
             self._estop = locked
             self.hub.post("estop", text_frame("estop", locked=locked))
 
+    # -- navigation and SLAM layers -------------------------------------------------------
+    def _throttled(self, key: str, period_ns: int) -> bool:
+        """True when ``key`` was sent less than ``period_ns`` ago; else marks it sent now."""
+        now = self._wall.now_ns()
+        if now - self._last_layer_ns.get(key, -period_ns) < period_ns:
+            return True
+        self._last_layer_ns[key] = now
+        return False
+
+    def _on_particles(self, msg: Any) -> None:
+        if self._throttled("particles", _NS // 5):
+            return
+        where = self._to_display(msg.header.frame_id)
+        if where is None:
+            self._problems[self.topics.particle_cloud] = (
+                f"no TF from {msg.header.frame_id!r} to {self.display_frame!r}")
+            return
+        self._problems.pop(self.topics.particle_cloud, None)
+        parts = msg.particles
+        step = max(1, -(-len(parts) // MAX_PARTICLES))
+        a = np.array([(p.pose.position.x, p.pose.position.y, p.pose.orientation.z,
+                       p.pose.orientation.w, p.weight) for p in parts[::step]],
+                     dtype=np.float64).reshape(-1, 5)
+        c, s = math.cos(where[2]), math.sin(where[2])
+        out = np.empty((a.shape[0], 4), np.float32)
+        out[:, 0] = where[0] + c * a[:, 0] - s * a[:, 1]
+        out[:, 1] = where[1] + s * a[:, 0] + c * a[:, 1]
+        out[:, 2] = 2.0 * np.arctan2(a[:, 2], a[:, 3]) + where[2]
+        out[:, 3] = a[:, 4]
+        self.hub.post("particles", binary_frame(
+            {"t": "particles", "frame": self.display_frame, "n": int(a.shape[0]),
+             "total": len(parts)}, out.tobytes()))
+
+    def _on_lookahead(self, msg: Any) -> None:
+        self._replay["lookahead"] = (self._on_lookahead, msg)
+        if self._throttled("lookahead", _NS // 10):
+            return
+        where = self._to_display(msg.header.frame_id)
+        if where is None:
+            self._unplaced.add("lookahead")
+            return
+        self._unplaced.discard("lookahead")
+        x, y, _ = _compose(where, msg.point.x, msg.point.y, 0.0)
+        self.hub.post("lookahead", text_frame("lookahead", x=_r(x), y=_r(y)))
+
+    def _on_footprint(self, msg: Any) -> None:
+        if self._throttled("footprint", _NS // 5):
+            return
+        where = self._to_display(msg.header.frame_id)
+        if where is None:
+            return
+        pts = [[_r(v, 3) for v in _compose(where, p.x, p.y, 0.0)[:2]] for p in msg.polygon.points]
+        self.hub.post("footprint", text_frame("footprint", pts=pts))
+
+    def _on_description(self, msg: Any) -> None:
+        try:
+            radius = footprint_from_urdf(str(msg.data))
+        except ValueError as exc:
+            self._problems[self.topics.robot_description] = str(exc)
+            return
+        self._problems.pop(self.topics.robot_description, None)
+        if radius is None:
+            self._problems[self.topics.robot_description] = "no base_link cylinder: footprint kept"
+            return
+        self.footprint_radius = radius
+        self.footprint_source = f"URDF {self.topics.robot_description}"
+        self._post_robot()
+
+    def _post_robot(self) -> None:
+        self.hub.post("robot", text_frame("robot", radius=_r(self.footprint_radius),
+                                          source=self.footprint_source))
+
+    def _on_graph(self, msg: Any) -> None:
+        self._clouds["graph"] = msg  # sent from the status tick, at most once a second
+
+    def _graph_frame(self, msg: Any) -> str:
+        layers, nodes, loops = [], 0, 0
+        for m in msg.markers:
+            kind = "points" if m.type in _POINT_MARKERS else "lines" if m.type in _LINE_MARKERS else None
+            if kind is None or m.action != 0:
+                continue
+            where = self._to_display(m.header.frame_id)
+            if where is None:
+                self._problems[self.topics.vslam_graph] = (
+                    f"no TF from {m.header.frame_id!r} to {self.display_frame!r}")
+                continue
+            base = _compose(where, m.pose.position.x, m.pose.position.y, _yaw(m.pose.orientation))
+            xy = np.array([(p.x, p.y) for p in m.points], np.float64).reshape(-1, 2)
+            if m.type == 4 and len(xy) >= 2:  # a strip as the segments of a list
+                xy = np.repeat(xy, 2, axis=0)[1:-1]
+            if kind == "lines":
+                xy = xy[: len(xy) // 2 * 2]
+                step = max(1, -(-(len(xy) // 2) // (_MAX_MARKER_POINTS // 2)))
+                xy = xy.reshape(-1, 2, 2)[::step].reshape(-1, 2)
+            else:
+                xy = xy[:: max(1, -(-len(xy) // _MAX_MARKER_POINTS))]
+            c, s = math.cos(base[2]), math.sin(base[2])
+            gx = base[0] + c * xy[:, 0] - s * xy[:, 1]
+            gy = base[1] + s * xy[:, 0] + c * xy[:, 1]
+            flat = np.round(np.stack([gx, gy], 1).reshape(-1), 3)
+            colour = "#{:02x}{:02x}{:02x}".format(*(round(255 * min(1.0, max(0.0, v)))
+                                                   for v in (m.color.r, m.color.g, m.color.b)))
+            loop = "loop" in m.ns
+            if kind == "points":
+                nodes += len(m.points)
+            elif loop:
+                loops += len(m.points) // 2
+            layers.append({"ns": m.ns, "kind": kind, "colour": colour, "loop": loop,
+                           "pts": flat.tolist()})
+        return text_frame("graph", layers=layers, nodes=nodes, loops=loops)
+
+    def _on_cloud(self, name: str, msg: Any) -> None:
+        self._clouds[name] = msg  # converted only while a page has the 3D view open
+
+    def _cloud_frame(self, name: str, msg: Any) -> bytes | None:
+        topic = self.topics.cloud_map if name == "cloud_map" else self.topics.points
+        fields = {f.name: f for f in msg.fields}
+        if any(k not in fields or int(fields[k].datatype) != 7 for k in "xyz"):  # FLOAT32
+            self._problems[topic] = "point cloud without float32 x, y, z fields"
+            return None
+        n, step = int(msg.width) * int(msg.height), int(msg.point_step)
+        buf = np.asarray(msg.data, dtype=np.uint8)
+        if n and (buf.size < n * step or step < 12):
+            self._problems[topic] = f"point cloud of {buf.size} bytes, expected {n * step}"
+            return None
+        frame = msg.header.frame_id.lstrip("/") or self.display_frame
+        try:
+            tr = self.tf.lookup_transform(self.display_frame, frame).transform
+        except TransformException:
+            self._problems[topic] = f"no TF from {frame!r} to {self.display_frame!r}"
+            return None
+        self._problems.pop(topic, None)
+        rows = buf[: n * step].reshape(n, step)[:: max(1, -(-n // MAX_CLOUD_POINTS))]
+        order = ">" if msg.is_bigendian else "<"
+
+        def column(off: int, kind: str) -> np.ndarray:
+            return np.ascontiguousarray(rows[:, off: off + 4]).view(f"{order}{kind}4")[:, 0]
+
+        xyz = np.stack([column(int(fields[k].offset), "f") for k in "xyz"], 1).astype(np.float64)
+        keep = np.isfinite(xyz).all(1)
+        xyz = xyz[keep]
+        r = tr.rotation
+        xyz = xyz @ _quat_matrix(r.x, r.y, r.z, r.w).T + (tr.translation.x, tr.translation.y,
+                                                          tr.translation.z)
+        colour = fields.get("rgb") or fields.get("rgba")
+        rgb = b""
+        if colour is not None:
+            packed = column(int(colour.offset), "u")[keep] if len(rows) else np.zeros(0, np.uint32)
+            rgb = np.stack([(packed >> 16) & 255, (packed >> 8) & 255, packed & 255],
+                           1).astype(np.uint8).tobytes()
+        return binary_frame({"t": "cloud", "name": name, "frame": self.display_frame,
+                             "n": int(xyz.shape[0]), "total": n, "rgb": bool(rgb)},
+                            xyz.astype(np.float32).tobytes() + rgb)
+
+    def _tf_frame(self) -> str:
+        frames = []
+        for f in self.tf.all_frames():
+            pose = self._to_display(f)
+            if pose is not None:
+                frames.append([f, _r(pose[0]), _r(pose[1]), _r(pose[2])])
+        return text_frame("tf", frame=self.display_frame, frames=frames)
+
+    def _send_views(self, now: int) -> None:
+        graph = self._clouds.get("graph")
+        if graph is not None and self._cloud_sent.get("graph") != id(graph) \
+                and not self._throttled("graph", _NS):
+            self._cloud_sent["graph"] = id(graph)
+            self.hub.post("graph", self._graph_frame(graph))
+        if self.hub.view_open("tf"):
+            self.hub.post("tf", self._tf_frame(), view="tf")
+        if self.hub.view_open("cloud"):
+            for name in ("cloud_map", "points"):
+                m = self._clouds.get(name)
+                if m is None or self._cloud_sent.get(name) == id(m) \
+                        or self._throttled(f"cloud:{name}", _NS // 2):
+                    continue
+                self._cloud_sent[name] = id(m)
+                frame = self._cloud_frame(name, m)
+                if frame is not None:
+                    self.hub.post(f"cloud:{name}", frame, view="cloud")
+
+    def view_changed(self, name: str, open_count: int) -> None:
+        """A page opened or closed a view (server thread); a reopened cloud view is resent."""
+        if name == "cloud" and open_count:
+            self._cloud_sent.pop("cloud_map", None)
+            self._cloud_sent.pop("points", None)
+
+    # -- the velocity mux ---------------------------------------------------------------
+    @staticmethod
+    def _mux_inputs(params: dict[str, Any] | None) -> tuple[list[MuxInput], list[MuxInput]]:
+        """twist_mux's sources and locks from its parameters (its defaults when None)."""
+        out: list[list[MuxInput]] = []
+        for group, defaults in (("topics", DEFAULT_TOPICS), ("locks", DEFAULT_LOCKS)):
+            if params is None:
+                table = {n: (t, to, pr) for n, (t, to, pr) in defaults.items()}
+            else:
+                names = sorted({k.split(".")[1] for k in params
+                                if k.startswith(f"{group}.") and k.count(".") == 2})
+                table = {n: (str(params.get(f"{group}.{n}.topic") or ""),
+                             float(params.get(f"{group}.{n}.timeout") or 0.0),
+                             int(params.get(f"{group}.{n}.priority") or 0)) for n in names}
+            out.append([MuxInput(n, t, round(to * 1e9), pr) for n, (t, to, pr) in table.items() if t])
+        return out[0], out[1]
+
+    def _mux_topic(self, topic: str) -> str:
+        if topic.startswith("/"):
+            return topic
+        ns = self.topics.twist_mux.rsplit("/", 1)[0]
+        return f"{ns}/{topic}"
+
+    def _subscribe_mux(self) -> None:
+        for sub in self._mux_subs.values():
+            self.destroy_subscription(sub)
+        self._mux_subs.clear()
+        for src in [*self._mux.sources, *self._mux.locks]:
+            is_lock = src in self._mux.locks
+            cls = self._bool_cls if is_lock else self._twist_cls
+
+            def cb(m: Any, src: MuxInput = src, is_lock: bool = is_lock) -> None:
+                src.last_ns = self._wall.now_ns()
+                src.value = bool(m.data) if is_lock else m
+
+            topic = self._mux_topic(src.topic)
+            try:
+                self._mux_subs[f"{src.name}:{topic}"] = self.create_subscription(cls, topic, cb, 10)
+            except TopicTypeMismatchError as exc:
+                self._problems[topic] = str(exc)
+
+    def _poll_mux_params(self) -> None:
+        """Read the running twist_mux's table once (it is read-only there)."""
+        client = self._mux_params
+        if client is None or self._mux_query is not None or not client.services_are_ready():
+            return
+        def got_values(names: list[str], f: Future) -> None:
+            if f.exception() is not None:
+                self._mux_query = None
+                return
+            params = {n: value_from_msg(v) for n, v in zip(names, f.result().values, strict=False)}
+            sources, locks = self._mux_inputs(params)
+            if sources:
+                self._mux = TwistMux(sources, locks)
+                self._mux_source = f"{self.topics.twist_mux} parameters"
+                self._subscribe_mux()
+            self._mux_params = None
+
+        def got_names(f: Future) -> None:
+            if f.exception() is not None or client is None:
+                self._mux_query = None
+                return
+            names = [n for n in f.result().result.names if n.count(".") == 2]
+            self._mux_query = client.get_parameters_async(names)
+            self._mux_query.add_done_callback(functools.partial(got_values, names))
+
+        self._mux_query = client.list_parameters_async(["topics", "locks"])
+        self._mux_query.add_done_callback(got_names)
+
+    def mux_state(self, now_ns: int) -> dict[str, Any]:
+        """Which source drives ``cmd_vel`` now (twist_mux's rule), and which locks hold."""
+        chosen = self._mux.select(now_ns)
+        locks = [lk.name for lk in self._mux.locks
+                 if bool(lk.value) or (lk.timeout_ns > 0 and (
+                     lk.last_ns is None or now_ns - lk.last_ns > lk.timeout_ns))]
+        return {"active": None if chosen is None else chosen.name,
+                "topic": None if chosen is None else self._mux_topic(chosen.topic),
+                "locks": locks, "table": self._mux_source}
+
     # -- periodic -------------------------------------------------------------------------
     def _status_tick(self) -> None:
         now = self._wall.now_ns()
@@ -398,15 +761,20 @@ class DashboardNode(Node):
         watched = [self.topics.scan, self.topics.odom, "/tf", "/map", self.topics.image,
                    self.topics.depth, self.topics.plan, self.topics.local_plan, *RANGE_TOPICS,
                    self.topics.battery, self.topics.collisions, *list(GRID_LAYERS.values())[1:],
-                   "/tf_static", self.topics.rosout]
+                   "/tf_static", self.topics.rosout, self.topics.particle_cloud,
+                   self.topics.vslam_graph]
         rates, age = {}, {}
         for topic in watched:
             r = self._rates.get(topic)
             rates[topic] = 0.0 if r is None else round(r.hz(now), 1)
             age[topic] = None if r is None or r.last_ns is None else round((now - r.last_ns) / _NS, 1)
+        self._replay_unplaced()
+        self._poll_mux_params()
+        self._send_views(now)
         self.hub.post("status", text_frame(
             "status", frame=self.display_frame, rates=rates, age=age, problems=dict(self._problems),
-            nav_server=self._nav.server_is_ready(), estop=self._estop, **self._status))
+            nav_server=self._nav.server_is_ready(), estop=self._estop, mux=self.mux_state(now),
+            **self._status))
         if self._logs_dirty:
             self._logs_dirty = False
             self.hub.post("log", text_frame("log", lines=list(self._logs)[-60:]))

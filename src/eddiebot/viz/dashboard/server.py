@@ -8,8 +8,13 @@ Security model:
 - on a loopback bind the ``Host`` header must name the loopback (no DNS rebinding);
 - a WebSocket is refused when its ``Origin`` is not the page's own origin, or, when a token
   is in force, when it carries no valid session (cookie, or ``?token=`` for scripts);
-- ``read_only`` refuses every command; commands are rate-limited per connection; malformed,
-  oversized or out-of-range commands are answered with an error and the connection stays.
+- ``read_only`` refuses every command that acts on the robot; opening or closing a view
+  (``{"op": "view"}``: TF frames, the 3D cloud) only changes what the page receives and stays
+  allowed. Commands, views included, are rate-limited per connection; malformed, oversized or
+  out-of-range commands are answered with an error and the connection stays.
+
+Static files are the page's own and the vendored three.js (``static/vendor/``, MIT, its
+licence beside it), which the page loads only when the 3D view is first opened.
 """
 
 from __future__ import annotations
@@ -43,12 +48,14 @@ from eddiebot.viz.dashboard.core import (
 )
 from eddiebot.viz.dashboard.errors import CommandError, DashboardBindError, RateLimitedError
 from eddiebot.viz.dashboard.hub import Hub
-from eddiebot.viz.dashboard.node import FOOTPRINT_RADIUS, DashboardNode
+from eddiebot.viz.dashboard.node import DashboardNode
 
 __all__ = ["DashboardConfig", "DashboardHandle", "create_app", "is_loopback", "start_dashboard"]
 
 COOKIE = "eddie_dashboard_session"
-_STATIC = {"app.js": "text/javascript", "style.css": "text/css", "index.html": "text/html"}
+_STATIC = {"app.js": "text/javascript", "style.css": "text/css", "index.html": "text/html",
+           "view3d.js": "text/javascript", "vendor/three.module.min.js": "text/javascript",
+           "vendor/three.LICENSE": "text/plain; charset=utf-8"}
 _CSP = ("default-src 'self'; img-src 'self' blob: data:; connect-src 'self'; "
         "style-src 'self'; script-src 'self'; frame-ancestors 'none'; base-uri 'none'")
 
@@ -106,7 +113,10 @@ class _Auth:
 
 
 def _static(name: str) -> bytes:
-    return (resources.files("eddiebot.viz.dashboard") / "static" / name).read_bytes()
+    path = resources.files("eddiebot.viz.dashboard") / "static"
+    for part in name.split("/"):
+        path = path / part
+    return path.read_bytes()
 
 
 def create_app(node: DashboardNode, hub: Hub, config: DashboardConfig,
@@ -114,7 +124,12 @@ def create_app(node: DashboardNode, hub: Hub, config: DashboardConfig,
     """The Starlette application serving the page and the WebSocket of ``node``."""
     auth = _Auth(config.token)
     loopback = is_loopback(config.host)
-    files = {name: _static(name) for name in _STATIC}
+    files: dict[str, bytes] = {}
+
+    def file(name: str) -> bytes:
+        if name not in files:  # read on first use: three.js is large and often never asked for
+            files[name] = _static(name)
+        return files[name]
 
     def host_ok(host_header: str) -> bool:
         if not loopback:
@@ -147,7 +162,7 @@ def create_app(node: DashboardNode, hub: Hub, config: DashboardConfig,
             if not auth.has_session(dict(request.cookies), None):
                 return refuse(401, "this dashboard needs its token: open the URL printed by "
                                    "<code>eddie dashboard</code>")
-        return security_headers(Response(files["index.html"], media_type="text/html"))
+        return security_headers(Response(file("index.html"), media_type="text/html"))
 
     async def static(request: Request) -> Response:
         name = request.path_params["name"]
@@ -157,7 +172,7 @@ def create_app(node: DashboardNode, hub: Hub, config: DashboardConfig,
             return refuse(400, "unexpected Host header")
         if not auth.has_session(dict(request.cookies), None):
             return refuse(401, "no session")
-        return security_headers(Response(files[name], media_type=_STATIC[name]))
+        return security_headers(Response(file(name), media_type=_STATIC[name]))
 
     async def ws_endpoint(ws: WebSocket) -> None:
         host_header = ws.headers.get("host", "")
@@ -180,7 +195,7 @@ def create_app(node: DashboardNode, hub: Hub, config: DashboardConfig,
     routes = [
         Route("/", index),
         Route("/favicon.ico", favicon),
-        Route("/static/{name}", static),
+        Route("/static/{name:path}", static),
         WebSocketRoute("/ws", ws_endpoint),
     ]
     return Starlette(routes=routes)
@@ -233,6 +248,12 @@ async def _serve_connection(ws: WebSocket, node: DashboardNode, hub: Hub,
             if cmd.op == "ping":
                 await send(text_frame("pong"))
                 return
+            if cmd.op == "view":
+                commands.take(time.monotonic(), "view")
+                opened = hub.set_view(box, cmd.name, bool(cmd.engage))
+                node.view_changed(cmd.name, opened)
+                await send(text_frame("ack", op=op, msg=f"{cmd.name} view {'opened' if cmd.engage else 'closed'}"))
+                return
             if config.read_only:
                 raise CommandError(f"{cmd.op} refused: the dashboard is read-only")
             now = time.monotonic()
@@ -262,7 +283,7 @@ async def _serve_connection(ws: WebSocket, node: DashboardNode, hub: Hub,
         except CommandError as exc:
             await reply_error(op or exc.op, str(exc))
 
-    await send(text_frame("hello", read_only=config.read_only, footprint=FOOTPRINT_RADIUS,
+    await send(text_frame("hello", read_only=config.read_only, footprint=node.footprint_radius,
                           topics={"cmd_vel": node.topics.cmd_vel, "e_stop": node.topics.e_stop}))
     send_task = asyncio.create_task(sender())
     try:

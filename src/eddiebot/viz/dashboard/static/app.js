@@ -1,17 +1,40 @@
-// eddie dashboard front end: one WebSocket, one <canvas>. No external resources.
+// eddie dashboard front end: one WebSocket, one <canvas>; the 3D view (three.js, vendored)
+// is loaded only when opened. No external resources.
 "use strict";
 (() => {
   const $ = (id) => document.getElementById(id);
   const canvas = $("view");
   const ctx = canvas.getContext("2d");
-  const LAYERS = ["map", "global_costmap", "local_costmap"];
+  const LAYERS = ["map", "vslam_map", "global_costmap", "local_costmap"];
   const RANGE_COLOURS = { ir: "rgba(255,80,80,0.35)", ping: "rgba(80,160,255,0.35)" };
+  const COLOURS = {
+    plan: "#3c3", local_plan: "#fa0", lookahead: "#ff5", goal: "#e040e0", scan: "#ff3030",
+    particles: "#30e0b0", footprint: "#40a0ff", grid: "rgba(70,130,255,0.35)",
+  };
+  // the legend: one row per layer, with its toggle (id show-<key>) and its colours
+  const LEGEND = [
+    ["map", "map (/map)", true, [["#fff", "free"], ["#000", "occupied"], ["#808080", "unknown"]]],
+    ["vslam_map", "vSLAM map (/rtabmap/map)", true, [["#fff", "free"], ["#000", "occupied"]]],
+    ["global_costmap", "global costmap", false, [["#5000ff", "low"], ["#ff0098", "high"], ["#0ff", "inscribed"], ["#f0f", "lethal"]]],
+    ["local_costmap", "local costmap", true, [["#5000ff", "low"], ["#ff0098", "high"], ["#0ff", "inscribed"], ["#f0f", "lethal"]]],
+    ["grid", "metric grid", true, [["rgba(70,130,255,0.6)", "lines"]]],
+    ["scan", "laser scan", true, [[COLOURS.scan, "/scan"]]],
+    ["ranges", "IR / PING", true, [["#ff5050", "IR"], ["#50a0ff", "PING"]]],
+    ["particles", "AMCL particles", true, [[COLOURS.particles, "/particle_cloud"]]],
+    ["plans", "plans", true, [[COLOURS.plan, "global path"], [COLOURS.local_plan, "local plan"], [COLOURS.lookahead, "lookahead"], [COLOURS.goal, "goal"]]],
+    ["footprint", "footprint", true, [[COLOURS.footprint, "URDF"], ["#ffffff", "costmap"]]],
+    ["graph", "vSLAM graph", true, [["#ff8000", "nodes"], ["#0099ff", "links"], ["#ff0000", "loop closures"]]],
+    ["tf", "TF frames", false, [["#f44", "x"], ["#4f4", "y"]]],
+  ];
   const state = {
     view: { cx: 0, cy: 0, scale: 40 },
-    follow: true, mode: "pan", readOnly: true, footprint: 0.2245,
+    follow: true, mode: "pan", readOnly: true, footprint: 0.2245, footprintSource: "",
     pose: null, scan: null, ranges: {}, paths: {}, goal: null, goalStatus: "",
     grids: {}, status: null, estop: false, connected: false,
-    drag: null, tilesDrawn: 0, lastError: null, lastAck: null,
+    particles: null, lookahead: null, footprintPoly: null, tf: null, graph: null, mux: null,
+    drag: null, tilesDrawn: 0, lastError: null, lastAck: null, cursor: null,
+    drawn: { particles: 0, graphNodes: 0, loops: 0, tfFrames: 0, gridStep: 0 },
+    view3d: null, clouds: {},
   };
   let ws = null;
   let dirty = true;
@@ -33,7 +56,7 @@
   const PALETTES = {};
   function palette(layer) {
     if (!PALETTES[layer]) {
-      const f = layer === "map" ? mapColour : costColour;
+      const f = layer.endsWith("map") && !layer.endsWith("costmap") ? mapColour : costColour;
       const p = new Uint8ClampedArray(256 * 4);
       for (let v = 0; v < 256; v++) p.set(f(v), v * 4);
       PALETTES[layer] = p;
@@ -64,6 +87,7 @@
     switch (m.t) {
       case "hello":
         state.readOnly = m.read_only; state.footprint = m.footprint;
+        for (const v of ["tf", "cloud"]) if (state.views && state.views.has(v)) sendView(v, true);
         document.querySelectorAll(".control").forEach((e) => e.classList.toggle("hidden", m.read_only));
         break;
       case "pose":
@@ -84,16 +108,21 @@
         break;
       }
       case "range": state.ranges[m.name] = m; break;
+      case "robot": state.footprint = m.radius; state.footprintSource = m.source; break;
+      case "lookahead": state.lookahead = m; break;
+      case "footprint": state.footprintPoly = m.pts; break;
+      case "tf": state.tf = m.frames; break;
+      case "graph": state.graph = m; $("graph-count").textContent = `${m.nodes} nodes, ${m.loops} loop closures`; break;
       case "path": state.paths[m.name] = m.pts; break;
       case "goal": state.goal = m.pose; state.goalStatus = m.status; showGoal(); break;
       case "status": state.status = m; showStatus(m); break;
-      case "log": showLog(m.lines); break;
+      case "log": lastLog = m.lines; showLog(m.lines); break;
       case "estop":
         state.estop = m.locked;
         $("estop").classList.toggle("locked", m.locked);
         $("estop").textContent = m.locked ? "E-STOP ENGAGED — click to release" : "EMERGENCY STOP";
         break;
-      case "ack": state.lastAck = m; notice(m.msg, false); break;
+      case "ack": state.lastAck = m; if (m.op !== "view") notice(m.msg, false); break;
       case "error": state.lastError = m; notice(m.msg, true); break;
       default: break;
     }
@@ -117,6 +146,12 @@
       }
       g.ctx.putImageData(img, head.tx * head.tile, head.ty * head.tile);
       state.tilesDrawn++;
+    } else if (head.t === "particles") {
+      state.particles = { head, data: new Float32Array(payload) };
+    } else if (head.t === "cloud") {
+      state.clouds[head.name] = head;
+      if (state.view3d) state.view3d.setCloud(head, payload);
+      $("cloud-count").textContent = Object.values(state.clouds).map((c) => `${c.name}: ${c.n} of ${c.total} points`).join(", ");
     } else if (head.t === "scan") {
       state.scan = { head, ranges: new Float32Array(payload) };
     } else if (head.t === "image") {
@@ -154,6 +189,10 @@
     $("speed").textContent = m.linear === null ? "no data on /odom" : `${fmt(m.linear, " m/s", 2)}, ${fmt(m.angular, " rad/s", 2)}`;
     $("collisions").textContent = m.collisions === null ? "no data on /sim/collisions" : String(m.collisions);
     $("frame").textContent = m.frame + (m.nav_server ? " · nav server up" : "");
+    state.mux = m.mux;
+    const mux = m.mux;
+    $("mux").textContent = mux.active ? `${mux.active} (${mux.topic})` : (mux.locks.length ? `none: locked by ${mux.locks.join(", ")}` : "none (no source active)");
+    $("mux").title = `worked out from ${mux.table}`;
     panelAge("/image_raw", "cap-camera", "camera");
     panelAge("/depth/image_raw", "cap-depth", "depth");
     const body = $("rates").querySelector("tbody");
@@ -175,9 +214,18 @@
   const LEVELS = { 10: "DEBUG", 20: "INFO", 30: "WARN", 40: "ERROR", 50: "FATAL" };
   function showLog(lines) {
     const el = $("log");
-    el.textContent = lines.map((l) => `[${LEVELS[l.level] || l.level}] [${l.name}] ${l.msg}`).join("\n");
+    const min = Number($("log-level").value);
+    el.textContent = "";
+    for (const l of lines) {
+      if (l.level < min) continue;
+      const div = document.createElement("div");
+      div.className = "lvl" + l.level;
+      div.textContent = `[${LEVELS[l.level] || l.level}] [${l.name}] ${l.msg}`;
+      el.append(div);
+    }
     el.scrollTop = el.scrollHeight;
   }
+  let lastLog = [];
 
   // -- drawing -------------------------------------------------------------------------
   function shown(id) { return $(id).checked; }
@@ -205,6 +253,10 @@
     }
     baseTransform();
     const px = 1 / state.view.scale;
+    if (shown("show-grid")) drawGrid(px);
+    if (shown("show-graph") && state.graph) drawGraph(px);
+    if (shown("show-particles") && state.particles) drawParticles(px);
+    else state.drawn.particles = 0;
     if (shown("show-plans")) {
       for (const [name, colour] of [["plan", "#3c3"], ["local_plan", "#fa0"]]) {
         const pts = state.paths[name];
@@ -236,22 +288,108 @@
         ctx.fillRect(sx + r * Math.cos(a) - d / 2, sy + r * Math.sin(a) - d / 2, d, d);
       }
     }
-    if (state.goal) arrow(state.goal.x, state.goal.y, state.goal.yaw, 0.5, "#e040e0");
-    if (state.pose) {
-      const p = state.pose;
-      ctx.strokeStyle = "#40a0ff"; ctx.fillStyle = "rgba(64,160,255,0.35)"; ctx.lineWidth = 2 * px;
-      ctx.beginPath(); ctx.arc(p.x, p.y, state.footprint, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
-      ctx.beginPath(); ctx.moveTo(p.x, p.y);
-      ctx.lineTo(p.x + state.footprint * Math.cos(p.yaw), p.y + state.footprint * Math.sin(p.yaw)); ctx.stroke();
+    if (shown("show-plans") && state.lookahead) {
+      const l = state.lookahead;
+      ctx.strokeStyle = COLOURS.lookahead; ctx.lineWidth = 2 * px;
+      ctx.beginPath(); ctx.arc(l.x, l.y, 6 * px, 0, 2 * Math.PI); ctx.stroke();
+      if (state.pose) { ctx.setLineDash([4 * px, 4 * px]); ctx.beginPath(); ctx.moveTo(state.pose.x, state.pose.y); ctx.lineTo(l.x, l.y); ctx.stroke(); ctx.setLineDash([]); }
     }
+    if (state.goal && shown("show-plans")) arrow(state.goal.x, state.goal.y, state.goal.yaw, 0.5, COLOURS.goal);
+    if (state.pose && shown("show-footprint")) {
+      const p = state.pose;
+      ctx.strokeStyle = COLOURS.footprint; ctx.fillStyle = "rgba(64,160,255,0.35)"; ctx.lineWidth = 2 * px;
+      ctx.beginPath(); ctx.arc(p.x, p.y, state.footprint, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
+      arrow(p.x, p.y, p.yaw, state.footprint * 1.4, "#ffffff");
+      const fp = state.footprintPoly;
+      if (fp && fp.length > 2) {
+        ctx.strokeStyle = "#ffffff"; ctx.lineWidth = 1 * px; ctx.beginPath(); ctx.moveTo(fp[0][0], fp[0][1]);
+        for (const q of fp) ctx.lineTo(q[0], q[1]);
+        ctx.closePath(); ctx.stroke();
+      }
+    }
+    if (shown("show-tf") && state.tf) drawFrames(px);
+    else state.drawn.tfFrames = 0;
     if (state.drag && state.drag.kind !== "pan") {
       const d = state.drag;
       const yaw = Math.atan2(d.y1 - d.y0, d.x1 - d.x0);
       arrow(d.x0, d.y0, yaw, Math.max(0.3, Math.hypot(d.x1 - d.x0, d.y1 - d.y0)), d.kind === "goal" ? "#e040e0" : "#30e030");
     }
   }
+  // a "nice" step (1, 2 or 5 × 10^k m) at least minPx pixels long
+  function niceStep(minPx) {
+    const raw = minPx / state.view.scale;
+    const k = Math.pow(10, Math.floor(Math.log10(raw)));
+    for (const m of [1, 2, 5, 10]) if (m * k >= raw) return m * k;
+    return 10 * k;
+  }
+  function drawGrid(px) {
+    const step = niceStep(60);
+    state.drawn.gridStep = step;
+    const [x0, y1] = screenToWorld(0, 0), [x1, y0] = screenToWorld(canvas.width, canvas.height);
+    ctx.lineWidth = px; ctx.strokeStyle = COLOURS.grid; ctx.beginPath();
+    for (let x = Math.ceil(x0 / step) * step; x <= x1; x += step) { ctx.moveTo(x, y0); ctx.lineTo(x, y1); }
+    for (let y = Math.ceil(y0 / step) * step; y <= y1; y += step) { ctx.moveTo(x0, y); ctx.lineTo(x1, y); }
+    ctx.stroke();
+    ctx.strokeStyle = "rgba(255,255,255,0.3)"; ctx.beginPath();  // the frame's axes
+    ctx.moveTo(x0, 0); ctx.lineTo(x1, 0); ctx.moveTo(0, y0); ctx.lineTo(0, y1); ctx.stroke();
+  }
+  function drawScaleBar() {
+    const step = niceStep(80);
+    const len = step * state.view.scale;
+    const x = canvas.width - 20 - len, y = canvas.height - 20;
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.strokeStyle = "#eee"; ctx.lineWidth = 2; ctx.beginPath();
+    ctx.moveTo(x, y - 5); ctx.lineTo(x, y); ctx.lineTo(x + len, y); ctx.lineTo(x + len, y - 5); ctx.stroke();
+    ctx.fillStyle = "#eee"; ctx.font = "12px system-ui, sans-serif"; ctx.textAlign = "center";
+    ctx.fillText(step >= 1 ? `${step} m` : `${Math.round(step * 100)} cm`, x + len / 2, y - 6);
+    $("scale").textContent = `${len.toFixed(0)} px = ${step} m`;
+  }
+  function drawParticles(px) {
+    const { head, data } = state.particles;
+    const len = Math.max(0.08, 8 * px);
+    ctx.strokeStyle = COLOURS.particles; ctx.lineWidth = px; ctx.beginPath();
+    for (let i = 0; i < head.n; i++) {
+      const x = data[i * 4], y = data[i * 4 + 1], a = data[i * 4 + 2];
+      ctx.moveTo(x, y); ctx.lineTo(x + len * Math.cos(a), y + len * Math.sin(a));
+    }
+    ctx.stroke();
+    state.drawn.particles = head.n;
+  }
+  function drawGraph(px) {
+    let nodes = 0, loops = 0;
+    for (const l of state.graph.layers) {
+      const p = l.pts;
+      if (l.kind === "points") {
+        ctx.fillStyle = l.colour;
+        const d = Math.max(0.04, 4 * px);
+        for (let i = 0; i + 1 < p.length; i += 2) ctx.fillRect(p[i] - d / 2, p[i + 1] - d / 2, d, d);
+        nodes += p.length / 2;
+      } else {
+        ctx.strokeStyle = l.colour; ctx.lineWidth = (l.loop ? 2 : 1) * px; ctx.beginPath();
+        for (let i = 0; i + 3 < p.length; i += 4) { ctx.moveTo(p[i], p[i + 1]); ctx.lineTo(p[i + 2], p[i + 3]); }
+        ctx.stroke();
+        if (l.loop) loops += Math.floor(p.length / 4);
+      }
+    }
+    state.drawn.graphNodes = nodes; state.drawn.loops = loops;
+  }
+  function drawFrames(px) {
+    const len = Math.max(0.2, 25 * px);
+    for (const [name, x, y, yaw] of state.tf) {
+      arrowLine(x, y, x + len * Math.cos(yaw), y + len * Math.sin(yaw), "#f44", px);
+      arrowLine(x, y, x - len * Math.sin(yaw), y + len * Math.cos(yaw), "#4f4", px);
+    }
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.fillStyle = "#ddd"; ctx.font = "11px system-ui, sans-serif"; ctx.textAlign = "left";
+    for (const [name, x, y] of state.tf) { const [sx, sy] = worldToScreen(x, y); ctx.fillText(name, sx + 4, sy - 4); }
+    baseTransform();
+    state.drawn.tfFrames = state.tf.length;
+  }
+  function arrowLine(x0, y0, x1, y1, colour, px) {
+    ctx.strokeStyle = colour; ctx.lineWidth = 2 * px; ctx.beginPath(); ctx.moveTo(x0, y0); ctx.lineTo(x1, y1); ctx.stroke();
+  }
   function frame() {
-    if (dirty) { dirty = false; draw(); }
+    if (dirty) { dirty = false; draw(); drawScaleBar(); }
     requestAnimationFrame(frame);
   }
 
@@ -261,6 +399,44 @@
     ws.send(JSON.stringify(obj));
     return true;
   }
+  // views change only what this page receives, so a read-only page may open them
+  state.views = new Set();
+  function sendView(name, on) {
+    if (on) state.views.add(name); else state.views.delete(name);
+    if (ws && ws.readyState === WebSocket.OPEN) ws.send(JSON.stringify({ op: "view", name, engage: on }));
+  }
+  async function toggle3d() {
+    const wrap = $("view3d-wrap");
+    if (state.view3d) {
+      sendView("cloud", false);
+      state.view3d.close(); state.view3d = null;
+      wrap.classList.add("hidden"); $("open-3d").classList.remove("active");
+      return;
+    }
+    wrap.classList.remove("hidden"); $("open-3d").classList.add("active");
+    const mod = await import("/static/view3d.js");
+    state.view3d = mod.open($("view3d"), () => state.pose);
+    sendView("cloud", true);
+  }
+  $("open-3d").addEventListener("click", toggle3d);
+  $("log-level").addEventListener("change", () => showLog(lastLog));
+
+  // -- legend and layer toggles ------------------------------------------------------------
+  for (const [key, label, on, swatches] of LEGEND) {
+    const row = document.createElement("label");
+    row.className = "legend-row"; row.dataset.layer = key;
+    const box = document.createElement("input");
+    box.type = "checkbox"; box.id = "show-" + key; box.checked = on;
+    const name = document.createElement("span"); name.className = "legend-name"; name.textContent = label;
+    row.append(box, name);
+    for (const [colour, what] of swatches) {
+      const sw = document.createElement("span"); sw.className = "swatch"; sw.style.background = colour; sw.title = what;
+      const txt = document.createElement("span"); txt.className = "swatch-label"; txt.textContent = what;
+      row.append(sw, txt);
+    }
+    $("legend").append(row);
+  }
+  $("show-tf").addEventListener("change", (e) => sendView("tf", e.target.checked));
   function setMode(mode) {
     state.mode = state.mode === mode ? "pan" : mode;
     document.querySelectorAll("[data-mode]").forEach((b) => b.classList.toggle("active", b.dataset.mode === state.mode));
@@ -282,6 +458,9 @@
     e.preventDefault();
   });
   canvas.addEventListener("mousemove", (e) => {
+    const [cx, cy] = screenToWorld(e.offsetX, e.offsetY);
+    state.cursor = [cx, cy];
+    $("cursor").textContent = `${cx.toFixed(2)}, ${cy.toFixed(2)} m (${state.status ? state.status.frame : "–"})`;
     const d = state.drag;
     if (!d) return;
     if (d.kind === "pan") {
@@ -385,7 +564,8 @@
       if (typeof ev.data === "string") onText(JSON.parse(ev.data)); else onBinary(ev.data);
     };
   }
-  window.eddie = { state, worldToScreen, screenToWorld, setMode, send };
+  canvas.addEventListener("mouseleave", () => { state.cursor = null; $("cursor").textContent = "–"; });
+  window.eddie = { state, worldToScreen, screenToWorld, setMode, send, sendView };
   connect();
   requestAnimationFrame(frame);
 })();
