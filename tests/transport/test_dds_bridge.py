@@ -635,6 +635,7 @@ def test_our_client_calls_a_service_served_on_dds(
         assert client.wait_for_service(timeout_sec=15), bridge.stderr
         [entity] = transport.cache.services(name)
         assert entity.type_name == "std_srvs/srv/SetBool"
+        assert bridge.wait_for(f"bridged service {name} [std_srvs/srv/SetBool] <- dds", 5)
         first = client.call(SetBool.Request(data=True), timeout_sec=10)
         second = client.call(SetBool.Request(data=False), timeout_sec=10)
     finally:
