@@ -414,3 +414,77 @@ def test_odometry_jump_is_not_integrated(
     else:
         assert error > 1.0
         assert jumps == []
+
+
+# -- localization: initialpose, pose, relocalisation, the buffer ----------------------------
+def _initialpose(rig: Rig, pose: np.ndarray, frame: str = "map") -> None:
+    from eddiebot.geometry import yaw_to_quaternion
+    from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
+
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = frame
+    msg.pose.pose.position.x, msg.pose.pose.position.y = float(pose[0]), float(pose[1])
+    o = msg.pose.pose.orientation
+    o.x, o.y, o.z, o.w = yaw_to_quaternion(float(pose[2]))
+    pub = rig.probe.create_publisher(PoseWithCovarianceStamped, "/initialpose", 1)
+    pub.publish(msg)
+    rig.ex.spin_for(0.05)
+
+
+def _poses_seen(rig: Rig) -> list[Any]:
+    from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
+
+    seen: list[Any] = []
+    rig.probe.create_subscription(PoseWithCovarianceStamped, "/pose", seen.append, 10)
+    return seen
+
+
+def test_initialpose_places_the_next_scan_and_pose_is_published(
+    rig_factory: Any, session: Any
+) -> None:
+    path, first, last = session
+    rig = rig_factory(mode="localization", map_file_name=str(path), map_start_pose=[3.0, 4.0, 0.0])
+    seen = _poses_seen(rig)
+    _first_scan_at(rig, np.array([3.0, 4.0, 0.0]), np.zeros(3))
+    assert len(rig.node.core._loc_buffer) == 1
+    # the robot is carried elsewhere; the operator says where
+    here = np.array([5.0, 4.0, 0.05])
+    _initialpose(rig, here + np.array([0.06, -0.04, 0.02]))
+    assert len(rig.node.core._loc_buffer) == 0  # cleared, as upstream
+    pose = _first_scan_at(rig, here, np.array([0.4, 0.1, 0.0]))
+    assert np.hypot(*(pose[:2] - here[:2])) < 0.03
+    assert len(seen) == 2
+    got = seen[-1]
+    assert got.header.frame_id == "map"
+    assert abs(got.pose.pose.position.x - 5.0) < 0.03
+    assert got.pose.covariance[0] > 0.0  # the match's x variance
+    # another frame is refused with one warning; the pose is not touched
+    _initialpose(rig, np.array([9.0, 9.0, 0.0]), frame="odom")
+    assert rig.node.core._state.pending_start is None
+
+
+def test_localization_without_a_start_pose_relocalises_globally(
+    rig_factory: Any, session: Any, caplog: pytest.LogCaptureFixture
+) -> None:
+    path, first, last = session
+    caplog.set_level(logging.INFO)
+    rig = rig_factory(mode="localization", map_file_name=str(path))
+    here = np.array([4.5, 4.0, 0.0])
+    pose = _first_scan_at(rig, here, np.array([-1.0, 2.0, 0.7]))
+    assert np.hypot(*(pose[:2] - here[:2])) < 0.05
+    (attempt,) = rig.node.core.relocalizations
+    assert attempt.accepted
+    assert any("relocalised globally" in r.getMessage() for r in caplog.records)
+
+
+def test_clear_localization_buffer_service(rig_factory: Any, session: Any) -> None:
+    from eddiebot.msgs.std_srvs import Empty
+
+    path, first, last = session
+    rig = rig_factory(mode="localization", map_file_name=str(path), map_start_pose=[3.0, 4.0, 0.0])
+    _first_scan_at(rig, np.array([3.0, 4.0, 0.0]), np.zeros(3))
+    assert len(rig.node.core._loc_buffer) == 1
+    rig.call(Empty, "clear_localization_buffer")
+    assert len(rig.node.core._loc_buffer) == 0
+    mapping = rig_factory()
+    assert not [s for s in mapping.node.services if s.service_name.endswith("clear_localization_buffer")]

@@ -11,7 +11,8 @@ is neither slam_toolbox's nor eddiebot's (`eddiebot.slam.config.parameter_warnin
 scans wait; older ones are dropped).
 
 ``map_file_name`` loads a saved session at start-up in every mode, as slam_toolbox: in
-localization mode with LOCALIZE_AT_POSE at ``map_start_pose``; otherwise at ``map_start_pose``
+localization mode with LOCALIZE_AT_POSE at ``map_start_pose`` — without it the first scan is
+relocalised globally over the whole map (slam_toolbox starts at the origin); otherwise at ``map_start_pose``
 (START_AT_GIVEN_POSE) or, with ``map_start_at_dock``, at the session's first node
 (START_AT_FIRST_NODE); neither set: at the map origin. ``~/deserialize_map`` takes the same
 match types: LOCALIZE_AT_POSE only in localization mode (and only it there), UNSET refused.
@@ -20,6 +21,13 @@ One laser: the map is built from the first laser frame's scans; a scan from anot
 whose mount differs is refused (one warning; ``scans_refused_frame`` counts them), so earlier
 scans are never re-placed under another mount. ``transform_publish_period`` 0 publishes no
 map → odom transform. ``paused_new_measurements`` starts paused.
+
+Localization mode (slam_toolbox's localization node; `eddiebot.slam.mapper.localization`):
+``initialpose`` (geometry_msgs/PoseWithCovarianceStamped, in ``map_frame``) places the next scan
+at that pose and clears the localization buffer; ``~/clear_localization_buffer``
+(std_srvs/Empty) clears it; a robot lost for ``scan_buffer_size`` scans is relocalised globally.
+Every processed scan's pose is published on ``pose`` (geometry_msgs/PoseWithCovarianceStamped,
+the match's x, y, yaw covariance) in every mode, as upstream.
 
 Services (under the node's name, as slam_toolbox): ``~/save_map`` (slam_toolbox/SaveMap:
 nav2 map_server files), ``~/serialize_map`` and ``~/deserialize_map`` (the session file),
@@ -67,10 +75,10 @@ from eddiebot.core.qos import (
     qos_profile_sensor_data,
 )
 from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, make_transform_2d
-from eddiebot.core.time import stamp_to_ns
-from eddiebot.geometry import yaw_to_quaternion
+from eddiebot.core.time import ns_to_stamp, stamp_to_ns
+from eddiebot.geometry import quaternion_to_yaw, yaw_to_quaternion
 from eddiebot.maps import MapAnchor, map_to_msg, save_anchor, save_map
-from eddiebot.msgs.geometry_msgs import Point
+from eddiebot.msgs.geometry_msgs import Point, PoseWithCovarianceStamped
 from eddiebot.msgs.nav_msgs import MapMetaData, OccupancyGrid
 from eddiebot.msgs.sensor_msgs import LaserScan
 from eddiebot.msgs.slam_toolbox import (
@@ -81,6 +89,7 @@ from eddiebot.msgs.slam_toolbox import (
     SaveMap,
     SerializePoseGraph,
 )
+from eddiebot.msgs.std_srvs import Empty
 from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
 from eddiebot.slam.config import SlamConfig, parameter_warnings
 from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning, warm_up
@@ -165,6 +174,14 @@ class SlamNode(Node):
             MapMetaData, f"{map_topic}_metadata", qos_profile_latched
         )
         self.graph_pub = self.create_publisher(MarkerArray, "~/graph_visualization", 1)
+        self.pose_pub = self.create_publisher(PoseWithCovarianceStamped, "pose", 10)
+        if self.config.mode == "localization":
+            self.create_subscription(
+                PoseWithCovarianceStamped, "initialpose", self._on_initial_pose, 1
+            )
+            self.create_service(
+                Empty, "~/clear_localization_buffer", self._clear_localization_buffer
+            )
         if self.processing == "sync":
             scan_qos = QoSProfile(
                 history=HistoryPolicy.KEEP_ALL, reliability=qos_profile_sensor_data.reliability
@@ -311,6 +328,11 @@ class SlamNode(Node):
         self.scans_processed += 1
         result = self.core.process(scan, np.array(odom))
         cpu = time.thread_time() - cpu0
+        for w in result.warnings:
+            if w.kind in ("relocalized", "relocalization_failed"):
+                self.get_logger().info(w.message)
+        if result.pose is not None:
+            self._publish_pose(result.pose, result.covariance, stamp)
         if result.status in (ProcessStatus.ADDED, ProcessStatus.LOCALIZED):
             self.scan_cpu_s.append(cpu)
             self._track_low_feature(result)
@@ -339,6 +361,47 @@ class SlamNode(Node):
         self.tf_broadcaster.sendTransform(
             make_transform_2d(self.config.map_frame, self.config.odom_frame, stamp, x, y, th)
         )
+
+    def _publish_pose(self, pose: np.ndarray, cov: np.ndarray | None, stamp: int) -> None:
+        msg = PoseWithCovarianceStamped()
+        msg.header.frame_id = self.config.map_frame
+        msg.header.stamp = ns_to_stamp(stamp)
+        msg.pose.pose.position.x, msg.pose.pose.position.y = float(pose[0]), float(pose[1])
+        q = yaw_to_quaternion(float(pose[2]))
+        o = msg.pose.pose.orientation
+        o.x, o.y, o.z, o.w = q
+        c = np.zeros((6, 6))
+        if cov is not None:
+            ix = [0, 1, 5]
+            c[np.ix_(ix, ix)] = np.asarray(cov, dtype=np.float64)[:3, :3]
+        msg.pose.covariance = c.reshape(36)
+        self.pose_pub.publish(msg)
+
+    def _on_initial_pose(self, msg: Any) -> None:
+        """slam_toolbox's ``localizePoseCallback``: the next scan starts at this pose."""
+        frame = msg.header.frame_id
+        if frame and frame != self.config.map_frame:
+            self.get_logger().warning(
+                f"initialpose in frame {frame!r}, expected map_frame "
+                f"{self.config.map_frame!r}; ignored"
+            )
+            return
+        p = msg.pose.pose
+        o = p.orientation
+        yaw = quaternion_to_yaw(o.x, o.y, o.z, o.w)
+        pose = np.array([float(p.position.x), float(p.position.y), yaw])
+        if not np.all(np.isfinite(pose)):
+            self.get_logger().warning(f"initialpose {pose} is not finite; ignored")
+            return
+        self.core.start_at(pose)
+        self.get_logger().info(
+            f"initialpose: localizing to ({pose[0]:.2f}, {pose[1]:.2f}), theta={pose[2]:.2f}"
+        )
+
+    def _clear_localization_buffer(self, req: Any, res: Any) -> Any:
+        self.core.clear_localization_buffer()
+        self.get_logger().info("clearing the localization buffer")
+        return res
 
     def _publish_map(self) -> None:
         if not self._map_dirty and self.map_pub.sequence > 0:
@@ -440,8 +503,10 @@ class SlamNode(Node):
         """slam_toolbox's ``loadPoseGraphByParams``: ``map_file_name`` at start-up."""
         cfg = self.config
         request = DeserializePoseGraph.Request
-        pose = cfg.map_start_pose or (0.0, 0.0, 0.0)
+        pose: tuple[float, ...] | None = tuple(cfg.map_start_pose or (0.0, 0.0, 0.0))
         if cfg.mode == "localization":
+            if not cfg.map_start_pose:
+                pose = None  # relocalised globally on the first scan
             if cfg.map_start_at_dock and not cfg.map_start_pose:
                 self.get_logger().warning(
                     "map_start_at_dock: localization does not start at the first node; "
@@ -458,13 +523,13 @@ class SlamNode(Node):
                 "map_file_name without map_start_pose or map_start_at_dock: starting at the "
                 "map origin"
             )
-        if not self.load_session_file(cfg.map_file_name, match, tuple(pose)):
+        if not self.load_session_file(cfg.map_file_name, match, pose):
             self.get_logger().error(
                 f"map_file_name {cfg.map_file_name!r} not loaded; starting with an empty map"
             )
 
     def load_session_file(
-        self, filename: str, match_type: int, pose: tuple[float, ...] = (0.0, 0.0, 0.0)
+        self, filename: str, match_type: int, pose: tuple[float, ...] | None = (0.0, 0.0, 0.0)
     ) -> bool:
         """Load a saved session as ``~/deserialize_map`` does; False (and a log line) when
         refused or unreadable, the current session kept.
@@ -472,7 +537,8 @@ class SlamNode(Node):
         ``match_type``: START_AT_FIRST_NODE (the robot is at the session's first node),
         START_AT_GIVEN_POSE (at ``pose``, map frame x, y, theta) — mapping and lifelong;
         LOCALIZE_AT_POSE (at ``pose``) — localization only. The next scan is placed there,
-        whatever its odometry, and matched against the nodes near it."""
+        whatever its odometry, and matched against the nodes near it. LOCALIZE_AT_POSE with
+        ``pose`` None: the next scan is relocalised over the whole map."""
         request = DeserializePoseGraph.Request
         names = {
             request.START_AT_FIRST_NODE: "START_AT_FIRST_NODE",
@@ -516,17 +582,21 @@ class SlamNode(Node):
             )
             return False
         core.on_warning = self._on_warning
+        where = "at the pose global relocalisation finds"
         if match_type == request.START_AT_FIRST_NODE and core.nodes:
             start = core.node_poses()[0]
-        else:
+        elif pose is not None:
             start = np.asarray(pose, dtype=np.float64)
-        core.start_at(start)
+        else:
+            start = None
+        if start is not None:
+            core.start_at(start)
+            where = f"at {_fmt_pose(start)}"
         self.core = core
         self._last_scan_ns = None
         self._map_dirty = True
         self.get_logger().info(
-            f"loaded session {filename} ({len(core.nodes)} nodes), {names[match_type]} at "
-            f"{_fmt_pose(start)}"
+            f"loaded session {filename} ({len(core.nodes)} nodes), {names[match_type]} {where}"
         )
         return True
 

@@ -8,15 +8,14 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from eddiebot.geometry import se2_compose, se2_inverse
-from eddiebot.slam.mapper.mapping import Mapping
+from eddiebot.slam.mapper.localization import Localization
 from eddiebot.slam.mapper.measurement import corrected_scan
-from eddiebot.slam.mapper.results import FloatArray, ProcessResult, ProcessStatus, SlamWarning
+from eddiebot.slam.mapper.results import ProcessResult, ProcessStatus, SlamWarning
 from eddiebot.slam.mapper.se2_rows import _compose1, _inverse1
-from eddiebot.slam.scan import Scan, check_scan, scan_points
+from eddiebot.slam.scan import Scan, check_scan
 
 
-class SlamCore(Mapping):
+class SlamCore(Localization):
     """2D graph SLAM over laser scans and odometry (pure: no clock, no bus, no files).
 
     ``sensor_offset`` is the laser's pose in the base frame (x, y, theta).
@@ -110,63 +109,3 @@ class SlamCore(Mapping):
         if self.mode == "localization":
             return self._localize(scan, odom, warnings)
         return self._map(scan, odom, warnings)
-
-    # -- localization
-    def _localize(self, scan: Scan, odom: FloatArray, warnings: list[SlamWarning]) -> ProcessResult:
-        cfg = self.config
-        st = self._state
-        stamp = int(scan.stamp_ns)
-        if not self.nodes:
-            self._warn(warnings, "no_map", "localization mode without a loaded session", stamp)
-            return ProcessResult(ProcessStatus.SKIPPED, self.map_to_odom, warnings=tuple(warnings))
-        if st.last_pose is None:
-            st.last_pose = self.graph.pose(0)
-            st.map_to_odom = se2_compose(st.last_pose, se2_inverse(odom))
-        points = scan_points(scan, cfg.max_laser_range)
-        prior = self._prior(odom)
-        prior_sensor = se2_compose(prior, self.sensor_offset)
-        positions = self._positions()
-        active = np.flatnonzero(self.active_mask())
-        d = np.hypot(positions[active, 0] - prior_sensor[0], positions[active, 1] - prior_sensor[1])
-        near = active[d <= cfg.scan_buffer_maximum_scan_distance]
-        near = near[
-            np.argsort(
-                np.hypot(positions[near, 0] - prior_sensor[0], positions[near, 1] - prior_sensor[1])
-            )
-        ]
-        ref_nodes = [int(i) for i in near[: 2 * cfg.scan_buffer_size]]
-        pose = prior
-        response = 0.0
-        covariance = None
-        if ref_nodes:
-            match = self._match_against(ref_nodes, points, prior_sensor, self._seq_params)
-            if match.response < self._weak_response:
-                wide = self._match_against(ref_nodes, points, prior_sensor, self._loop_coarse)
-                if wide.response > match.response:
-                    match = self._match_against(ref_nodes, points, wide.pose, self._loop_fine)
-            response, covariance = match.response, match.covariance
-            if match.response >= cfg.link_match_minimum_response_fine:
-                pose = se2_compose(match.pose, se2_inverse(self.sensor_offset))
-                self._check_covariance(match, warnings, stamp)
-            else:
-                self._warn(
-                    warnings,
-                    "weak_match",
-                    f"localization match response {match.response:.2f}; using odometry",
-                    stamp,
-                )
-        else:
-            self._warn(
-                warnings, "off_map", "no map nodes near the predicted pose; using odometry", stamp
-            )
-        st.last_pose = pose.copy()
-        st.last_processed_odom = odom.copy()
-        st.map_to_odom = se2_compose(pose, se2_inverse(odom))
-        return ProcessResult(
-            ProcessStatus.LOCALIZED,
-            self.map_to_odom,
-            pose=pose.copy(),
-            response=response,
-            covariance=covariance,
-            warnings=tuple(warnings),
-        )

@@ -175,9 +175,12 @@ class ScanMatching(MapperState):
         params: MatcherParams,
         *,
         reject_below: float | None = None,
+        extra: tuple[FloatArray, FloatArray] | None = None,
     ) -> MatchResult:
         # ``reject_below``: the caller discards a match whose response is below it, so such a
-        # match stops once its response is known (`match_scan`) and is not polished
+        # match stops once its response is known (`match_scan`) and is not polished;
+        # ``extra``: further reference points and their normals (map frame) beside the nodes'
+        # (localization's buffer of recent scans)
         # one pass over the optimiser's estimate (the same values as one look-up per node,
         # which the reference points and normals below would otherwise make ~40 times)
         poses = self.graph.poses
@@ -187,6 +190,11 @@ class ScanMatching(MapperState):
             ref, normals = self._reference(nodes, poses, normals=polish)
         else:
             ref = np.zeros((0, 2))
+        if extra is not None and extra[0].shape[0]:
+            ref = np.concatenate([ref, extra[0]])
+            if normals is not None or (polish and not nodes):
+                base = normals if normals is not None else np.zeros((0, 2))
+                normals = np.concatenate([base, extra[1]])
         c, s = math.cos(prior_sensor[2]), math.sin(prior_sensor[2])
         wx = prior_sensor[0] + c * points[:, 0] - s * points[:, 1]
         wy = prior_sensor[1] + s * points[:, 0] + c * points[:, 1]

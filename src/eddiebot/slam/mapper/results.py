@@ -25,6 +25,9 @@ class ProcessStatus(str, enum.Enum):
     """Skipped: the robot has not moved enough since the last processed scan."""
     SKIPPED = "skipped"
     """Skipped: bad input (see the warnings)."""
+    LOST = "lost"
+    """Localization: global relocalisation found no pose passing the loop-closure thresholds
+    (the odometry pose is kept when there was one)."""
 
 
 @dataclass(frozen=True)

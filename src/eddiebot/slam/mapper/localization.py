@@ -1,0 +1,342 @@
+"""Localization against a loaded graph: slam_toolbox's rolling buffer of recent scans, and a
+global relocalisation over the whole map when there is no pose to track from.
+
+Tracking (slam_toolbox's ``ProcessLocalization``): the scan is placed by odometry from the
+last localised scan and matched (the sequential matcher, with its odometry penalty) against
+the loaded graph's scans near that prior *and* the localization buffer — the last
+``scan_buffer_size`` localised scans at their localised poses. The buffer plays the part of
+upstream's running scans: it carries the pose through places the map's scans see poorly or
+that changed since mapping. Unlike upstream, buffered scans never enter the pose graph (no
+temporary vertices to remove again); the graph, its nodes and the map stay exactly as loaded.
+A match below ``link_match_minimum_response_fine`` leaves the odometry pose (``weak_match``)
+and that scan does not enter the buffer; a match below the slip re-search's threshold
+(``slip_search_minimum_response``, else ``loop_match_minimum_response_fine``) is first
+searched again over the loop-closure window against the map's scans alone.
+
+The buffer's scans match each other whatever the map says, so a pose that went wrong (a
+kidnapped robot, a failed match) would carry on confidently: each placed scan is also scored
+against the map's scans alone, and a scan whose *map support* is below that same threshold
+counts as unsupported.
+
+Relocalisation: with no pose (localization started without ``map_start_pose`` or
+``/initialpose``), or after ``scan_buffer_size`` consecutive unsupported scans (retried after
+each further ``scan_buffer_size``; a place the map does not cover is tracked through the
+buffer meanwhile), the scan is searched over the whole map: one correlation grid of every
+active node's scan at the loop search's resolution and smear, every heading, every
+translation (branch and bound), then the loop closer's fine match against the nodes near the
+best pose. It is accepted as a loop closure is (Karto's two-stage check): the coarse response
+reaches ``loop_match_minimum_response_coarse`` with x and y variances below
+``loop_match_maximum_variance_coarse`` (a scan that fits several places of the map spreads its
+candidates: refused as ambiguous), and the fine response reaches
+``loop_match_minimum_response_fine``. Otherwise it is refused: status ``LOST`` without a pose
+to keep, else the tracked pose is kept. ``relocalizations`` records each attempt.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from eddiebot.geometry import se2_compose, se2_inverse
+from eddiebot.slam.mapper.mapping import Mapping
+from eddiebot.slam.mapper.results import FloatArray, ProcessResult, ProcessStatus, SlamWarning
+from eddiebot.slam.mapper.se2_rows import _compose1
+from eddiebot.slam.scan import Scan, scan_points
+from eddiebot.slam.scan_matcher import (
+    CorrelationGrid,
+    MatcherParams,
+    MatchResult,
+    build_correlation_grid,
+    match_scan,
+    point_normals,
+    pyramid_levels,
+    score_pose,
+)
+
+
+@dataclass(frozen=True)
+class Relocalization:
+    """One global relocalisation attempt: the robot pose found (map frame), the coarse and
+    fine responses, the coarse match's larger position variance (m²), and whether it passed
+    the loop-closure thresholds."""
+
+    pose: FloatArray
+    coarse_response: float
+    response: float
+    accepted: bool
+    coarse_variance: float = math.inf
+    stamp_ns: int = 0
+
+
+@dataclass
+class _Buffered:
+    points: FloatArray
+    """End points, sensor frame (M, 2)."""
+    normals: FloatArray
+    """Their normals, sensor frame (M, 2)."""
+    pose: FloatArray
+    """Localised robot pose, map frame."""
+
+
+class Localization(Mapping):
+    """`Mapping` with localization mode (see the module docstring)."""
+
+    def clear(self) -> None:
+        super().clear()
+        self._loc_buffer: deque[_Buffered] = deque()
+        self._weak_run = 0
+        self._global: tuple[CorrelationGrid, FloatArray, float] | None = None
+        self.relocalizations: list[Relocalization] = []
+        """Every global relocalisation attempt, accepted or refused, in order."""
+
+    def clear_localization_buffer(self) -> None:
+        """Forget the recent localised scans (slam_toolbox's ``clear_localization_buffer``)."""
+        self._loc_buffer.clear()
+        self._weak_run = 0
+
+    def set_initial_pose(
+        self, pose: npt.ArrayLike, odom_pose: npt.ArrayLike | None = None
+    ) -> None:
+        super().set_initial_pose(pose, odom_pose)
+        self.clear_localization_buffer()
+
+    def start_at(self, pose: npt.ArrayLike) -> None:
+        super().start_at(pose)
+        self.clear_localization_buffer()
+
+    # -- tracking
+    def _localize(self, scan: Scan, odom: FloatArray, warnings: list[SlamWarning]) -> ProcessResult:
+        cfg = self.config
+        st = self._state
+        stamp = int(scan.stamp_ns)
+        if not self.nodes:
+            self._warn(warnings, "no_map", "localization mode without a loaded session", stamp)
+            return ProcessResult(ProcessStatus.SKIPPED, self.map_to_odom, warnings=tuple(warnings))
+        points = scan_points(scan, cfg.max_laser_range)
+        if st.last_pose is None:
+            return self._relocalize_scan(points, odom, stamp, warnings, "no initial pose")
+        prior = self._prior(odom)
+        prior_sensor = _compose1(prior, self.sensor_offset)
+        ref_nodes = self._nodes_near(prior_sensor[:2])
+        extra = self._buffer_reference()
+        pose = prior
+        response = 0.0
+        covariance = None
+        matched = False
+        support = 0.0
+        if ref_nodes or extra is not None:
+            match = self._match_against(
+                ref_nodes, points, prior_sensor, self._seq_params, extra=extra
+            )
+            if match.response < self._weak_response and ref_nodes:
+                wide = self._match_against(ref_nodes, points, prior_sensor, self._loop_coarse)
+                if wide.response > match.response:
+                    fine = self._match_against(ref_nodes, points, wide.pose, self._loop_fine)
+                    if fine.response > match.response:
+                        match = fine
+            response, covariance = match.response, match.covariance
+            if match.response >= cfg.link_match_minimum_response_fine:
+                pose = se2_compose(match.pose, se2_inverse(self.sensor_offset))
+                matched = True
+                self._check_covariance(match, warnings, stamp)
+                support = self._map_support(ref_nodes, points, match.pose)
+            else:
+                self._warn(
+                    warnings,
+                    "weak_match",
+                    f"localization match response {match.response:.2f} below "
+                    f"link_match_minimum_response_fine {cfg.link_match_minimum_response_fine}; "
+                    "using odometry",
+                    stamp,
+                )
+        else:
+            self._warn(
+                warnings, "off_map", "no map nodes near the predicted pose; using odometry", stamp
+            )
+        if matched:
+            self._buffer(points, pose)
+        if support >= self._weak_response:
+            self._weak_run = 0
+        else:
+            self._weak_run += 1
+            if self._weak_run >= cfg.scan_buffer_size:
+                self._weak_run = 0
+                return self._relocalize_scan(
+                    points, odom, stamp, warnings,
+                    f"{cfg.scan_buffer_size} consecutive scans the map does not support",
+                    fallback=pose, covariance=covariance,
+                )
+        return self._localized(pose, odom, response, covariance, warnings)
+
+    def _map_support(self, nodes: list[int], points: FloatArray, sensor: FloatArray) -> float:
+        """Response of the scan at sensor pose ``sensor`` against the map's ``nodes`` alone
+        (the loop search's grid): how far the map, not the buffer, backs the pose."""
+        if not nodes:
+            return 0.0
+        ref, _ = self._reference(nodes, self.graph.poses)
+        params = self._loop_fine
+        c, s = math.cos(sensor[2]), math.sin(sensor[2])
+        wx = sensor[0] + c * points[:, 0] - s * points[:, 1]
+        wy = sensor[1] + s * points[:, 0] + c * points[:, 1]
+        grid = build_correlation_grid(
+            ref,
+            (float(wx.min()), float(wy.min()), float(wx.max()), float(wy.max())),
+            params.resolution,
+            params.smear_deviation,
+        )
+        return score_pose(points, sensor, grid)
+
+    def _localized(
+        self,
+        pose: FloatArray,
+        odom: FloatArray,
+        response: float,
+        covariance: FloatArray | None,
+        warnings: list[SlamWarning],
+        status: ProcessStatus = ProcessStatus.LOCALIZED,
+    ) -> ProcessResult:
+        st = self._state
+        st.last_pose = pose.copy()
+        st.last_processed_odom = odom.copy()
+        st.map_to_odom = se2_compose(pose, se2_inverse(odom))
+        return ProcessResult(
+            status,
+            self.map_to_odom,
+            pose=pose.copy(),
+            response=response,
+            covariance=covariance,
+            warnings=tuple(warnings),
+        )
+
+    def _nodes_near(self, xy: FloatArray) -> list[int]:
+        """Active map nodes within ``scan_buffer_maximum_scan_distance`` of ``xy``, nearest
+        first, at most 2 × ``scan_buffer_size``."""
+        cfg = self.config
+        positions = self._positions()
+        active = np.flatnonzero(self.active_mask())
+        d = np.hypot(positions[active, 0] - xy[0], positions[active, 1] - xy[1])
+        keep = d <= cfg.scan_buffer_maximum_scan_distance
+        near = active[keep][np.argsort(d[keep], kind="stable")]
+        return [int(i) for i in near[: 2 * cfg.scan_buffer_size]]
+
+    def _buffer(self, points: FloatArray, pose: FloatArray) -> None:
+        self._loc_buffer.append(_Buffered(points, point_normals(points), pose.copy()))
+        while len(self._loc_buffer) > self.config.scan_buffer_size:
+            self._loc_buffer.popleft()
+
+    def _buffer_reference(self) -> tuple[FloatArray, FloatArray] | None:
+        """The buffer's end points and normals in the map frame (None when empty)."""
+        if not self._loc_buffer:
+            return None
+        pts, nrm = [], []
+        for b in self._loc_buffer:
+            sensor = _compose1(b.pose, self.sensor_offset)
+            c, s = math.cos(sensor[2]), math.sin(sensor[2])
+            rot = np.array([[c, -s], [s, c]])
+            pts.append(b.points @ rot.T + sensor[:2])
+            nrm.append(b.normals @ rot.T)
+        return np.concatenate(pts), np.concatenate(nrm)
+
+    # -- global relocalisation
+    def _relocalize_scan(
+        self,
+        points: FloatArray,
+        odom: FloatArray,
+        stamp: int,
+        warnings: list[SlamWarning],
+        why: str,
+        *,
+        fallback: FloatArray | None = None,
+        covariance: FloatArray | None = None,
+    ) -> ProcessResult:
+        found = self.relocalize(points, stamp_ns=stamp)
+        cfg = self.config
+        if found.accepted:
+            self._warn(
+                warnings,
+                "relocalized",
+                f"{why}: relocalised globally at ({found.pose[0]:.2f}, {found.pose[1]:.2f}, "
+                f"{found.pose[2]:.2f}), response {found.response:.2f}",
+                stamp,
+            )
+            self.clear_localization_buffer()
+            self._buffer(points, found.pose)
+            return self._localized(found.pose, odom, found.response, None, warnings)
+        self._warn(
+            warnings,
+            "relocalization_failed",
+            f"{why}: global relocalisation refused (best: coarse response "
+            f"{found.coarse_response:.2f}, variance {found.coarse_variance:.3g} m², fine "
+            f"response {found.response:.2f}; needs >= {cfg.loop_match_minimum_response_coarse}, "
+            f"< {cfg.loop_match_maximum_variance_coarse} m², >= "
+            f"{cfg.loop_match_minimum_response_fine})",
+            stamp,
+        )
+        if fallback is None:
+            return ProcessResult(ProcessStatus.LOST, self.map_to_odom, warnings=tuple(warnings))
+        return self._localized(fallback, odom, found.response, covariance, warnings)
+
+    def _global_grid(self) -> tuple[CorrelationGrid, FloatArray, float]:
+        """The correlation grid of every active node's scan (cached: the loaded graph does
+        not change while localising), its centre and the side of the square it spans."""
+        if self._global is not None:
+            return self._global
+        poses = self.graph.poses
+        nodes = [int(i) for i in np.flatnonzero(self.active_mask())]
+        ref, _ = self._reference(nodes, poses)
+        lo, hi = ref.min(axis=0), ref.max(axis=0)
+        centre = 0.5 * (lo + hi)
+        side = float(max(hi - lo)) + 2.0 * self.config.max_laser_range
+        params = self._global_params(side)
+        grid = build_correlation_grid(
+            ref,
+            (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
+            params.resolution,
+            params.smear_deviation,
+            pyramid_levels(params),
+        )
+        self._global = (grid, centre, side)
+        return self._global
+
+    def _global_params(self, side: float) -> MatcherParams:
+        return dataclasses.replace(
+            self._loop_coarse,
+            search_dimension=side,
+            coarse_angle_offset=math.pi,
+            use_response_expansion=False,
+            penalize=False,
+        )
+
+    def relocalize(self, points: FloatArray, *, stamp_ns: int = 0) -> Relocalization:
+        """Search the whole map for scan end points ``points`` (sensor frame): the best robot
+        pose, its responses, and whether it passes the loop-closure thresholds. Recorded in
+        ``relocalizations``; the tracked pose is not changed."""
+        cfg = self.config
+        if not self.nodes or points.shape[0] == 0:
+            out = Relocalization(np.zeros(3), 0.0, 0.0, False, math.inf, stamp_ns)
+            self.relocalizations.append(out)
+            return out
+        grid, centre, side = self._global_grid()
+        prior = np.array([centre[0], centre[1], 0.0])
+        coarse: MatchResult = match_scan(points, grid, prior, self._global_params(side))
+        fine = coarse
+        near = self._nodes_near(coarse.pose[:2])
+        if near:
+            fine = self._match_against(near, points, coarse.pose, self._loop_fine)
+        variance = float(max(coarse.covariance[0, 0], coarse.covariance[1, 1]))
+        accepted = (
+            coarse.response >= cfg.loop_match_minimum_response_coarse
+            and variance < cfg.loop_match_maximum_variance_coarse
+            and fine.response >= cfg.loop_match_minimum_response_fine
+        )
+        pose = se2_compose(fine.pose, se2_inverse(self.sensor_offset))
+        out = Relocalization(
+            pose, float(coarse.response), float(fine.response), accepted, variance, stamp_ns
+        )
+        self.relocalizations.append(out)
+        return out
