@@ -156,6 +156,14 @@ def test_lost_odometry_never_becomes_a_pose(tmp_path, caplog):
         rig.frame(2 * SEC, 0.2)
         assert _nodes(rig) == n0
         assert any("'odom_lost'" in r.getMessage() for r in caplog.records)
+        # odometry back (TF again): the next node starts a new map, with no link to the last
+        rig.frame(3 * SEC, 0.4)
+        result = rig.slam.last_result
+        assert result is not None and result.new_map and result.map_id == 1
+        assert _nodes(rig) == n0 + 1
+        assert not rig.slam.core.memory.links.get(result.node_id)
+        rig.frame(4 * SEC, 0.6)
+        assert rig.slam.last_result.map_id == 1 and not rig.slam.last_result.new_map
     finally:
         rig.close()
 

@@ -205,6 +205,7 @@ class RtabmapNode(Node):
         self._last_processed_ns: int | None = None
         self._static: dict[tuple[str, str], np.ndarray] = {}
         self._map_dirty = True
+        self._odom_reset_pending = False
 
         self.db: SessionDatabase | None = None
         self.core = self._make_core(self.delete_db_on_start)
@@ -444,18 +445,20 @@ class RtabmapNode(Node):
             return None
         return min(cands, key=lambda i: abs(stamp_to_ns(i.header.stamp) - t))
 
-    def _odometry_lost(self, t: int) -> bool:
-        """True if the /odom message nearest `t` says the odometry is lost (null pose or
-        covariance 9999, as rtabmap_odom publishes it)."""
+    def _odometry_state(self, t: int) -> str:
+        """What the /odom message nearest `t` says: ``lost`` (null pose, as rtabmap_odom
+        publishes it), ``reset`` (a pose with covariance 9999: re-initialised, the next node
+        starts a new map) or ``ok``."""
         if not self._odom:
-            return False
+            return "ok"
         msg = min(self._odom, key=lambda m: abs(stamp_to_ns(m.header.stamp) - t))
         if abs(stamp_to_ns(msg.header.stamp) - t) > _SEC // 2:
-            return False
+            return "ok"
         q = msg.pose.pose.orientation
         cov = np.asarray(msg.pose.covariance, dtype=np.float64)
-        null = q.x == 0.0 and q.y == 0.0 and q.z == 0.0 and q.w == 0.0
-        return bool(null or (cov.size and cov[0] >= 9999.0))
+        if q.x == 0.0 and q.y == 0.0 and q.z == 0.0 and q.w == 0.0:
+            return "lost"
+        return "reset" if cov.size and cov[0] >= 9999.0 else "ok"
 
     def _process(self, t: int, img: Any, depth_msg: Any | None, scan_msg: Any | None) -> None:
         from eddiebot.perception.errors import ImageSizeError, UnsupportedEncodingError
@@ -504,8 +507,12 @@ class RtabmapNode(Node):
             return
         camera = CameraIntrinsics.from_k(rgb_info.k, int(rgb_info.width), int(rgb_info.height),
                                          cam_pose)
-        if self._odometry_lost(t):
-            self._warn_once("odom_lost", "odometry is lost at an image's time: skipped")
+        odom_state = self._odometry_state(t)
+        if odom_state == "lost":
+            # RTAB-Map: the frames after lost odometry start a new map (nothing welds the jump)
+            self._odom_reset_pending = True
+            self._warn_once("odom_lost", "odometry is lost at an image's time: skipped; a new "
+                            "map starts when it is back")
             return
         try:
             odom = _tf_matrix(self.tf_buffer.lookup_transform(
@@ -516,6 +523,9 @@ class RtabmapNode(Node):
         scan = self._scan(scan_msg) if scan_msg is not None else None
         lin, ang = self.odom_tf_linear_variance, self.odom_tf_angular_variance
         cov = np.diag([lin, lin, lin, ang, ang, ang])
+        if odom_state == "reset" or self._odom_reset_pending:
+            cov = np.diag([9999.0] * 6)
+            self._odom_reset_pending = False
         result = self.core.process(rgb, depth, camera, odom, t, scan, odom_covariance=cov)
         self._last_processed_ns = t
         self.frames_processed += 1
@@ -524,6 +534,12 @@ class RtabmapNode(Node):
         if result.pose is None:
             self._warn_once("rejected", f"frame rejected: {result.rejection_reason}")
             return
+        if result.new_map:
+            self.get_logger().info(f"odometry reset: map {result.map_id} started (its own "
+                                   "frame until a loop closure merges it)")
+        if result.maps_merged:
+            self.get_logger().info(f"maps merged by the loop closure {result.node_id} → "
+                                   f"{result.loop_closure_id or result.proximity_id}")
         if result.added:
             self.node_stamps[result.node_id] = t
             self._map_dirty = True
@@ -599,7 +615,10 @@ class RtabmapNode(Node):
             weights, loop_tf))
 
     def _publish_graph(self) -> None:
-        poses, links = self.core.graph()
+        all_poses, links = self.core.graph()
+        frames = self.core.map_frames()
+        current = frames.get(self.core.current_frame, [])
+        poses = {i: all_poses[i] for i in current}
         header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.map_frame_id)
         graph = graph_message(header, self.core.map_to_odom, poses, links)
         self.graph_pub.publish(graph)
@@ -607,11 +626,18 @@ class RtabmapNode(Node):
                  if i in poses and i not in self._published_nodes]
         self.map_data_pub.publish(map_data_message(header, graph, fresh))
         self._published_nodes.update(n.id for n in fresh)
-        self._publish_markers(poses, links)
+        out: list[Marker] = []
+        for frame, ids in frames.items():
+            # a map not merged yet is drawn in its own frame, map_<id> (no TF joins it)
+            name = (self.map_frame_id if frame == self.core.current_frame
+                    else f"{self.map_frame_id}_{frame}")
+            out += self._graph_markers({i: all_poses[i] for i in ids}, links, name, len(out))
+        self.markers_pub.publish(MarkerArray(markers=out))
 
-    def _publish_markers(self, poses: dict[int, np.ndarray], links: list[Any]) -> None:
-        header = Header(frame_id=self.map_frame_id)
-        nodes = Marker(header=header, ns="rtabmap_nodes", id=0, type=Marker.SPHERE_LIST,
+    def _graph_markers(self, poses: dict[int, np.ndarray], links: list[Any], frame_id: str,
+                       first_id: int) -> list[Marker]:
+        header = Header(frame_id=frame_id)
+        nodes = Marker(header=header, ns="rtabmap_nodes", id=first_id, type=Marker.SPHERE_LIST,
                        action=Marker.ADD)
         nodes.scale.x = nodes.scale.y = nodes.scale.z = 0.06
         nodes.color.r, nodes.color.g, nodes.color.b, nodes.color.a = 1.0, 0.5, 0.0, 1.0
@@ -622,7 +648,8 @@ class RtabmapNode(Node):
         for k, (name, kinds, rgb) in enumerate((
                 ("rtabmap_neighbor_links", {LinkType.NEIGHBOR}, (0.0, 0.6, 1.0)),
                 ("rtabmap_loop_links", None, (1.0, 0.0, 0.0)))):
-            m = Marker(header=header, ns=name, id=k + 1, type=Marker.LINE_LIST, action=Marker.ADD)
+            m = Marker(header=header, ns=name, id=first_id + k + 1, type=Marker.LINE_LIST,
+                       action=Marker.ADD)
             m.scale.x = 0.02
             m.color.r, m.color.g, m.color.b, m.color.a = (*rgb, 1.0)
             m.pose.orientation.w = 1.0
@@ -636,7 +663,7 @@ class RtabmapNode(Node):
                         Point(x=float(b[0, 3]), y=float(b[1, 3]), z=float(b[2, 3]))]
             m.points = pts
             out.append(m)
-        self.markers_pub.publish(MarkerArray(markers=out))
+        return out
 
     def cloud_message(self) -> Any:
         """The assembled cloud (map frame) as PointCloud2 with x, y, z and packed rgb."""

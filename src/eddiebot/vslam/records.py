@@ -42,6 +42,11 @@ class ProcessResult:
     #: the registered transform (new node → old node, 4×4) of a hypothesis that passed the
     #: registration but was rejected after it (gate or `RGBD/OptimizeMaxError`), else None
     rejected_transform: F64 | None = None
+    #: the frame's map (a new one after an odometry reset), whether this frame started it,
+    #: and whether an accepted closure joined two maps
+    map_id: int = 0
+    new_map: bool = False
+    maps_merged: bool = False
 
 
 class _Verification(NamedTuple):

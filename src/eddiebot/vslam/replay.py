@@ -76,7 +76,10 @@ class ReplayReport:
     `slam_ate_m` is over every input frame (a lost frame keeps the last pose), `keyframe_ate_m`
     over the key frames; `loop_closures` counts appearance (global) loop closures,
     `proximity_links` proximity-by-space links, `rejected_hypotheses` loop hypotheses that
-    failed registration or `RGBD/OptimizeMaxError`.
+    failed registration or `RGBD/OptimizeMaxError`. `odometry_resets` counts re-initialised
+    odometry (each starts a new map), `map_merges` closures that joined two maps, `maps` the
+    map frames left at the end (1 when every new map was merged; poses of the others are in
+    their own frames, so one ATE alignment cannot fit them).
     """
 
     frames: int
@@ -95,6 +98,9 @@ class ReplayReport:
     intrinsics_source: str = ""
     depth_scale: float = TUM_DEPTH_SCALE
     depth_scale_source: str = ""
+    odometry_resets: int = 0
+    map_merges: int = 0
+    maps: int = 1
 
 
 def replay_tum(
@@ -111,7 +117,11 @@ def replay_tum(
     - ``odom.txt`` (frames odometry tracked), ``rtabmap.db`` and ``report.json``.
 
     Every frame goes to the SLAM core (no `Rtabmap/DetectionRate` throttling, as in RTAB-Map's
-    TUM evaluation with update thresholds at 0 when so configured). The first frame's depth
+    TUM evaluation with update thresholds at 0 when so configured). Lost odometry is re-seeded
+    from the current frame after `Odom/ResetCountdown` consecutive lost frames (2 when 0: no
+    one is there to call ``reset_odom`` in a replay, and a single lost frame is often a glitch
+    the next frame tracks through against the same local map) and the core starts a new map
+    there, which a later loop closure merges with the earlier ones. The first frame's depth
     must be plausible at the setup's scale (`DepthScaleError`).
     """
     if params is None:
@@ -138,7 +148,9 @@ def replay_tum(
     frame_keys: list[tuple[int, F64] | None] = []
     key_odom: dict[int, F64] = {}
     key_order: list[int] = []
-    lost = loops = proximity = rejected = 0
+    lost = loops = proximity = rejected = resets = merges = 0
+    lost_run = 0
+    reset_after = params.odom_reset_countdown if params.odom_reset_countdown > 0 else 2
     odom_ms: list[float] = []
     slam_ms: list[float] = []
     with SessionDatabase(out / "rtabmap.db", delete_on_start=True) as db:
@@ -148,11 +160,19 @@ def replay_tum(
             stamp_ns = round(frame.stamp * 1e9)
             t0 = time.perf_counter()
             odom = vo.process(rgb, depth, camera, stamp_ns)
+            if odom.pose is None and frame_keys and frame_keys[-1] is not None:
+                lost_run += 1
+                if lost_run >= reset_after:
+                    # re-seed the odometry from this frame, where it was: a new map starts
+                    vo.reset(vo.pose)
+                    odom = vo.process(rgb, depth, camera, stamp_ns)
+                    resets += odom.pose is not None
             odom_ms.append((time.perf_counter() - t0) * 1e3)
             if odom.pose is None:
                 lost += 1
                 frame_keys.append(frame_keys[-1] if frame_keys else None)
                 continue
+            lost_run = 0
             odom_stamps.append(frame.stamp)
             odom_poses.append(odom.pose @ lt)
             t0 = time.perf_counter()
@@ -169,6 +189,7 @@ def replay_tum(
             loops += bool(result.loop_closure_id)
             proximity += bool(result.proximity_id)
             rejected += bool(result.rejected_loop_id)
+            merges += bool(result.maps_merged)
         poses, _ = slam.graph()
         db.save_optimized(poses, slam.occupancy_grid())
     ids = sorted(i for i in poses if i in node_stamps)
@@ -196,7 +217,8 @@ def replay_tum(
         ate_frames=ate_pairs,
         intrinsics=(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height),
         intrinsics_source=setup.intrinsics_source, depth_scale=scale,
-        depth_scale_source=setup.depth_scale_source,
+        depth_scale_source=setup.depth_scale_source, odometry_resets=resets,
+        map_merges=merges, maps=max(1, len(slam.map_frames())),
     )
     (out / "report.json").write_text(json.dumps(asdict(report), indent=2))
     return report

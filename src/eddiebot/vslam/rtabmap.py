@@ -94,6 +94,10 @@ class Rtabmap:
         self.map_to_odom = np.eye(4)
         self._next_id = 1
         self._map_id = 0
+        #: map id → id of the map whose frame it shares (itself until merged by a loop closure;
+        #: merged maps take the oldest one's frame)
+        self._map_frames: dict[int, int] = {0: 0}
+        self.maps_started = 0  # new maps started within this session (odometry resets)
         self._last_node_id = 0
         self._last_loop_id = 0
         self._last_had_loop = False
@@ -121,9 +125,99 @@ class Rtabmap:
         return not self.params.mem_incremental_memory
 
     def restore_state(self, next_id: int, map_id: int) -> None:
-        """Continue numbering after a database session (`map_id` is the new session's id)."""
+        """Continue numbering after a database session (`map_id` is the new session's id);
+        maps joined by links share the oldest one's frame."""
         self._next_id = max(self._next_id, next_id)
         self._map_id = map_id
+        frames = {n.map_id: n.map_id for n in self.memory.nodes.values()}
+        frames[map_id] = map_id
+        changed = True
+        while changed:
+            changed = False
+            for a, partners in self.memory.links.items():
+                for b in partners:
+                    na, nb = self.memory.nodes.get(a), self.memory.nodes.get(b)
+                    if na is None or nb is None:
+                        continue
+                    fa, fb = frames[na.map_id], frames[nb.map_id]
+                    if fa != fb:
+                        low = min(fa, fb)
+                        for m, f in frames.items():
+                            if f in (fa, fb):
+                                frames[m] = low
+                        changed = True
+        self._map_frames = frames
+
+    def frame_of(self, node_id: int) -> int:
+        """The map frame (the oldest map id of its merged group) a node's pose is in."""
+        node = self.memory.nodes.get(node_id)
+        map_id = self._map_id if node is None else node.map_id
+        return self._map_frames.get(map_id, map_id)
+
+    @property
+    def current_frame(self) -> int:
+        """The map frame of the current map (map→odom is in it)."""
+        return self._map_frames.get(self._map_id, self._map_id)
+
+    def map_frames(self) -> dict[int, list[int]]:
+        """Node ids with an optimised pose, by map frame (maps not merged yet are apart)."""
+        out: dict[int, list[int]] = {}
+        for i in sorted(self.optimized_poses):
+            out.setdefault(self.frame_of(i), []).append(i)
+        return out
+
+    def _odometry_reset(self, odom: F64, covariance: F64 | None) -> bool:
+        """RTAB-Map's new-map triggers: the odometry's covariance at 9999 (lost, then
+        re-initialised) or an identity pose after a non-identity one, once the current map has
+        a node."""
+        prev = self.memory.nodes.get(self._last_node_id)
+        if prev is None or prev.map_id != self._map_id or self.localization_mode:
+            return False
+        if covariance is not None and float(np.asarray(covariance).reshape(6, 6)[0, 0]) >= 9999:
+            return True
+        eye = np.eye(4)
+        return bool(np.allclose(odom, eye) and not np.allclose(prev.odom_pose, eye))
+
+    def _start_new_map(self) -> None:
+        """A new map in this session: no link to the previous node, its own frame (map→odom
+        identity) until a loop closure merges it with another map."""
+        self._map_id += 1
+        self._map_frames[self._map_id] = self._map_id
+        self.maps_started += 1
+        self.map_to_odom = np.eye(4)
+        self._graph_live = False
+        self._last_had_loop = False
+
+    def _merge_frames(self, node: Node, closure_links: list[Link]) -> bool:
+        """Join the frames of maps a closure links: the newer frame's poses are moved into
+        the older one through the closure (so the optimiser starts from a consistent guess).
+        True if frames were merged."""
+        merged = False
+        for link in closure_links:
+            new_id, old_id = link.from_id, link.to_id
+            f_new, f_old = self.frame_of(new_id), self.frame_of(old_id)
+            if f_new == f_old:
+                continue
+            p_new, p_old = self.optimized_poses[new_id], self.optimized_poses[old_id]
+            if f_old < f_new:  # move the new node's frame: T_new(old frame) = T_old · link⁻¹
+                moved, keep = f_new, f_old
+                correction = p_old @ se3_inverse(link.transform) @ se3_inverse(p_new)
+            else:
+                moved, keep = f_old, f_new
+                correction = p_new @ link.transform @ se3_inverse(p_old)
+            for i in list(self.optimized_poses):
+                if self.frame_of(i) == moved:
+                    self.optimized_poses[i] = correction @ self.optimized_poses[i]
+            if moved == self.current_frame:
+                self.map_to_odom = correction @ self.map_to_odom
+            for m, f in self._map_frames.items():
+                if f == moved:
+                    self._map_frames[m] = keep
+            merged = True
+        if merged:
+            self._graph_live = False
+            self._frame_poses = {}
+        return merged
 
     # -- main entry -------------------------------------------------------------------------
     def process(
@@ -148,6 +242,9 @@ class Rtabmap:
         if not np.all(np.isfinite(odom)):
             return ProcessResult(0, False, self.map_to_odom.copy(), None,
                                  rejection_reason="invalid odometry pose")
+        new_map = self._odometry_reset(odom, odom_covariance)
+        if new_map:
+            self._start_new_map()
         if features is None:
             features = self._extractor.extract(rgb, depth, camera)
         n_words = len(features) if p.kp_max_features <= 0 else min(len(features), p.kp_max_features)
@@ -263,6 +360,7 @@ class Rtabmap:
         t_verify = self._timer()
         stats["Timing/Retrieval_and_verification/ms"] = (t_verify - t_bayes) * 1e3
         # --- graph update ---
+        merged = False
         if self.localization_mode:
             pose = self._localize(node, closure_links, odom)
         else:
@@ -272,8 +370,16 @@ class Rtabmap:
                 self.bayes.invalidate([link.from_id, link.to_id])
             graph_changed |= bool(closure_links)
             self.optimized_poses[node.id] = self.map_to_odom @ odom
+            backup = (dict(self.optimized_poses), self.map_to_odom.copy(), dict(self._map_frames),
+                      dict(self._frame_poses))
+            merged = self._merge_frames(node, closure_links)
             if graph_changed:
                 ok = self._optimize(node.id, closure_links)
+                if not ok and merged:
+                    (self.optimized_poses, self.map_to_odom, self._map_frames,
+                     self._frame_poses) = backup
+                    self._graph_live = False
+                    merged = False
                 if not ok:
                     for link in closure_links:
                         self.memory.remove_link(link.from_id, link.to_id)
@@ -318,22 +424,26 @@ class Rtabmap:
             node.id if keep else 0, keep, self.map_to_odom.copy(), pose,
             loop_closure_id=loop_id, proximity_id=proximity_id, hypothesis_id=hyp_id,
             hypothesis_value=hyp_value, rejected_loop_id=rejected_id, rejection_reason=reason,
-            localized=self._localized, statistics=stats,
+            localized=self._localized, statistics=stats, map_id=node.map_id,
+            new_map=new_map, maps_merged=merged,
             rejected_transform=(candidate.transform.copy()
                                 if rejected_id and candidate is not None else None),
         )
 
     # -- maps -------------------------------------------------------------------------------
     def occupancy_grid(self) -> GlobalGrid | None:
-        """Global grid assembled from the local grids at the optimised poses."""
+        """Global grid assembled from the local grids at the optimised poses, of the current
+        map (with the maps merged into it; a map not merged yet is in a frame of its own)."""
+        frame = self.current_frame
         grids = {i: n.data.grid for i, n in self.memory.nodes.items()
-                 if n.data is not None and n.data.grid is not None}
+                 if n.data is not None and n.data.grid is not None and self.frame_of(i) == frame}
         return assemble_grid(grids, self.optimized_poses, self.params.grid_cell_size)
 
     def point_cloud(self, voxel_size: float = 0.05) -> tuple[F64, NDArray[np.uint8]]:
-        """Assembled coloured cloud (map frame) of the nodes in RAM."""
+        """Assembled coloured cloud (map frame) of the current map's nodes in RAM."""
+        frame = self.current_frame
         clouds = {i: n.data.cloud for i, n in self.memory.nodes.items()
-                  if n.data is not None and n.data.cloud is not None}
+                  if n.data is not None and n.data.cloud is not None and self.frame_of(i) == frame}
         return assemble_cloud(clouds, self.optimized_poses, voxel_size)
 
     def graph(self) -> tuple[dict[int, F64], list[Link]]:
@@ -433,7 +543,7 @@ class Rtabmap:
             info[idx, idx] = cap[idx]
         link = Link(new.id, old.id, link_type, se3_inverse(reg.transform), info)
         gate = self.params.rgbd_loop_closure_max_mahalanobis
-        if gate > 0 and not self.localization_mode:
+        if gate > 0 and not self.localization_mode and self.frame_of(old.id) == self.frame_of(new.id):
             old_pose = self.optimized_poses.get(old.id)
             if old_pose is not None:
                 d = closure_mahalanobis(link, self.map_to_odom @ new.odom_pose, old_pose,
@@ -482,7 +592,7 @@ class Rtabmap:
             pose = self.optimized_poses.get(i)
             if i in stm or i in linked or pose is None or (reach is not None and i not in reach):
                 continue
-            if self.memory.nodes[i].map_id != node.map_id:
+            if self.frame_of(i) != self.frame_of(node.id):
                 continue
             d = float(np.linalg.norm(pose[:2, 3] - here[:2, 3]))
             if p.rgbd_local_radius <= 0 or d <= p.rgbd_local_radius:
