@@ -34,6 +34,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
+from eddiebot.bag.writer import ROS_DISTRO
 from eddiebot.core.context import Context
 from eddiebot.core.executors import SingleThreadedExecutor
 from eddiebot.core.node import Node, Subscription
@@ -52,9 +53,6 @@ from eddiebot.msgs import (
 
 __all__ = ["DEFAULT_REMAP", "LATCHED_TOPICS", "ROS_DISTRO", "BridgeConfig", "FoxgloveBridge",
            "msg_from_dict", "split_parameter_name"]
-
-#: The ROS 2 distribution whose message definitions we speak.
-ROS_DISTRO = "jazzy"
 
 #: Topics whose last messages a late subscriber receives (transient-local in ROS 2).
 LATCHED_TOPICS = ("/tf_static", "/map", "/robot_description", "/map_metadata",
