@@ -36,16 +36,19 @@ wire's timing (:mod:`eddiebot.robot.timing`) unless ``emulator_timing`` is false
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
-from eddiebot.base.board_health import battery_state_msg, diagnostic_array
-from eddiebot.base.board_io import BoardIO, BoardOp, Priority, ThreadedBoardIO, TimedBoardIO
+from eddiebot.base.board_counters import WheelCounters
+from eddiebot.base.board_diagnostics import board_diagnostics
+from eddiebot.base.board_health import battery_state_msg
+from eddiebot.base.board_io import BoardOp, Priority, ThreadedBoardIO
+from eddiebot.base.board_link import BoardConnector, acc_min, open_board, stop_retrying
 from eddiebot.base.board_modes import Motion, StopKind
 from eddiebot.base.board_services import serve_original_services
+from eddiebot.base.board_stops import StopCheck, StopTracker
 from eddiebot.base.kinematics import twist_to_wheel_positions
 from eddiebot.base.safety import (
     SAFETY_VETO_QOS,
@@ -58,7 +61,7 @@ from eddiebot.core.node import Node
 from eddiebot.core.parameters import Parameter, ParameterDescriptor, SetParametersResult
 from eddiebot.core.qos import qos_profile_latched
 from eddiebot.core.time import ns_to_stamp
-from eddiebot.msgs.diagnostic_msgs import DiagnosticArray, DiagnosticStatus
+from eddiebot.msgs.diagnostic_msgs import DiagnosticArray
 from eddiebot.msgs.eddiebot_msgs import (
     ADC,
     Encoders,
@@ -80,7 +83,6 @@ from eddiebot.robot.constants import (
     adc_counts_to_volts,
     battery_volts_from_counts,
     ping_units_to_range_m,
-    profile_for_name,
     sharp_voltage_to_distance,
 )
 from eddiebot.robot.errors import (
@@ -97,7 +99,6 @@ __all__ = ["BoardNode", "StopKind"]
 
 _READ_ONLY = ("port", "firmware", "counts_per_rev", "wheel_radius", "track", "ping_mask",
               "reply_timeout", "emulator_timing")
-_SPD_AVERAGE_S = 0.5
 
 
 class BoardNode(Node):
@@ -149,11 +150,7 @@ class BoardNode(Node):
         self._epoch = 0  # bumped by every stop: motion submitted before it is void
         self._estop = False
         self._battery_low = False
-        # stop state
-        self._stop_kind: StopKind | None = None
-        self._stop_confirmed_ns: int | None = None
-        self._stop_verified = False
-        self._stop_deadline_ns = 0
+        self.stops = StopTracker()
         self._stops_sent = 0
         self._stop_wire_ns: list[int] = []  # when each stop went out (tests, benchmarks)
         self._sent_wheels: tuple[int, int] = (0, 0)  # the last GOSPD the board confirmed
@@ -163,17 +160,11 @@ class BoardNode(Node):
         self.connected = False
         self._link_generation = 0
         self._profile: FirmwareProfile | None = None
-        self._raw_dist: tuple[int, int] | None = None
-        self._joint_offset = [0, 0]  # joint counts = raw + offset (continuous)
-        self._joint_counts = [0, 0]
-        self._encoder_zero = [0, 0]  # /eddie/encoders_data = joint counts - this
-        self._rebase = True  # next DIST sets the offset (after start, reconnect, reboot)
-        self._dist_history: list[tuple[int, int, int]] = []  # (t_ns, left, right) for SPD
+        self.counters = WheelCounters(self.max_wheel_speed)
         self._spd: tuple[int, int] = (0, 0)
         self._battery_v = math.nan
         self._stats = {"polls": 0, "timeouts": 0, "link_lost": 0, "stops": 0, "vetoes": 0}
         self._poll_times: list[int] = []
-        self._missing_port_logged_ns: int | None = None
         self._events: list[str] = []
 
         self.encoders_pub = self.create_publisher(Encoders, "/eddie/encoders_data", 10)
@@ -186,58 +177,17 @@ class BoardNode(Node):
         self.create_subscription(Velocity, "/eddie/simple_velocity", self._on_velocity, 1)
         self.create_subscription(Bool, "/e_stop", self._on_estop, qos_profile_latched)
         self._serve_original_services()
-        self.board, self.io = self._make_board(emulator_timing)
+        self.board, self.io = open_board(self, emulator_timing)
         self._poll_timer = self.create_timer(1.0 / self.poll_rate, self._poll)
         self.create_timer(1.0, self._publish_diagnostics)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.context.add_safety_stop(self.emergency_stop)
-        self._next_connect_ns = 0
-        self._booting = False
-        self._boot_s = DEFAULT_TIMING.boot_s if emulator_timing or not self.port.startswith(
+        boot_s = DEFAULT_TIMING.boot_s if emulator_timing or not self.port.startswith(
             "emulator") else 0.0
-        self._connect()
+        self.connector = BoardConnector(self, boot_s, self._on_connected)
+        self.connector.connect()
 
     # -- link ------------------------------------------------------------------------------
-    def _make_board(self, emulator_timing: bool) -> tuple[Board, BoardIO]:
-        from eddiebot.robot.links import SerialLink, TimedEmulatorLink
-        from eddiebot.robot.timing import NO_TIMING, LinkTiming
-
-        if self.port.startswith("emulator"):
-            emulator = self.context.resources.get("emulator")
-            if emulator is None or ":" in self.port:
-                from eddiebot.robot.emulator import FirmwareEmulator
-
-                profile = profile_for_name(self.port.partition(":")[2] or "1.1")
-                emulator = FirmwareEmulator(profile, start_ns=self.get_clock().now_ns(),
-                                            counts_per_rev=self.counts_per_rev)
-                self.context.resources["emulator"] = emulator
-            clock = self.get_clock()
-            link = TimedEmulatorLink(emulator, clock_ns=clock.now_ns,
-                                     timing=LinkTiming() if emulator_timing else NO_TIMING,
-                                     reply_timeout_s=self.reply_timeout)
-            self.context.resources["board_link"] = link
-            board = Board(link, clock=clock.now_ns, timeout_s=self.reply_timeout,
-                          on_event=self._on_board_event)
-            io: BoardIO = TimedBoardIO(board, self._call_later)
-        else:
-            board = Board(SerialLink(self.port), clock=time.monotonic_ns,
-                          timeout_s=self.reply_timeout, on_event=self._on_board_event)
-            guard = self.create_guard_condition(self._drain_posted)
-            self._posted: list[Any] = []
-
-            def post(fn: Any) -> None:
-                self._posted.append(fn)
-                guard.trigger()
-
-            io = ThreadedBoardIO(board, post)
-        if self.firmware != "auto":
-            board.forced_profile = profile_for_name(self.firmware)
-        return board, io
-
-    def _drain_posted(self) -> None:
-        while self._posted:
-            self._posted.pop(0)()
-
     def _call_later(self, delay_ns: int, fn: Any) -> None:
         timer: Any = None
 
@@ -247,75 +197,15 @@ class BoardNode(Node):
 
         timer = self.create_timer(delay_ns / 1e9, fire, oneshot=True)
 
-    def _connect(self) -> None:
-        """Open the port, wait out the board's boot, run the handshake — all on the I/O side
-        (never on the executor); at most once a second of node time."""
-        now = self.get_clock().now_ns()
-        if (self.io.pending("open") or self.io.pending("connect") or self._booting
-                or now < self._next_connect_ns):
-            return
-        self._next_connect_ns = now + 1_000_000_000
-        if self.board.link.generation == 0:
-            self.io.submit(BoardOp("open", lambda b: b.link.open(), self._on_opened,
-                                   Priority.STOP))
-        else:
-            self._handshake()
-
-    def _on_opened(self, _: Any, error: BaseException | None) -> None:
-        if error is not None:
-            self._on_connected(None, error)
-            return
-        # opening the port raises DTR, which reboots the Propeller: it is deaf until it booted
-        self._booting = True
-
-        def booted() -> None:
-            self._booting = False
-            self._handshake()
-
-        self._call_later(round(self._boot_s * 1e9), booted)
-
-    def _handshake(self) -> None:
-        acceleration = self.acceleration
-
-        def run(board: Board) -> FirmwareProfile:
-            profile = board.start(ping_mask=self.ping_mask)
-            board.stop_now()
-            if acceleration is not None:
-                board.set_acceleration(min(max(acceleration, _acc_min(profile)), profile.acc_max))
-            return profile
-
-        self.io.submit(BoardOp("connect", run, self._on_connected, Priority.STOP))
-
-    def _on_connected(self, profile: Any, error: BaseException | None) -> None:
-        if error is not None:
-            self.connected = False
-            self._log_connect_failure(error)
-            return
+    def _on_connected(self, profile: FirmwareProfile) -> None:
         self.connected = True
         self._profile = profile
         self._link_generation = self.board.link.generation
-        self._rebase = True
-        self._missing_port_logged_ns = None
+        self.counters.rebase = True
         self._stop_confirmed(StopKind.CUT, self.get_clock().now_ns())
         self.get_logger().info(
             f"board on {self.port}: firmware {profile.name} (VER {self.board.firmware_version:04X})"
             f", {self.counts_per_rev} counts/rev")
-
-    def _log_connect_failure(self, error: BaseException) -> None:
-        now = self.get_clock().now_ns()
-        last = self._missing_port_logged_ns
-        if last is None:
-            hint = ""
-            if isinstance(error, LinkLost) and not self.port.startswith(("emulator", "socket:")):
-                hint = (" — check the cable and the board's power, that the port exists "
-                        "(ls /dev/ttyUSB* /dev/eddie) and that you may open it "
-                        "(the dialout group: sudo usermod -aG dialout $USER, then log in again)")
-            self.get_logger().error(f"board on {self.port} not answering: {error}{hint}; "
-                                    f"will keep trying")
-            self._missing_port_logged_ns = now
-        elif now - last > 30_000_000_000:
-            self.get_logger().warning(f"board on {self.port} still not answering ({error})")
-            self._missing_port_logged_ns = now
 
     def _on_board_event(self, event: BoardEvent, detail: str) -> None:
         if event == BoardEvent.LINK_LOST:
@@ -333,21 +223,14 @@ class BoardNode(Node):
         self.io.cancel(lambda op: op.priority == Priority.MOTION)
         self._motion = Motion.NONE
         self._move_forward = False
-        now = self.get_clock().now_ns()
-        current = self._stop_kind
-        if (current is not None and current >= kind and self._stop_confirmed_ns is not None
-                and now - self._stop_confirmed_ns < self.cmd_timeout_ns // 2):
+        if not self.stops.request(kind, self.get_clock().now_ns(), self.cmd_timeout_ns // 2):
             return  # the same (or a stronger) stop was confirmed a moment ago
-        owed = current is not None and self._stop_confirmed_ns is None
-        self._stop_kind = max(kind, current) if owed and current is not None else kind
-        self._stop_confirmed_ns = None
-        self._stop_verified = False
-        if reason:
-            self.get_logger().debug(f"stop ({self._stop_kind.name}): {reason}")
+        if reason and self.stops.kind is not None:
+            self.get_logger().debug(f"stop ({self.stops.kind.name}): {reason}")
         self._send_stop()
 
     def _send_stop(self) -> None:
-        kind = self._stop_kind
+        kind = self.stops.kind
         if kind is None:
             return
         name = "STOP" if kind == StopKind.CUT else "HOLD"
@@ -363,7 +246,7 @@ class BoardNode(Node):
                 board.hold_now()
 
         def done(_: Any, error: BaseException | None) -> None:
-            if self._stop_kind is None:
+            if self.stops.kind is None:
                 return  # motion was commanded since: nothing is owed any more
             if error is None:
                 self._stop_confirmed(kind, self.get_clock().now_ns())
@@ -375,63 +258,43 @@ class BoardNode(Node):
         self.io.submit(BoardOp(name, run, done, Priority.STOP))
 
     def _stop_confirmed(self, kind: StopKind, now: int) -> None:
-        if self._stop_kind is not None and kind < self._stop_kind:
-            return  # a stronger stop is still owed
-        self._stop_kind = kind
-        self._stop_confirmed_ns = now
-        self._target = (0, 0)
-        # SPD must reach 0 0 within the ramp the last speed and ACC imply, + its 0.5 s average
-        # (plus one poll period: SPD is sampled, not watched)
         speed = max(abs(v) for v in (*self._spd, *self._sent_wheels))
-        acc = max(self.acceleration, 1)
-        self._stop_deadline_ns = now + round(
-            (speed / acc + _SPD_AVERAGE_S + 1.0 / self.poll_rate) * 1e9)
-        self._stop_verified = False
+        if self.stops.confirm(kind, now, speed, self.acceleration, 1.0 / self.poll_rate):
+            self._target = (0, 0)
 
     def _check_stop(self, now: int) -> None:
-        if self._stop_kind is None:
-            return
-        if self._stop_confirmed_ns is None:
+        check = self.stops.check(now, self._spd, self._spd_stamp_ns)
+        if check == StopCheck.RESEND:
             self._send_stop()  # unconfirmed: at every poll until a reply arrives
-            return
-        if self._stop_verified:
-            return
-        if self._spd == (0, 0) and self._spd_fresh_after(self._stop_confirmed_ns):
-            self._stop_verified = True
+        elif check == StopCheck.VERIFIED:
             self._sent_wheels = (0, 0)
-        elif now > self._stop_deadline_ns:
+        elif check == StopCheck.RECUT:
             self.get_logger().warning(
                 f"wheels still turning ({self._spd[0]} {self._spd[1]} positions/s) "
                 f"after the stop: STOP 0 again")
-            self._stop_kind = StopKind.CUT
-            self._stop_confirmed_ns = None
             self._send_stop()
-
-    def _spd_fresh_after(self, t_ns: int) -> bool:
-        return self._spd_stamp_ns > t_ns
 
     @property
     def stopped(self) -> bool:
         """Whether the last stop was confirmed and the wheels read 0 0 since."""
-        return self._stop_verified
+        return self.stops.verified
 
     # -- polling ---------------------------------------------------------------------------
     def _poll(self) -> None:
         now = self.get_clock().now_ns()
         if not self.connected:
-            self._connect()
-            if (self._stop_kind is not None and self._stop_confirmed_ns is None
-                    and self.board.link.generation > 0):
+            self.connector.connect()
+            if self.stops.owed and self.board.link.generation > 0:
                 self._send_stop()  # a port that was open once: the board may still be driving
             return
         if self.board.link.generation != self._link_generation:
             # the link came back (the board may have rebooted): it may still run the last GOSPD
             self._link_generation = self.board.link.generation
-            self._rebase = True
+            self.counters.rebase = True
             self.request_stop(StopKind.CUT, "link came back")
         self._check_stale(now)
         self._check_stop(now)
-        if self._stop_kind is not None and not self._stop_verified and self._stop_confirmed_ns:
+        if self.stops.awaiting_speed:
             self._submit_query("SPD", lambda b: b.speed(), self._on_spd)
         if self.io.pending("DIST") or self.io.pending("PING") or self.io.pending("ADC"):
             self._poll_owed = True  # the last cycle is still on the wire: start when it ends
@@ -477,45 +340,25 @@ class BoardNode(Node):
 
     def _on_dist(self, sample: tuple[int, tuple[int, int]]) -> None:
         stamp_ns, raw = sample
-        last = self._raw_dist
         silent_since, self._silent_since_ns = self._silent_since_ns, None
-        if not self._rebase and last is not None and self._dist_history:
-            dt = (stamp_ns - self._dist_history[-1][0]) / 1e9
-            reach = 1.5 * self.max_wheel_speed * dt + 5  # farthest the wheels could go
-            jumped = max(abs(raw[0] - last[0]), abs(raw[1] - last[1])) > reach
-            # after a silence, counters that fell back near zero mean a reboot too
-            near_zero = silent_since is not None and all(
-                abs(r) <= 1.5 * self.max_wheel_speed * (stamp_ns - silent_since) / 1e9 + 5
-                and abs(r) + 10 < abs(v) for r, v in zip(raw, last))
-            if jumped or near_zero:
-                # counters jumped back (a reboot: DTR on port open, a brown-out): the board
-                # also lost VERB/SPNG/ACC and may have been mid-command
-                self.get_logger().warning(
-                    f"the board's counters restarted ({last[0]} {last[1]} → {raw[0]} {raw[1]}): "
-                    f"it rebooted; odometry continues from where it was")
-                self._rebase = True
-                self.board.core.rearm_reconnect()
-                self.request_stop(StopKind.CUT, "board rebooted")
-        if self._rebase or last is None:
-            # after start, a reconnect or a reboot the counters may have restarted: continue
-            # the joint angles from where they were (what moved during the gap is lost)
-            self._joint_offset = [self._joint_counts[0] - raw[0], self._joint_counts[1] - raw[1]]
-            self._rebase = False
-        self._raw_dist = raw
-        left = raw[0] + self._joint_offset[0]
-        right = raw[1] + self._joint_offset[1]
-        self._joint_counts = [left, right]
-        self.encoders_pub.publish(Encoders(left=left - self._encoder_zero[0],
-                                           right=right - self._encoder_zero[1]))
+        last = self.counters.raw
+        if last is not None and self.counters.restarted(stamp_ns, raw, silent_since):
+            # counters jumped back (a reboot: DTR on port open, a brown-out): the board
+            # also lost VERB/SPNG/ACC and may have been mid-command
+            self.get_logger().warning(
+                f"the board's counters restarted ({last[0]} {last[1]} → {raw[0]} {raw[1]}): "
+                f"it rebooted; odometry continues from where it was")
+            self.counters.rebase = True
+            self.board.core.rearm_reconnect()
+            self.request_stop(StopKind.CUT, "board rebooted")
+        left, right = self.counters.update(stamp_ns, raw)
+        since_zero = self.counters.since_zero()
+        self.encoders_pub.publish(Encoders(left=since_zero[0], right=since_zero[1]))
         js = JointState()
         js.header.stamp = ns_to_stamp(stamp_ns)
         js.name = list(WHEEL_JOINTS)
         js.position = np.array([left * self.rad_per_position, right * self.rad_per_position])
         self.joint_pub.publish(js)
-        history = self._dist_history
-        history.append((stamp_ns, left, right))
-        while len(history) > 2 and stamp_ns - history[1][0] >= _SPD_AVERAGE_S * 1e9:
-            history.pop(0)
 
     def _on_spd(self, spd: tuple[int, int]) -> None:
         self._spd = spd
@@ -635,7 +478,7 @@ class BoardNode(Node):
             self._motion = Motion.VELOCITY if reason == "veto" else Motion.NONE
             return
         self._motion = Motion.VELOCITY
-        if wheels == self._target and self._stop_kind is None:
+        if wheels == self._target and self.stops.kind is None:
             return  # the board already runs these targets
         self._send_motion("GOSPD", lambda b, w=wheels: b.go_speed(*w), wheels, Motion.VELOCITY)
 
@@ -644,9 +487,7 @@ class BoardNode(Node):
         self.io.cancel(lambda op: op.priority == Priority.MOTION)
         self.io.cancel(lambda op: op.name in ("HOLD",))
         epoch = self._epoch
-        self._stop_kind = None
-        self._stop_confirmed_ns = None
-        self._stop_verified = False
+        self.stops.clear()
         self._target = wheels
         self._motion = motion
         self._move_forward = forward
@@ -673,8 +514,8 @@ class BoardNode(Node):
             from eddiebot.robot import protocol
 
             protocol.encode_acc(rate, profile)
-            if rate < _acc_min(profile):
-                raise ValueError(f"ACC {rate} is below {_acc_min(profile)} on firmware "
+            if rate < acc_min(profile):
+                raise ValueError(f"ACC {rate} is below {acc_min(profile)} on firmware "
                                  f"{profile.name} (ACC 0 freezes GOSPD on FW 1.1)")
         except (ParameterRangeError, ValueError) as exc:
             self.get_logger().error(f"acceleration_rate refused: {exc}")
@@ -700,6 +541,7 @@ class BoardNode(Node):
                 self._poll_timer = self.create_timer(1.0 / self.poll_rate, self._poll)
             elif prm.name == "max_wheel_speed":
                 self.max_wheel_speed = float(prm.value)
+                self.counters.max_wheel_speed = self.max_wheel_speed
             elif prm.name in ("battery_warning_voltage", "battery_cutoff_voltage"):
                 setattr(self, "battery_warning_v" if "warning" in prm.name else "battery_cutoff_v",
                         float(prm.value))
@@ -723,45 +565,7 @@ class BoardNode(Node):
         return (len(t) - 1) / ((t[-1] - t[0]) / 1e9)
 
     def _publish_diagnostics(self) -> None:
-        now = self.get_clock().now_ns()
-        if not self.connected:
-            level, message = DiagnosticStatus.ERROR, "board not answering"
-        elif self._estop:
-            level, message = DiagnosticStatus.WARN, "e-stop engaged"
-        elif self._battery_low:
-            level, message = DiagnosticStatus.ERROR, "battery below cut-off"
-        elif self._stop_kind is not None and self._stop_confirmed_ns is None:
-            level, message = DiagnosticStatus.ERROR, "stop not yet confirmed"
-        elif self._battery_v < self.battery_warning_v:
-            level, message = DiagnosticStatus.WARN, "battery low"
-        else:
-            level, message = DiagnosticStatus.OK, "ok"
-        if self._stop_kind is None:
-            stop = "none"
-        else:
-            state = ("verified" if self._stop_verified else
-                     "confirmed" if self._stop_confirmed_ns else "unconfirmed")
-            stop = f"{self._stop_kind.name} {state}"
-        version = self.board.firmware_version
-        values = {
-            "link": "connected" if self.connected else "down",
-            "firmware": self._profile.name if self._profile else "unknown",
-            "version word": f"{version:04X}" if version is not None else "unknown",
-            "poll rate achieved (Hz)": f"{self.achieved_poll_rate():.1f}",
-            "poll rate set (Hz)": f"{self.poll_rate:g}",
-            "timeouts": str(self._stats["timeouts"]),
-            "link losses": str(self._stats["link_lost"]),
-            "stops sent": str(self._stats["stops"]),
-            "vetoes": str(self._stats["vetoes"]),
-            "battery (V)": f"{self._battery_v:.2f}",
-            "motion": self._motion.value,
-            "stop": stop,
-            "e-stop": str(self._estop).lower(),
-            "veto": str(bool(self.veto.vetoed_at(now))).lower(),
-            "last events": " | ".join(self._events[-3:]),
-        }
-        self.diag_pub.publish(diagnostic_array(f"{self.get_name()}: control board", self.port,
-                                               level, message, values, now))
+        self.diag_pub.publish(board_diagnostics(self, self.get_clock().now_ns()))
 
     # -- shutdown --------------------------------------------------------------------------
     def emergency_stop(self, reason: str, from_signal: bool = False) -> None:
@@ -782,7 +586,7 @@ class BoardNode(Node):
             self.context.remove_safety_stop(self.emergency_stop)
             self.io.cancel(lambda op: True)
             if self.board.link.generation > 0:  # never opened: nothing to stop
-                self.io.submit(BoardOp("STOP", _stop_retrying, None, Priority.STOP))
+                self.io.submit(BoardOp("STOP", stop_retrying, None, Priority.STOP))
             wait = getattr(self.io, "wait_idle", None)
             if wait is not None:
                 wait(1.5)
@@ -793,18 +597,3 @@ class BoardNode(Node):
                 pass
         super().destroy_node()
 
-
-def _acc_min(profile: FirmwareProfile) -> int:
-    # ACC 0 on FW 1.1 freezes every later GOSPD change: never send it
-    return max(profile.acc_min, 1)
-
-
-def _stop_retrying(board: Board, attempts: int = 3) -> None:
-    for _ in range(attempts):
-        try:
-            board.stop_now()
-            return
-        except LinkLost:
-            return
-        except RobotError:
-            continue

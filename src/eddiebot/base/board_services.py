@@ -109,18 +109,16 @@ def serve_original_services(node: BoardNode) -> None:
 
     def reset_encoder(req: Any, res: Any) -> Any:
         # by an offset: /eddie/encoders_data restarts at 0, /joint_states stays continuous
-        node._encoder_zero = list(node._joint_counts)
+        node.counters.reset_zero()
         return res
 
     def get_distance(req: Any, res: Any) -> Any:
-        res.left = node._joint_counts[0] - node._encoder_zero[0]
-        res.right = node._joint_counts[1] - node._encoder_zero[1]
+        res.left, res.right = node.counters.since_zero()
         return res
 
     def get_heading(req: Any, res: Any) -> Any:
         # HEAD's own formula on the counts since reset_encoder: degrees, clockwise positive
-        left = node._joint_counts[0] - node._encoder_zero[0]
-        right = node._joint_counts[1] - node._encoder_zero[1]
+        left, right = node.counters.since_zero()
         spin = round(POSITIONS_PER_SPIN * node.counts_per_rev / POSITIONS_PER_REV)
         diff = left - right
         rem = int(math.copysign(abs(diff) % spin, diff))
@@ -129,11 +127,9 @@ def serve_original_services(node: BoardNode) -> None:
 
     def get_speed(req: Any, res: Any) -> Any:
         # SPD's meaning: positions/s averaged over the last 0.5 s of DIST polls
-        h = node._dist_history
-        if len(h) >= 2 and h[-1][0] > h[0][0]:
-            dt = (h[-1][0] - h[0][0]) / 1e9
-            res.left = round((h[-1][1] - h[0][1]) / dt)
-            res.right = round((h[-1][2] - h[0][2]) / dt)
+        speed = node.counters.average_speed()
+        if speed is not None:
+            res.left, res.right = speed
         return res
 
     node.create_service(Accelerate, "acceleration_rate", acceleration_rate)
