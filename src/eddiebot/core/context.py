@@ -76,6 +76,9 @@ class Context:
         #: Called with (node, level, text) for every log line (``/rosout``; see clock_node).
         self.rosout_hook: Callable[[Any, int, str], None] | None = None
         self._safety_stops: list[Callable[[str, bool], None]] = []
+        #: Called with a topic name whenever a publisher or subscription of this process
+        #: comes or goes on it (QoS matched/incompatible events follow the graph)
+        self.graph_listeners: list[Callable[[str], None]] = []
 
     # -- safety -------------------------------------------------------------------------
     def add_safety_stop(self, stop: Callable[[str, bool], None]) -> None:
@@ -134,6 +137,13 @@ class Context:
                 for node in self.nodes:
                     for client in node.clients:
                         announce(client)
+            topics = list(self.topics)
+        for topic in topics:
+            self._graph_changed(topic)
+
+    def _graph_changed(self, topic: str) -> None:
+        for listener in list(self.graph_listeners):
+            listener(topic)
 
     # -- registry -----------------------------------------------------------------------
     def _entry(self, topic: str, type_name: str) -> TopicEntry:
@@ -164,6 +174,7 @@ class Context:
             self._entry(pub.topic_name, pub.type_name).publishers.append(pub)
             for t in self.transports:
                 t.on_publisher_added(pub)
+        self._graph_changed(pub.topic_name)
 
     def remove_publisher(self, pub: Publisher) -> None:
         with self._lock:
@@ -173,6 +184,7 @@ class Context:
                 self._forget_if_empty(entry)
             for t in self.transports:
                 t.on_publisher_removed(pub)
+        self._graph_changed(pub.topic_name)
 
     def add_subscription(self, sub: Subscription) -> None:
         with self._lock:
@@ -188,6 +200,7 @@ class Context:
                 t.on_subscription_added(sub)
         for msg in latched:
             sub.deliver(msg)
+        self._graph_changed(sub.topic_name)
 
     def remove_subscription(self, sub: Subscription) -> None:
         with self._lock:
@@ -197,6 +210,7 @@ class Context:
                 self._forget_if_empty(entry)
             for t in self.transports:
                 t.on_subscription_removed(sub)
+        self._graph_changed(sub.topic_name)
 
     def _forget_if_empty(self, entry: TopicEntry) -> None:
         if not entry.publishers and not entry.subscriptions:
@@ -222,20 +236,28 @@ class Context:
         """Hand ``msg`` to every local subscription (by reference) and to the transports."""
         entry = self.topics.get(pub.topic_name)
         if entry is not None:
-            for sub in entry.subscriptions:
-                sub.deliver(msg)
+            lifespan = pub.lifespan_ns
+            if lifespan is None:
+                for sub in entry.subscriptions:
+                    sub.deliver(msg)
+            else:
+                expires = self.system_clock.now_ns() + lifespan
+                for sub in entry.subscriptions:
+                    sub.deliver(msg, expires_ns=expires)
         for t in self.transports:
             t.publish(pub, msg)
 
-    def deliver_remote(self, topic: str, type_name: str, msg: Any) -> None:
-        """A message that arrived from another process (called by a transport thread)."""
+    def deliver_remote(self, topic: str, type_name: str, msg: Any,
+                       expires_ns: int | None = None) -> None:
+        """A message that arrived from another process (called by a transport thread);
+        ``expires_ns``: system time its publisher's lifespan ends."""
         entry = self.topics.get(topic)
         if entry is None:
             return
         if entry.type_name is not None and entry.type_name != type_name:
             raise TopicTypeMismatchError(topic, entry.type_name, type_name)
         for sub in list(entry.subscriptions):
-            sub.deliver(msg)
+            sub.deliver(msg, expires_ns)
 
     def local_subscription_count(self, topic: str) -> int:
         entry = self.topics.get(topic)

@@ -36,13 +36,15 @@ from eddiebot.core.parameters import (
     coerce,
     node_matches,
 )
-from eddiebot.core.qos import QoSProfile, as_qos
+from eddiebot.core.qos import LivelinessPolicy, QoSProfile, as_qos, duration_ns
+from eddiebot.core.qos_events import PublisherEventCallbacks, SubscriptionEventCallbacks
 from eddiebot.core.task import Future
 from eddiebot.core.time import Clock, Duration, JumpThreshold, Time, TimeJump
 from eddiebot.msgs import ServiceType, type_name
 
 if TYPE_CHECKING:
     from eddiebot.core.executors import Executor
+    from eddiebot.core.qos_events import EndpointEvents
     from eddiebot.core.rate import Rate
 
 __all__ = [
@@ -102,6 +104,10 @@ class Publisher:
         self.qos = qos
         self.latched: deque[Any] = deque(maxlen=qos.depth if qos.transient_local else 0)
         self.sequence = 0
+        #: QoS lifespan in ns (None: messages never expire)
+        self.lifespan_ns = duration_ns(qos.lifespan)
+        #: QoS events (deadline, liveliness, matched, incompatible QoS), when asked for
+        self.events: EndpointEvents | None = None
         self._destroyed = False
 
     @property
@@ -119,7 +125,16 @@ class Publisher:
         self.sequence += 1
         if self.qos.transient_local:
             self.latched.append(msg)
+        if self.events is not None:
+            self.events.on_activity()
         self.node.context.publish(self, msg)
+
+    def assert_liveliness(self) -> None:
+        """Count as alive for another lease (MANUAL_BY_TOPIC liveliness) without publishing."""
+        if self.events is not None:
+            self.events.asserted_in_lease = True
+            if not self.events.alive:
+                self.events.on_activity()
 
     def get_subscription_count(self) -> int:
         """Subscriptions in this process plus those the transports know of."""
@@ -131,6 +146,8 @@ class Publisher:
     def destroy(self) -> None:
         if not self._destroyed:
             self._destroyed = True
+            if self.events is not None:
+                self.events.destroy()
             self.node.context.remove_publisher(self)
 
 
@@ -161,18 +178,25 @@ class Subscription(Entity):
         #: the messages it holds, so a full queue adds no work (the executor's ready
         #: queue is bounded by the subscriptions' depths)
         self._scheduled = 0
+        #: QoS events (deadline, liveliness, matched, incompatible QoS, message lost)
+        self.events: EndpointEvents | None = None
         self._destroyed = False
 
     @property
     def topic(self) -> str:
         return self.topic_name
 
-    def deliver(self, msg: Any) -> None:
-        """Queue a message (dropping the oldest when full) and wake the executor."""
+    def deliver(self, msg: Any, expires_ns: int | None = None) -> None:
+        """Queue a message (dropping the oldest when full) and wake the executor.
+
+        ``expires_ns``: system time after which the message is not delivered any more (the
+        publisher's QoS lifespan)."""
         if self._destroyed:
             return
+        if self.events is not None:
+            self.events.on_activity()
         with self._lock:
-            self._queue.append(msg)
+            self._queue.append(msg if expires_ns is None else _Expiring(msg, expires_ns))
             if self._scheduled >= len(self._queue):
                 return  # the oldest was dropped: the work already queued takes the newest
             self._scheduled += 1
@@ -180,7 +204,12 @@ class Subscription(Entity):
 
     def take(self) -> Any | None:
         with self._lock:
-            return self._queue.popleft() if self._queue else None
+            item = self._queue.popleft() if self._queue else None
+        if type(item) is _Expiring:
+            if self.node.context.system_clock.now_ns() > item.expires_ns:
+                return None  # outlived the publisher's lifespan
+            return item.msg
+        return item
 
     def execute(self) -> None:
         with self._lock:
@@ -193,7 +222,19 @@ class Subscription(Entity):
     def destroy(self) -> None:
         if not self._destroyed:
             self._destroyed = True
+            if self.events is not None:
+                self.events.destroy()
             self.node.context.remove_subscription(self)
+
+
+class _Expiring:
+    """A queued message with the system time its lifespan ends."""
+
+    __slots__ = ("expires_ns", "msg")
+
+    def __init__(self, msg: Any, expires_ns: int) -> None:
+        self.msg = msg
+        self.expires_ns = expires_ns
 
 
 class Timer(Entity):
@@ -619,10 +660,26 @@ class Node(GraphQueries):
         return self.get_clock().now()
 
     # -- entities -----------------------------------------------------------------------
-    def create_publisher(self, msg_type: Any, topic: str, qos_profile: QoSProfile | int) -> Publisher:
-        pub = Publisher(self, msg_type, self.resolve_topic_name(topic), as_qos(qos_profile))
+    def create_publisher(
+        self,
+        msg_type: Any,
+        topic: str,
+        qos_profile: QoSProfile | int,
+        *,
+        callback_group: CallbackGroup | None = None,
+        event_callbacks: PublisherEventCallbacks | None = None,
+    ) -> Publisher:
+        qos = as_qos(qos_profile)
+        pub = Publisher(self, msg_type, self.resolve_topic_name(topic), qos)
         self.context.add_publisher(pub)
         self.publishers.append(pub)
+        manual = (qos.liveliness == LivelinessPolicy.MANUAL_BY_TOPIC
+                  and duration_ns(qos.liveliness_lease_duration) is not None)
+        if event_callbacks is not None or manual:
+            from eddiebot.core.qos_events import EndpointEvents
+
+            pub.events = EndpointEvents(pub, event_callbacks or PublisherEventCallbacks(),
+                                        publisher=True, group=callback_group)
         return pub
 
     def create_subscription(
@@ -634,6 +691,7 @@ class Node(GraphQueries):
         *,
         callback_group: CallbackGroup | None = None,
         raw: bool = False,
+        event_callbacks: SubscriptionEventCallbacks | None = None,
     ) -> Subscription:
         sub = Subscription(
             self,
@@ -646,6 +704,10 @@ class Node(GraphQueries):
         )
         self.subscriptions.append(sub)
         self.context.add_subscription(sub)
+        if event_callbacks is not None:
+            from eddiebot.core.qos_events import EndpointEvents
+
+            sub.events = EndpointEvents(sub, event_callbacks, publisher=False)
         return sub
 
     def create_timer(

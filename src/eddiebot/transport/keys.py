@@ -20,7 +20,15 @@ from dataclasses import dataclass
 from typing import Any
 
 from eddiebot.core._xxh3 import xxh3_128
-from eddiebot.core.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from eddiebot.core.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    LivelinessPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    duration_ns,
+)
+from eddiebot.core.time import Duration
 from eddiebot.core.type_description import describe, rihs01, service_fielddefs
 from eddiebot.msgs import TYPESTORE, UnknownTypeError, load_type, normalize_type_name, type_hash
 
@@ -58,6 +66,7 @@ _DEFAULT_RELIABILITY = int(ReliabilityPolicy.RELIABLE)
 _DEFAULT_DURABILITY = int(DurabilityPolicy.VOLATILE)
 _DEFAULT_HISTORY = int(HistoryPolicy.KEEP_LAST)
 _DEFAULT_DEPTH = 42
+_DEFAULT_LIVELINESS = int(LivelinessPolicy.AUTOMATIC)
 
 
 def mangle(name: str) -> str:
@@ -146,28 +155,62 @@ def topic_wildcard_key(domain: int, name: str) -> str:
     return f"{domain}/{name.strip('/')}/*/*"
 
 
+_INF_SEC, _INF_NSEC = 9223372036, 854775807
+
+
+def _duration_to_keyexpr(d: Duration) -> str:
+    """``sec,nsec`` with rmw_zenoh's rule: a part equal to the infinite default is empty."""
+    ns = duration_ns(d)
+    sec, nsec = (_INF_SEC, _INF_NSEC) if ns is None else divmod(ns, 1_000_000_000)
+    return f"{'' if sec == _INF_SEC else sec},{'' if nsec == _INF_NSEC else nsec}"
+
+
+def _duration_from_keyexpr(sec: str, nsec: str) -> Duration:
+    s = int(sec) if sec else _INF_SEC
+    n = int(nsec) if nsec else _INF_NSEC
+    if (s, n) == (_INF_SEC, _INF_NSEC):
+        return Duration(0)  # not set: infinite
+    return Duration(s * 1_000_000_000 + n)
+
+
 def qos_to_keyexpr(qos: QoSProfile) -> str:
-    """rmw_zenoh's compact QoS chunk, e.g. ``::,10:,:,:,,`` (empty = rmw_zenoh default)."""
+    """rmw_zenoh's compact QoS chunk, e.g. ``::,10:,:,:,,`` (empty = rmw_zenoh default):
+    ``reliability:durability:history,depth:deadline s,ns:lifespan s,ns:liveliness,lease s,ns``."""
     rel = "" if int(qos.reliability) in (0, _DEFAULT_RELIABILITY) else str(int(qos.reliability))
     dur = "" if int(qos.durability) in (0, _DEFAULT_DURABILITY) else str(int(qos.durability))
     hist = "" if int(qos.history) in (0, _DEFAULT_HISTORY) else str(int(qos.history))
     depth = "" if qos.depth == _DEFAULT_DEPTH else str(qos.depth)
-    return f"{rel}:{dur}:{hist},{depth}:,:,:,,"
+    live = "" if int(qos.liveliness) in (0, _DEFAULT_LIVELINESS) else str(int(qos.liveliness))
+    return (f"{rel}:{dur}:{hist},{depth}:{_duration_to_keyexpr(qos.deadline)}:"
+            f"{_duration_to_keyexpr(qos.lifespan)}:{live},"
+            f"{_duration_to_keyexpr(qos.liveliness_lease_duration)}")
 
 
 def qos_from_keyexpr(text: str) -> QoSProfile:
-    """Inverse of :func:`qos_to_keyexpr` (deadline, lifespan and liveliness ignored)."""
+    """Inverse of :func:`qos_to_keyexpr` (a malformed chunk gives the default profile)."""
     try:
         parts = text.split(":")
         hist, depth = parts[2].split(",")[:2]
         history = HistoryPolicy(int(hist)) if hist else HistoryPolicy.KEEP_LAST
+        deadline = lifespan = lease = Duration(0)
+        liveliness = LivelinessPolicy.SYSTEM_DEFAULT
+        if len(parts) >= 6:
+            deadline = _duration_from_keyexpr(*parts[3].split(",")[:2])
+            lifespan = _duration_from_keyexpr(*parts[4].split(",")[:2])
+            live, lease_s, lease_ns = parts[5].split(",")[:3]
+            liveliness = LivelinessPolicy(int(live)) if live else LivelinessPolicy.SYSTEM_DEFAULT
+            lease = _duration_from_keyexpr(lease_s, lease_ns)
         return QoSProfile(
             depth=int(depth) if depth else _DEFAULT_DEPTH,
             reliability=ReliabilityPolicy(int(parts[0])) if parts[0] else ReliabilityPolicy.RELIABLE,
             durability=DurabilityPolicy(int(parts[1])) if parts[1] else DurabilityPolicy.VOLATILE,
             history=history,
+            deadline=deadline,
+            lifespan=lifespan,
+            liveliness=liveliness,
+            liveliness_lease_duration=lease,
         )
-    except (ValueError, IndexError):
+    except (ValueError, IndexError, TypeError):
         return QoSProfile()
 
 

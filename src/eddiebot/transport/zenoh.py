@@ -42,7 +42,7 @@ from typing import TYPE_CHECKING, Any
 import zenoh
 
 from eddiebot.core.errors import ServiceCallTimeoutError, TopicTypeMismatchError
-from eddiebot.core.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from eddiebot.core.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, duration_ns
 from eddiebot.msgs import deserialize, serialize
 from eddiebot.transport.config import ZenohConfig
 from eddiebot.transport.errors import RemoteServiceError
@@ -51,6 +51,7 @@ from eddiebot.transport.keys import (
     ATTACHMENT,
     UNKNOWN_TYPE_HASH,
     GraphEntity,
+    decode_attachment,
     entity_gid,
     liveliness_key,
     liveliness_prefix,
@@ -457,6 +458,35 @@ class ZenohTransport:
                 return None
             return remote
 
+        # publisher GID → last sequence number (gaps are lost samples, as rmw_zenoh counts
+        # them) and → its QoS lifespan in ns (from its liveliness token's QoS)
+        last_seq: dict[bytes, int] = {}
+        lifespans: dict[bytes, int | None] = {}
+        cache_version = [-1]
+
+        def lifespan_of(gid: bytes) -> int | None:
+            if gid not in lifespans and cache_version[0] != self.cache.version:
+                cache_version[0] = self.cache.version
+                for e in self.cache.publishers(topic):
+                    lifespans[e.gid] = duration_ns(e.qos_profile.lifespan)
+            return lifespans.get(gid)
+
+        def track(entry: Any, sample: Any) -> int | None:
+            """Count lost samples; the system time this sample expires (None: never)."""
+            att = sample.attachment
+            decoded = decode_attachment(att.to_bytes()) if att is not None else None
+            if decoded is None:
+                return None
+            seq, stamp, gid = decoded
+            previous = last_seq.get(gid)
+            last_seq[gid] = seq
+            if previous is not None and seq > previous + 1:
+                for sub in list(entry.subscriptions):
+                    if sub.events is not None:
+                        sub.events.on_messages_lost(seq - previous - 1)
+            lifespan = lifespan_of(gid)
+            return None if lifespan is None else stamp + lifespan
+
         def handler(sample: Any) -> None:
             try:
                 entry = context.topics.get(topic)
@@ -472,6 +502,9 @@ class ZenohTransport:
                     if ros_type_name(dds) == entry.type_name:  # same name, other definition
                         self.undecoded[topic] = self.undecoded.get(topic, 0) + 1
                     return
+                expires = track(entry, sample)
+                if expires is not None and context.system_clock.now_ns() > expires:
+                    return  # outlived the publisher's lifespan on the way
                 data = sample.payload.to_bytes()
                 subs = list(entry.subscriptions)
                 if any(getattr(sub, "raw", False) for sub in subs):
@@ -479,15 +512,15 @@ class ZenohTransport:
                     cooked = []
                     for sub in subs:
                         if getattr(sub, "raw", False):
-                            sub.deliver(data)
+                            sub.deliver(data, expires)
                         else:
                             cooked.append(sub)
                     if cooked:
                         msg = deserialize(data, remote)
                         for sub in cooked:
-                            sub.deliver(msg)
+                            sub.deliver(msg, expires)
                     return
-                context.deliver_remote(topic, remote, deserialize(data, remote))
+                context.deliver_remote(topic, remote, deserialize(data, remote), expires)
             except Exception:
                 log.exception("dropping a sample on %s", topic)
 
