@@ -40,6 +40,8 @@ class StubRobot(Node):
         self.start = self.pose.copy()
         self.cmd = (0.0, 0.0)
         self.publish_tf = True
+        #: drive in place and backwards only (a robot stuck against something it cannot see)
+        self.block_forward = False
         self.commands: list[tuple[int, float, float]] = []
         self.tf = TransformBroadcaster(self)
         statics = [make_transform_2d("base_footprint", "laser", 0, 0.0, 0.0, 0.0)]
@@ -54,7 +56,8 @@ class StubRobot(Node):
         self.create_timer(0.1, self._scan)
 
     def _on_cmd(self, msg: Any) -> None:
-        self.cmd = (float(msg.linear.x), float(msg.angular.z))
+        v = float(msg.linear.x)
+        self.cmd = (min(v, 0.0) if self.block_forward else v, float(msg.angular.z))
         self.commands.append((self.now().nanoseconds, *self.cmd))
 
     def odom_pose(self) -> tuple[float, float, float]:

@@ -29,6 +29,11 @@ def test_amcl_localises_and_the_robot_navigates(make_stack):
     assert stack.nodes["amcl"].amcl.particles[:, :2].std(axis=0).min() > 0.3
     poses = []
     stack.probe.create_subscription(PoseWithCovarianceStamped, "/amcl_pose", poses.append, MAP_QOS)
+    nav = stack.nodes["bt_navigator"]
+    for _ in range(100):  # a goal starts once AMCL gives map -> odom
+        if nav._robot_pose_in() is not None:
+            break
+        stack.spin(0.1)
     _, res = navigate(stack, 4.5, 1.2, 0.0)
     assert res.status == GoalStatus.STATUS_SUCCEEDED, res.result.error_msg
     assert len(poses) > 3

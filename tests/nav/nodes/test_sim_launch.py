@@ -10,6 +10,7 @@ from eddiebot.cli.nav import resolve_params
 from eddiebot.core import Context, Node, SingleThreadedExecutor
 from eddiebot.core.action import ActionClient, GoalStatus
 from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
+from eddiebot.core.tf import Buffer, TransformException, TransformListener
 from eddiebot.maps import save_map
 from eddiebot.msgs.nav2_msgs import NavigateToPose
 from eddiebot.nav.nodes._common import pose_stamped
@@ -39,7 +40,15 @@ def sim_stack(tmp_path):
 
 def test_simulated_robot_reaches_a_goal(sim_stack):
     ctx, ex, probe, start = sim_stack
+    tf = Buffer(node=probe)
+    TransformListener(tf, probe)
     ex.spin_for(2.0)
+    for _ in range(60):  # a goal starts once the robot is localised (map -> base_footprint)
+        try:
+            tf.lookup_pose2d("map", "base_footprint", 0)
+            break
+        except TransformException:
+            ex.spin_for(0.5)
     client = ActionClient(probe, NavigateToPose, "/navigate_to_pose")
     gx, gy = (1.4, 4.2) if start[1] < 3.0 else (1.4, 1.6)
     fb = []

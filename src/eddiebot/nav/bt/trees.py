@@ -1,124 +1,30 @@
-"""Factories for Nav2's default navigation trees (``navigate_to_pose_w_replanning_and_recovery``
-and its through-poses twin), built from :mod:`eddiebot.nav.bt.nodes`::
+"""Nav2's default behaviour trees, shipped as Nav2 writes them (``behavior_trees/``).
 
-    RecoveryNode(number_of_retries=6)
-      PipelineSequence
-        RateController(1 Hz)
-          ComputePathToPose | Sequence(RemovePassedGoals(0.7 m), ComputePathThroughPoses)
-        FollowPath
-      Sequence
-        WouldARecoveryHelp              (goals outside the map / occupied abort at once)
-        ReactiveFallback
-          GoalUpdated
-          RoundRobin
-            Sequence(ClearLocalCostmap, ClearGlobalCostmap)
-            Spin(1.57)
-            Wait(5 s)
-            BackUp(0.30 m, 0.05 m/s)
+``default_nav_to_pose_bt_xml`` defaults to ``navigate_to_pose_w_replanning_and_recovery.xml``
+and ``default_nav_through_poses_bt_xml`` to
+``navigate_through_poses_w_replanning_and_recovery.xml``, as in Nav2 Jazzy. A tree path
+that is not absolute and not found from the working directory is looked up here, so
+``behavior_tree: navigate_to_pose_w_replanning_and_recovery.xml`` in a goal works too.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
 
-from py_trees.behaviour import Behaviour
+__all__ = ["DEFAULT_TREES", "TREES_DIR", "resolve_tree_path"]
 
-from eddiebot.nav.bt.nodes import (
-    BackUp,
-    ClearEntireCostmap,
-    ComputePathThroughPoses,
-    ComputePathToPose,
-    FollowPath,
-    GoalUpdated,
-    NavBlackboard,
-    PipelineSequence,
-    RateController,
-    ReactiveFallback,
-    RecoveryNode,
-    RemovePassedGoals,
-    RoundRobin,
-    SequenceWithMemory,
-    Spin,
-    Wait,
-    WouldARecoveryHelp,
-)
-
-__all__ = ["NavClients", "TreeOptions", "navigate_through_poses_tree", "navigate_to_pose_tree"]
+TREES_DIR = Path(__file__).resolve().parent / "behavior_trees"
+DEFAULT_TREES = {
+    "navigate_to_pose": TREES_DIR / "navigate_to_pose_w_replanning_and_recovery.xml",
+    "navigate_through_poses": TREES_DIR / "navigate_through_poses_w_replanning_and_recovery.xml",
+}
 
 
-@dataclass
-class NavClients:
-    """The action and service clients the trees use (made once by the navigator)."""
-
-    compute_path_to_pose: Any
-    compute_path_through_poses: Any
-    follow_path: Any
-    spin: Any
-    backup: Any
-    wait: Any
-    clear_local_costmap: Any
-    clear_global_costmap: Any
-
-
-@dataclass(frozen=True)
-class TreeOptions:
-    replanning_frequency: float = 1.0
-    number_of_retries: int = 6
-    spin_dist: float = 1.57
-    wait_duration: float = 5.0
-    backup_dist: float = 0.30
-    backup_speed: float = 0.05
-    server_timeout: float = 1.0
-    passed_goal_radius: float = 0.7
-
-
-def _recovery_branch(bb: NavBlackboard, c: NavClients, clock: Callable[[], int],
-                     o: TreeOptions) -> Behaviour:
-    t = o.server_timeout
-    actions = RoundRobin("RecoveryActions", [
-        SequenceWithMemory("ClearingActions", [
-            ClearEntireCostmap("ClearLocalCostmap-Subtree", c.clear_local_costmap, bb),
-            ClearEntireCostmap("ClearGlobalCostmap-Subtree", c.clear_global_costmap, bb),
-        ]),
-        Spin("Spin", c.spin, bb, clock, t, spin_dist=o.spin_dist),
-        Wait("Wait", c.wait, bb, clock, t, wait_duration=o.wait_duration),
-        BackUp("BackUp", c.backup, bb, clock, t, backup_dist=o.backup_dist,
-               backup_speed=o.backup_speed),
-    ])
-    return SequenceWithMemory("RecoveryGuard", [
-        WouldARecoveryHelp(bb),
-        ReactiveFallback("RecoveryFallback", [GoalUpdated(bb), actions]),
-    ])
-
-
-def _tree(planner: Behaviour, bb: NavBlackboard, c: NavClients, clock: Callable[[], int],
-          o: TreeOptions) -> Behaviour:
-    pipeline = PipelineSequence("NavigateWithReplanning", [
-        RateController("RateController", planner, o.replanning_frequency, clock),
-        FollowPath("FollowPath", c.follow_path, bb, clock, o.server_timeout),
-    ])
-    return RecoveryNode("NavigateRecovery", pipeline, _recovery_branch(bb, c, clock, o),
-                        o.number_of_retries)
-
-
-def navigate_to_pose_tree(bb: NavBlackboard, clients: NavClients, clock: Callable[[], int],
-                          options: TreeOptions | None = None) -> Behaviour:
-    """Nav2's ``navigate_to_pose_w_replanning_and_recovery`` tree; ``clock()`` gives ns."""
-    o = options or TreeOptions()
-    planner = ComputePathToPose("ComputePathToPose", clients.compute_path_to_pose, bb, clock,
-                                o.server_timeout)
-    return _tree(planner, bb, clients, clock, o)
-
-
-def navigate_through_poses_tree(bb: NavBlackboard, clients: NavClients, clock: Callable[[], int],
-                                options: TreeOptions | None = None) -> Behaviour:
-    """Nav2's ``navigate_through_poses_w_replanning_and_recovery`` tree."""
-    o = options or TreeOptions()
-    planner = SequenceWithMemory("PlanThroughPoses", [
-        RemovePassedGoals(bb, o.passed_goal_radius),
-        ComputePathThroughPoses("ComputePathThroughPoses", clients.compute_path_through_poses,
-                                bb, clock, o.server_timeout),
-    ])
-    return _tree(planner, bb, clients, clock, o)
+def resolve_tree_path(path: str) -> Path:
+    """``path`` as given, or the shipped tree of that file name when ``path`` does not
+    exist and is not absolute (the caller reports a missing file)."""
+    p = Path(path).expanduser()
+    if p.is_file() or p.is_absolute():
+        return p
+    shipped = TREES_DIR / p.name
+    return shipped if shipped.is_file() else p
