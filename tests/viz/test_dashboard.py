@@ -445,15 +445,15 @@ def test_read_only_page_opens_views_particles_decimated_and_mux_source(graph: Gr
     from eddiebot.msgs.nav2_msgs import Particle, ParticleCloud
     from eddiebot.msgs.sensor_msgs import PointCloud2, PointField
     from eddiebot.msgs.std_msgs import Header
-    from eddiebot.viz.dashboard.node import MAX_CLOUD_POINTS, MAX_PARTICLES
+    from eddiebot.viz.dashboard.node import MAX_LIVE_POINTS, MAX_PARTICLES
 
     graph.publish_world()
     n_part = 3 * MAX_PARTICLES + 7
     cloud_pub = graph.node.create_publisher(ParticleCloud, "/particle_cloud", 10)
     points_pub = graph.node.create_publisher(PointCloud2, "/points", 10)
-    n_pts = 2 * MAX_CLOUD_POINTS + 1
+    n_pts = 2 * MAX_LIVE_POINTS + 1
     xyz = np.zeros((n_pts, 3), np.float32)
-    xyz[:, 0] = np.arange(n_pts) * 1e-4
+    xyz[:, 0] = np.arange(n_pts) * 1e-4  # x = k * 0.1 mm for point k
     xyz[6] = np.nan  # an invalid point is left out
     fields = [PointField(name=k, offset=4 * i, datatype=PointField.FLOAT32, count=1)
               for i, k in enumerate("xyz")]
@@ -485,6 +485,7 @@ def test_read_only_page_opens_views_particles_decimated_and_mux_source(graph: Gr
         head, payload = cloud
         # every 3rd point, less the invalid one
         assert (head["name"], head["total"], head["n"]) == ("points", n_pts, math.ceil(n_pts / 3) - 1)
+        assert head["n"] <= MAX_LIVE_POINTS
         pts = np.frombuffer(payload, np.float32).reshape(-1, 3)
         assert len(pts) == head["n"]
         # pts[2] is point 9, in the robot's frame at (1, 2) heading 0.5 rad in the map

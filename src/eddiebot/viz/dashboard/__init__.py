@@ -1,9 +1,11 @@
 """Web dashboard: the live map, robot, sensors and plans in a browser, with goals and teleop.
 
 `start_dashboard(context, host, port)` serves one page (a plain ``<canvas>``, shipped here,
-no external resources) and one WebSocket from background threads; a `DashboardNode` in the
-given context subscribes to the map, costmaps, TF, scan, ranges, plans, images, odometry,
-battery, collisions and ``/rosout``, and publishes goals, initial poses, teleop and the
+no external resources; three.js vendored for the 3D view) and one WebSocket from background
+threads; a `DashboardNode` in the given context subscribes to the map, costmaps, the vSLAM
+grid and graph, TF, scan, ranges, plans and the controller's lookahead, AMCL's particles,
+images, point clouds (only while a 3D view is open), odometry, battery, collisions, the
+velocity mux's inputs and ``/rosout``, and publishes goals, initial poses, teleop and the
 e-stop lock. Occupancy grids travel as tiles and only changed tiles are re-sent. Loopback by
 default; other binds need a token (see `eddiebot.viz.dashboard.server`).
 """

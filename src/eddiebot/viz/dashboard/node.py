@@ -7,7 +7,8 @@ arrive from the web server's thread and publish directly.
 
 Heavy layers are throttled and decimated before they travel: AMCL's particle cloud (at most
 ``MAX_PARTICLES`` at 5 Hz), the vSLAM graph (1 Hz), and the point clouds of the 3D view, which
-are converted only while a page has that view open (at most ``MAX_CLOUD_POINTS``, 2 Hz). The
+are converted only while a page has that view open (2 Hz at most; the assembled map up to
+``MAX_CLOUD_POINTS``, the live ``/points`` up to ``MAX_LIVE_POINTS``). The
 velocity source that holds ``cmd_vel`` is worked out as twist_mux does, from the mux's own
 parameters (read from the running ``twist_mux`` node, twist_mux's defaults until it answers)
 and the commands and locks seen on its input topics.
@@ -52,7 +53,8 @@ from eddiebot.viz.dashboard.core import (
 from eddiebot.viz.dashboard.errors import CommandError
 from eddiebot.viz.dashboard.hub import Hub
 
-__all__ = ["FOOTPRINT_RADIUS", "GRID_LAYERS", "MAX_CLOUD_POINTS", "MAX_PARTICLES", "RANGE_TOPICS",
+__all__ = ["FOOTPRINT_RADIUS", "GRID_LAYERS", "MAX_CLOUD_POINTS", "MAX_LIVE_POINTS", "MAX_PARTICLES",
+           "RANGE_TOPICS",
            "DashboardNode", "DashboardTopics", "footprint_from_urdf"]
 
 #: Eddie's footprint radius (m): the URDF's base_link cylinder, until /robot_description says.
@@ -64,8 +66,10 @@ GRID_LAYERS = {"map": "/map", "global_costmap": "/global_costmap/costmap",
                "local_costmap": "/local_costmap/costmap", "vslam_map": "/rtabmap/map"}
 #: particles sent per cloud (more are decimated evenly)
 MAX_PARTICLES = 5000
-#: points sent per 3D cloud (more are decimated evenly)
+#: points sent per 3D cloud (more are decimated evenly): the assembled map is sent when it
+#: changes (rarely), the live sensor cloud twice a second, so it gets fewer
 MAX_CLOUD_POINTS = 60000
+MAX_LIVE_POINTS = 20000
 #: points (or segment ends) sent per graph marker
 _MAX_MARKER_POINTS = 20000
 _NS = 1_000_000_000
@@ -195,7 +199,8 @@ class DashboardNode(Node):
         #: display frame changes or when TF for it arrives after the message did
         self._replay: dict[str, tuple[Callable[[Any], None], Any]] = {}
         self._unplaced: set[str] = set()
-        self._clouds: dict[str, Any] = {}
+        #: newest graph and cloud messages with their arrival count; sent counts per name
+        self._clouds: dict[str, tuple[int, Any]] = {}
         self._cloud_sent: dict[str, int] = {}
         self._mux = TwistMux(*self._mux_inputs(None))
         self._mux_source = "twist_mux defaults"
@@ -560,7 +565,7 @@ class DashboardNode(Node):
                                           source=self.footprint_source))
 
     def _on_graph(self, msg: Any) -> None:
-        self._clouds["graph"] = msg  # sent from the status tick, at most once a second
+        self._keep("graph", msg)  # sent from the status tick, at most once a second
 
     def _graph_frame(self, msg: Any) -> str:
         layers, nodes, loops = [], 0, 0
@@ -599,7 +604,11 @@ class DashboardNode(Node):
         return text_frame("graph", layers=layers, nodes=nodes, loops=loops)
 
     def _on_cloud(self, name: str, msg: Any) -> None:
-        self._clouds[name] = msg  # converted only while a page has the 3D view open
+        self._keep(name, msg)  # converted only while a page has the 3D view open
+
+    def _keep(self, name: str, msg: Any) -> None:
+        seq = self._clouds[name][0] + 1 if name in self._clouds else 1
+        self._clouds[name] = (seq, msg)
 
     def _cloud_frame(self, name: str, msg: Any) -> bytes | None:
         topic = self.topics.cloud_map if name == "cloud_map" else self.topics.points
@@ -619,7 +628,8 @@ class DashboardNode(Node):
             self._problems[topic] = f"no TF from {frame!r} to {self.display_frame!r}"
             return None
         self._problems.pop(topic, None)
-        rows = buf[: n * step].reshape(n, step)[:: max(1, -(-n // MAX_CLOUD_POINTS))]
+        limit = MAX_CLOUD_POINTS if name == "cloud_map" else MAX_LIVE_POINTS
+        rows = buf[: n * step].reshape(n, step)[:: max(1, -(-n // limit))]
         order = ">" if msg.is_bigendian else "<"
 
         def column(off: int, kind: str) -> np.ndarray:
@@ -651,20 +661,20 @@ class DashboardNode(Node):
 
     def _send_views(self, now: int) -> None:
         graph = self._clouds.get("graph")
-        if graph is not None and self._cloud_sent.get("graph") != id(graph) \
+        if graph is not None and self._cloud_sent.get("graph") != graph[0] \
                 and not self._throttled("graph", _NS):
-            self._cloud_sent["graph"] = id(graph)
-            self.hub.post("graph", self._graph_frame(graph))
+            self._cloud_sent["graph"] = graph[0]
+            self.hub.post("graph", self._graph_frame(graph[1]))
         if self.hub.view_open("tf"):
             self.hub.post("tf", self._tf_frame(), view="tf")
         if self.hub.view_open("cloud"):
             for name in ("cloud_map", "points"):
-                m = self._clouds.get(name)
-                if m is None or self._cloud_sent.get(name) == id(m) \
+                kept = self._clouds.get(name)
+                if kept is None or self._cloud_sent.get(name) == kept[0] \
                         or self._throttled(f"cloud:{name}", _NS // 2):
                     continue
-                self._cloud_sent[name] = id(m)
-                frame = self._cloud_frame(name, m)
+                self._cloud_sent[name] = kept[0]
+                frame = self._cloud_frame(name, kept[1])
                 if frame is not None:
                     self.hub.post(f"cloud:{name}", frame, view="cloud")
 

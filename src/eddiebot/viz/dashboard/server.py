@@ -383,6 +383,7 @@ def start_dashboard(context: Context, host: str = "127.0.0.1", port: int = 8080,
     config.port = sock.getsockname()[1]
     app = create_app(node, hub, config)
     uv_config = uvicorn.Config(app, log_level="warning", access_log=False, ws_max_size=1 << 20,
+                               ws_per_message_deflate=False,
                                ws_ping_interval=20.0, lifespan="off")
     server = uvicorn.Server(uv_config)
 
