@@ -5,8 +5,8 @@ import math
 from pathlib import Path
 
 import pytest
-from _support.nav_actions import wait_for
 
+from _support.nav_actions import wait_for
 from eddiebot.core.action import ActionClient, GoalStatus
 from eddiebot.msgs.nav2_msgs import NavigateThroughPoses, NavigateToPose
 from eddiebot.nav.bt import BehaviorTreeFactory, TreeContext
