@@ -302,3 +302,42 @@ def test_service_that_raises_on_a_spinning_executor_fails_the_call_at_once() -> 
     finally:
         ex.shutdown()
         ctx.shutdown()
+
+
+def test_every_request_waiting_for_a_busy_group_is_answered() -> None:
+    from eddiebot.msgs.std_srvs import Trigger
+
+    ctx = Context()
+    ex = MultiThreadedExecutor(num_threads=3, context=ctx)
+    try:
+        node = Node("busy_server", context=ctx)
+        ex.add_node(node)
+        group = MutuallyExclusiveCallbackGroup()
+        release = threading.Event()
+        started = threading.Event()
+
+        def slow(msg: Any) -> None:
+            started.set()
+            release.wait(10)
+
+        served: list[int] = []
+
+        def answer(req: Any, res: Any) -> Any:
+            served.append(1)
+            res.success = True
+            return res
+
+        node.create_subscription(Int32, "/hold", slow, 10, callback_group=group)
+        node.create_service(Trigger, "/busy", answer, callback_group=group)
+        spinner = threading.Thread(target=ex.spin, daemon=True)
+        spinner.start()
+        node.create_publisher(Int32, "/hold", 10).publish(Int32(data=1))
+        assert started.wait(10)
+        client = Node("busy_caller", context=ctx).create_client(Trigger, "/busy")
+        futures = [client.call_async(Trigger.Request()) for _ in range(3)]
+        release.set()
+        assert all(f.wait(10) for f in futures)
+        assert len(served) == 3
+    finally:
+        ex.shutdown()
+        ctx.shutdown()

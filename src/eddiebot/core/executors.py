@@ -400,14 +400,18 @@ class MultiThreadedExecutor(Executor):
         group_lock: threading.Lock | None = (
             group.lock if group is not None and not group.reentrant else None)
         exclusive = group_lock is not None
+        # A timer is found again by _due_timer while it is due, so it is handed out once;
+        # any other entity comes once per notification (a message, a request), so each
+        # one must run, however many are in flight or waiting.
+        is_timer = hasattr(entity, "timer_period_ns")
         with self._inflight_lock:
-            if key in self._inflight and not hasattr(entity, "take"):
-                # a timer already running; it will be re-evaluated when it finishes
-                return False
+            if is_timer and key in self._inflight:
+                return False  # re-evaluated when it finishes
             if group_lock is not None and not group_lock.acquire(blocking=False):
-                if key not in self._waiting or hasattr(entity, "take"):
+                if not (is_timer and key in self._waiting):
                     self._blocked.setdefault(id(group), deque()).append(entity)
-                    self._waiting.add(key)
+                    if is_timer:
+                        self._waiting.add(key)
                 return False
             self._inflight.add(key)
 
