@@ -124,6 +124,7 @@ class Subscription(Entity):
         #: the messages it holds, so a full queue adds no work (the executor's ready
         #: queue is bounded by the subscriptions' depths)
         self._scheduled = 0
+        self._what = f"topic {topic!r}"
         #: QoS events (deadline, liveliness, matched, incompatible QoS, message lost)
         self.events: EndpointEvents | None = None
         self._destroyed = False
@@ -161,9 +162,13 @@ class Subscription(Entity):
         with self._lock:
             if self._scheduled > 0:
                 self._scheduled -= 1
-        msg = self.take()
+            msg = self._queue.popleft() if self._queue else None
+        if type(msg) is _Expiring:
+            if self.node.context.system_clock.now_ns() > msg.expires_ns:
+                return  # outlived the publisher's lifespan
+            msg = msg.msg
         if msg is not None:
-            self.node._run_callback(self.callback, (msg,), f"topic {self.topic_name!r}")
+            self.node._run_callback(self.callback, (msg,), self._what)
 
     def destroy(self) -> None:
         if not self._destroyed:
