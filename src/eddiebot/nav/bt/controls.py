@@ -411,18 +411,21 @@ class PipelineSequence(ControlNode):
         self.last_child_ticked = 0
 
     def tick(self) -> Status:
+        skipped = 0
         for i, child in enumerate(self.children):
             s = child.execute_tick()
             if s == F:
                 self.reset_children()
                 self.last_child_ticked = 0
                 return F
-            if s == R and i >= self.last_child_ticked:
+            if s == K:
+                skipped += 1
+            elif s == R and i >= self.last_child_ticked:
                 self.last_child_ticked = i
                 return R
         self.reset_children()
         self.last_child_ticked = 0
-        return S
+        return K if skipped == len(self.children) else S
 
     def halt(self) -> None:
         super().halt()

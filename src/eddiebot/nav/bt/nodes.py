@@ -715,11 +715,14 @@ class AreErrorCodesPresent(LeafNode):
     CODES: ClassVar[frozenset[int]] = frozenset()
 
     def codes(self) -> frozenset[int]:
-        raw = self.config.ports.get("error_codes_to_check")
-        if raw is None or type(self) is not AreErrorCodesPresent:
+        if "error_codes_to_check" not in self.PORTS:
             return self.CODES
-        return frozenset(int(c) for c in str(self.get_input("error_codes_to_check")).replace(
-            ",", ";").split(";") if c.strip())
+        value = self.get_input("error_codes_to_check")
+        if value is None:
+            return self.CODES
+        if isinstance(value, str):  # a literal: "100;104" (or comma-separated)
+            return frozenset(int(c) for c in value.replace(",", ";").split(";") if c.strip())
+        return frozenset(int(c) for c in value)  # a set of codes from the blackboard
 
     def tick(self) -> Status:
         code = self.get_input("error_code")
