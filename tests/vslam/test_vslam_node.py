@@ -290,3 +290,33 @@ def test_publishes_grid_on_map_graph_data_and_info(tmp_path):
     finally:
         sub.destroy_node()
         rig.close()
+
+
+def test_localization_publishes_localization_pose(tmp_path):
+    from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
+
+    rig = Rig(tmp_path)
+    try:
+        for k in range(6):
+            rig.frame(SEC + k * SEC, 0.2 * k)
+    finally:
+        rig.close()
+    rig = Rig(tmp_path, delete_db_on_start=False, localization=True,
+              **{"Rtabmap/LoopThr": "0.05", "RGBD/LinearUpdate": "0"})
+    poses: list = []
+    sub = Node("viewer", context=rig.context)
+    sub.create_subscription(PoseWithCovarianceStamped, "/rtabmap/localization_pose",
+                            poses.append, 10)
+    rig.ex.add_node(sub)
+    try:
+        for k in range(4):
+            rig.frame(10 * SEC + k * SEC, 0.4)
+        assert len(poses) == 4 and rig.slam.core.localized
+        last = poses[-1]
+        assert last.header.frame_id == "map"
+        assert abs(last.pose.pose.position.x - 0.4) < 0.03
+        cov = np.asarray(last.pose.covariance).reshape(6, 6)
+        assert 0 < cov[0, 0] < 0.01  # the localization's, not 9999
+    finally:
+        sub.destroy_node()
+        rig.close()

@@ -25,7 +25,8 @@ Output: TF ``map → odom`` every ``tf_delay``; ``map_topic`` (default ``/map``,
 the mapper; ``/rtabmap/map`` to run beside 2D SLAM), the 2D grid (``Grid/RayTracing``,
 ``Grid/3D`` false); ``~/mapGraph`` (rtabmap_msgs/MapGraph) and ``~/mapData``
 (rtabmap_msgs/MapData: the graph and the nodes added since the last one) with the map,
-``~/info`` (rtabmap_msgs/Info) after every processed frame, ``~/graph_markers`` (MarkerArray:
+``~/info`` (rtabmap_msgs/Info) after every processed frame, ``~/localization_pose``
+(PoseWithCovarianceStamped, localization mode: covariance 9999 until localized), ``~/graph_markers`` (MarkerArray:
 nodes, neighbour and loop links; not upstream, for viewers without rtabmap's plugins);
 ``~/cloud_map`` (PointCloud2, on ``~/publish_map``). Services (std_srvs/Empty unless named):
 ``~/reset`` (empties memory and database), ``~/pause``, ``~/resume``, ``~/publish_map``,
@@ -55,7 +56,7 @@ from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, ma
 from eddiebot.core.time import ns_to_stamp, stamp_to_ns
 from eddiebot.geometry import matrix_to_quaternion, se3_from_tq
 from eddiebot.maps import map_to_msg, save_map
-from eddiebot.msgs.geometry_msgs import Point
+from eddiebot.msgs.geometry_msgs import Point, PoseWithCovarianceStamped
 from eddiebot.msgs.nav2_msgs import SaveMap as Nav2SaveMap
 from eddiebot.msgs.nav_msgs import OccupancyGrid, Odometry
 from eddiebot.msgs.rtabmap_msgs import Info, MapData, MapGraph
@@ -217,6 +218,8 @@ class RtabmapNode(Node):
         self.graph_pub = self.create_publisher(MapGraph, "~/mapGraph", qos_profile_latched)
         self.map_data_pub = self.create_publisher(MapData, "~/mapData", qos_profile_latched)
         self.info_pub = self.create_publisher(Info, "~/info", 10)
+        self.localization_pose_pub = self.create_publisher(
+            PoseWithCovarianceStamped, "~/localization_pose", 10)
         self.markers_pub = self.create_publisher(MarkerArray, "~/graph_markers",
                                                  qos_profile_latched)
         self._published_nodes: set[int] = set()
@@ -531,6 +534,8 @@ class RtabmapNode(Node):
         self.frames_processed += 1
         self.last_result = result
         self._publish_info(result, t)
+        if self.core.localization_mode and result.pose is not None:
+            self._publish_localization_pose(result.pose, t)
         if result.pose is None:
             self._warn_once("rejected", f"frame rejected: {result.rejection_reason}")
             return
@@ -613,6 +618,20 @@ class RtabmapNode(Node):
         self.info_pub.publish(info_message(
             header, result, [*core.memory.wm, *core.memory.stm], core.bayes.posterior_arrays(),
             weights, loop_tf))
+
+    def _publish_localization_pose(self, pose: np.ndarray, t: int) -> None:
+        """rtabmap's ``localization_pose``: the base in the map frame, covariance 9999 until
+        localized, then the last accepted localization's."""
+        from eddiebot.vslam.ros_messages import pose_message
+
+        msg = PoseWithCovarianceStamped()
+        msg.header = Header(stamp=ns_to_stamp(t), frame_id=self.map_frame_id)
+        msg.pose.pose = pose_message(pose)
+        cov = self.core.localization_covariance
+        if not self.core.localized or cov is None:
+            cov = np.diag([9999.0] * 6)
+        msg.pose.covariance = np.asarray(cov, np.float64).reshape(36).copy()
+        self.localization_pose_pub.publish(msg)
 
     def _publish_graph(self) -> None:
         all_poses, links = self.core.graph()

@@ -187,6 +187,13 @@ class RtabmapParameters:
         "neighbour links join per-node odometry frames, each tied to its node by this yaw σ "
         "(the root's frame is the root), so the neighbour links' angular variance is the "
         "accumulating part only")
+    rgbd_max_odom_cache_size: int = _p(
+        "RGBD/MaxOdomCacheSize", 10,
+        "localization: frames of odometry kept to check a localization against (0 = off: "
+        "every localization accepted as is)")
+    rgbd_localization_prior_error: float = _p(
+        "RGBD/LocalizationPriorError", 0.001,
+        "localization: variance of the priors holding the map nodes in the local graph")
     rgbd_proximity_by_space: bool = _p("RGBD/ProximityBySpace", True, "")
     rgbd_local_radius: float = _p("RGBD/LocalRadius", 10.0, "m")
     rgbd_proximity_max_graph_depth: int = _p("RGBD/ProximityMaxGraphDepth", 50, "")
@@ -249,6 +256,10 @@ class RtabmapParameters:
                                  "Grid/3D false for the 2D grid")
         if self.rgbd_proximity_path_max_neighbors < 0:
             raise ParameterError("RGBD/ProximityPathMaxNeighbors must be >= 0")
+        if self.rgbd_max_odom_cache_size < 0:
+            raise ParameterError("RGBD/MaxOdomCacheSize must be >= 0")
+        if self.rgbd_localization_prior_error <= 0:
+            raise ParameterError("RGBD/LocalizationPriorError must be > 0")
         if self.rgbd_local_radius < 0:
             raise ParameterError("RGBD/LocalRadius must be >= 0")
         if self.grid_sensor not in (0, 1, 2):

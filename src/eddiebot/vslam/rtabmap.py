@@ -27,6 +27,7 @@ from eddiebot.vslam.graph import (
     optimized_link_errors,
 )
 from eddiebot.vslam.icp import icp_2d
+from eddiebot.vslam.localization import OdometryCache
 from eddiebot.vslam.memory import Link, LinkType, Memory, Node, NodeData
 from eddiebot.vslam.occupancy import (
     GlobalGrid,
@@ -107,6 +108,17 @@ class Rtabmap:
         self._odom_max_info: F64 | None = None  # per-axis largest odometry information
         self._frame_poses: dict[int, F64] = {}  # optimised odometry frames (RGBD/OdomHeadingSigma)
         self._frames = OdometryFrames()  # their links, kept between graph updates
+        #: localization mode: the last frames' odometry and accepted localizations
+        self._odom_cache = (
+            OdometryCache(params.rgbd_max_odom_cache_size, params.reg_force_3dof,
+                          prior_variance=params.rgbd_localization_prior_error,
+                          max_error=params.rgbd_optimize_max_error,
+                          iterations=params.optimizer_iterations,
+                          epsilon=params.optimizer_epsilon)
+            if not params.mem_incremental_memory and params.rgbd_max_odom_cache_size > 0
+            else None)
+        #: covariance (6×6) of the last accepted localization, None before one
+        self.localization_covariance: F64 | None = None
         # the incremental graph holds the graph of the last `_optimize` (memory's link log
         # then tells what was added since)
         self._graph_live = False
@@ -118,6 +130,11 @@ class Rtabmap:
     def map_id(self) -> int:
         """Current session/map id."""
         return self._map_id
+
+    @property
+    def localized(self) -> bool:
+        """Localization mode: a localization was accepted since the start."""
+        return self._localized
 
     @property
     def localization_mode(self) -> bool:
@@ -170,10 +187,16 @@ class Rtabmap:
         """RTAB-Map's new-map triggers: the odometry's covariance at 9999 (lost, then
         re-initialised) or an identity pose after a non-identity one, once the current map has
         a node."""
-        prev = self.memory.nodes.get(self._last_node_id)
-        if prev is None or prev.map_id != self._map_id or self.localization_mode:
+        lost = (covariance is not None
+                and float(np.asarray(covariance).reshape(6, 6)[0, 0]) >= 9999)
+        if self.localization_mode:
+            if lost and self._odom_cache is not None:
+                self._odom_cache.clear()  # the odometry before the reset checks nothing now
             return False
-        if covariance is not None and float(np.asarray(covariance).reshape(6, 6)[0, 0]) >= 9999:
+        prev = self.memory.nodes.get(self._last_node_id)
+        if prev is None or prev.map_id != self._map_id:
+            return False
+        if lost:
             return True
         eye = np.eye(4)
         return bool(np.allclose(odom, eye) and not np.allclose(prev.odom_pose, eye))
@@ -351,7 +374,8 @@ class Rtabmap:
             stats["Loop/Mahalanobis/"] = mahalanobis
         # --- proximity by space ---
         proximity_id = 0
-        if p.rgbd_proximity_by_space and not loop_id and not self.localization_mode:
+        if p.rgbd_proximity_by_space and not loop_id and (
+                not self.localization_mode or self._localized):
             near = self._proximity(node, camera)
             if near is not None:
                 closure_links.append(near)
@@ -362,7 +386,12 @@ class Rtabmap:
         # --- graph update ---
         merged = False
         if self.localization_mode:
-            pose = self._localize(node, closure_links, odom)
+            pose, why = self._localize(closure_links, odom, self._odom_information(odom_covariance))
+            if why and closure_links:
+                rejected_id = rejected_id or (loop_id or proximity_id)
+                reason = why
+                loop_id = proximity_id = 0
+                closure_links = []
         else:
             for link in closure_links:
                 self.memory.add_link(link)
@@ -584,15 +613,17 @@ class Rtabmap:
         p = self.params
         stm = set(self.memory.stm)
         linked = set(self.memory.links.get(node.id, ()))
+        # in localization the frame is linked to nothing: every map node within the radius
+        local = self.localization_mode
         reach = (self.memory.neighbours(node.id, p.rgbd_proximity_max_graph_depth,
                                         exclude_stm=False, wm_only=False)
-                 if p.rgbd_proximity_max_graph_depth > 0 else None)
+                 if p.rgbd_proximity_max_graph_depth > 0 and not local else None)
         dist: dict[int, float] = {}
         for i in self.memory.wm:
             pose = self.optimized_poses.get(i)
             if i in stm or i in linked or pose is None or (reach is not None and i not in reach):
                 continue
-            if self.frame_of(i) != self.frame_of(node.id):
+            if not local and self.frame_of(i) != self.frame_of(node.id):
                 continue
             d = float(np.linalg.norm(pose[:2, 3] - here[:2, 3]))
             if p.rgbd_local_radius <= 0 or d <= p.rgbd_local_radius:
@@ -801,16 +832,32 @@ class Rtabmap:
             self.optimized_poses.update(zip(ids_all.tolist(), mats))
         return True
 
-    def _localize(self, node: Node, closure_links: list[Link], odom: F64) -> F64:
-        if closure_links:
+    def _localize(self, closure_links: list[Link], odom: F64, odom_info: F64
+                  ) -> tuple[F64, str]:
+        """Localization mode: map→odom moves only for a localization the odometry cache
+        accepts (`RGBD/MaxOdomCacheSize`, `RGBD/OptimizeMaxError`); returns the base pose in
+        the map frame and why a localization was rejected ("" if none was)."""
+        cache = self._odom_cache
+        if cache is not None:
+            cache.add(odom, odom_info)
+        if not closure_links:
+            return self.map_to_odom @ odom, ""
+        if cache is None:  # RGBD/MaxOdomCacheSize 0: every localization as is
             link = closure_links[0]
             old_pose = self.optimized_poses.get(link.to_id)
-            if old_pose is not None:
-                pose = old_pose @ se3_inverse(link.transform)
-                self.map_to_odom = pose @ se3_inverse(odom)
-                self._localized = True
-                return pose
-        return self.map_to_odom @ odom
+            if old_pose is None:
+                return self.map_to_odom @ odom, "the linked map node has no pose"
+            pose = old_pose @ se3_inverse(link.transform)
+            self.localization_covariance = np.asarray(np.linalg.inv(link.information))
+        else:
+            check = cache.localize(closure_links, self.optimized_poses)
+            if check.pose is None:
+                return self.map_to_odom @ odom, check.reason
+            pose = check.pose
+            self.localization_covariance = check.covariance
+        self.map_to_odom = pose @ se3_inverse(odom)
+        self._localized = True
+        return pose, ""
 
     def _retrieve_around(self, hyp_id: int) -> list[int]:
         mem = self.memory
