@@ -123,3 +123,28 @@ def test_misspelt_node_fails_configure_with_file_and_line(tmp_path):
         assert nav2.last_error.count(str(port)) == 1
     finally:
         ctx.shutdown()
+
+
+def test_goal_waits_for_the_robot_pose_then_aborts(make_stack, nav_stub_params):
+    stack = make_stack(params=_params(nav_stub_params, initial_pose_timeout=2.0))
+    stack.robot.publish_tf = False  # odom -> base_footprint goes stale: no robot pose
+    stack.spin(1.0)
+    client = ActionClient(stack.probe, NavigateToPose, "/navigate_to_pose")
+    # localisation comes back within initial_pose_timeout: the goal runs
+    handle = wait_for(stack, client.send_goal_async(
+        NavigateToPose.Goal(pose=pose_stamped(2.5, 1.0, 0.0, "map"))))
+    stack.spin(1.0)
+    stack.robot.publish_tf = True
+    res = wait_for(stack, handle.get_result_async(), 60.0)
+    assert res.status == GoalStatus.STATUS_SUCCEEDED, res.result.error_msg
+    # it does not: aborted with Nav2's reason after the timeout
+    stack.robot.publish_tf = False
+    stack.spin(1.0)
+    t0 = stack.probe.now().nanoseconds
+    handle = wait_for(stack, client.send_goal_async(
+        NavigateToPose.Goal(pose=pose_stamped(1.0, 1.0, 0.0, "map"))))
+    res = wait_for(stack, handle.get_result_async(), 10.0)
+    took = (stack.probe.now().nanoseconds - t0) * 1e-9
+    assert res.status == GoalStatus.STATUS_ABORTED
+    assert "initial robot pose is not available (map -> base_footprint)" in res.result.error_msg
+    assert 2.0 <= took < 3.0

@@ -5,8 +5,8 @@ Each navigator runs a BehaviorTree.CPP v3/v4 XML file (:mod:`eddiebot.nav.bt`):
 ``navigate_*_w_replanning_and_recovery.xml`` when empty), or the goal's ``behavior_tree``.
 The files are loaded and checked at configure (an unknown node or port fails the bring-up
 naming file and line); a goal naming a tree that does not load is aborted with that error,
-and so is a goal sent before TF gives the robot's pose in ``global_frame`` (Nav2's
-"Initial robot pose is not available").
+and so is a goal for which TF gives no robot pose in ``global_frame`` within
+``initial_pose_timeout`` s (Nav2's "Initial robot pose is not available", at once there).
 ``plugin_lib_names`` entries are resolved through
 :meth:`~eddiebot.nav.bt.BehaviorTreeFactory.load_plugin`. The tree is ticked every
 ``bt_loop_duration`` ms on the node clock; its nodes reach the servers through action
@@ -76,6 +76,9 @@ class BtNavigator(NavServer):
         "path_blackboard_id": "path", "goal_updater_topic": "goal_update",
         # eddiebot: how often feedback is published (Nav2 publishes on every loop)
         "feedback_frequency": 10.0,
+        # eddiebot: seconds a goal waits for the robot's pose (localisation starting up)
+        # before it is aborted as Nav2 aborts it at once (0: Nav2's behaviour)
+        "initial_pose_timeout": 10.0,
     }
 
     def __init__(self, node_name: str = "bt_navigator", **kwargs: Any) -> None:
@@ -255,6 +258,14 @@ class BtNavigator(NavServer):
             result.error_msg = f"{kind}: goal pose {bad[0]} is not finite"
             self.get_logger().warning(result.error_msg)
             handle.abort()
+            return result
+        wait_ns = round(float(self.param("initial_pose_timeout")) * 1e9)
+        deadline = self.now().nanoseconds + wait_ns
+        while self._robot_pose_in() is None and self.now().nanoseconds < deadline \
+                and not handle.is_cancel_requested:
+            await sleep(self, int(self.param("bt_loop_duration")) / 1000.0)
+        if handle.is_cancel_requested:
+            handle.canceled()
             return result
         if self._robot_pose_in() is None:
             # Nav2's initializeGoalPose: no goal starts before the robot is localised
