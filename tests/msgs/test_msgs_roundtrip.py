@@ -8,6 +8,7 @@ from _msgtools import NUMPY_DTYPES, assert_equal, fields, sample_message
 from rosbags.interfaces import Nodetype
 
 from eddiebot.msgs import TYPESTORE, deserialize, serialize
+from eddiebot.msgs._store import _FILE_DEFAULTS
 
 ALL_TYPES = sorted(TYPESTORE.types)
 
@@ -36,10 +37,15 @@ def test_filled_round_trip(typename: str) -> None:
 
 @pytest.mark.parametrize("typename", ALL_TYPES)
 def test_every_field_has_a_default(typename: str) -> None:
+    """Zero values everywhere, except a primitive field whose interface file gives a default
+    (``bool include_type_sources true``), which takes that."""
     msg = TYPESTORE.types[typename]()
+    written = _FILE_DEFAULTS.get(typename, {})
     for name, (kind, detail) in fields(typename):
         value = getattr(msg, name)
-        if kind == Nodetype.BASE:
+        if name in written:
+            assert value == written[name] and type(value) is type(written[name])
+        elif kind == Nodetype.BASE:
             typ = detail[0]
             if typ in ("string", "wstring"):
                 assert value == ""

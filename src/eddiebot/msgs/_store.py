@@ -10,12 +10,16 @@ request, response, goal, result and feedback serializes exactly as in ROS 2:
 
 Every generated class is given defaults for every field (zero numbers, empty strings,
 zero-filled fixed arrays, empty sequences, default nested messages), so ``Twist()`` or
-``Odometry(child_frame_id="base_footprint")`` is a complete message.
+``Odometry(child_frame_id="base_footprint")`` is a complete message. A primitive field with a
+default value in its interface file (``bool include_type_sources true``) takes that value,
+as rosidl's generated classes do.
 """
 
 from __future__ import annotations
 
+import ast
 import os
+import re
 import threading
 from dataclasses import dataclass
 from importlib import resources
@@ -119,15 +123,20 @@ def _parse_interface(
     typs: dict[str, Any] = {}
     if kind == "msg":
         typs.update(get_types_from_msg(text, full))
+        _FILE_DEFAULTS[full] = _field_defaults(text)
     elif kind == "srv":
         req, res = _split_srv(text)
         typs.update(get_types_from_msg(req, f"{full}_Request"))
         typs.update(get_types_from_msg(res, f"{full}_Response"))
+        _FILE_DEFAULTS[f"{full}_Request"] = _field_defaults(req)
+        _FILE_DEFAULTS[f"{full}_Response"] = _field_defaults(res)
     else:
         sections = _sections(text)
         if len(sections) != 3:
             raise ValueError(f"{full}.action needs two '---' separators")
         goal, result, feedback = sections
+        for suffix, part in zip(("_Goal", "_Result", "_Feedback"), sections):
+            _FILE_DEFAULTS[f"{full}{suffix}"] = _field_defaults(part)
         typs.update(get_types_from_msg(goal, f"{full}_Goal"))
         typs.update(get_types_from_msg(result, f"{full}_Result"))
         typs.update(get_types_from_msg(feedback, f"{full}_Feedback"))
@@ -156,6 +165,38 @@ def _parse_interface(
     # get_types_from_msg also files pkg/srv/X_Request under pkg/srv/msg/; undo that.
     typs = {k.replace("/srv/msg/", "/srv/"): _fix_action_refs(v) for k, v in typs.items()}
     return typs, full if kind == "srv" else None, full if kind == "action" else None
+
+
+#: Default values written in interface files: type name → field → value (primitives only).
+_FILE_DEFAULTS: dict[str, dict[str, Any]] = {}
+
+_DEFAULT_LINE = re.compile(
+    r"^\s*(?P<type>[A-Za-z][\w/]*)\s+(?P<field>[a-z]\w*)\s+(?P<value>[^#=\s][^#]*?)\s*(#.*)?$"
+)
+
+
+def _field_defaults(text: str) -> dict[str, Any]:
+    """``field → value`` for the primitive fields of one message text that give a default
+    (``bool include_type_sources true``); arrays and nested messages keep theirs."""
+    out: dict[str, Any] = {}
+    for line in text.splitlines():
+        m = _DEFAULT_LINE.match(line)
+        if m is None:
+            continue
+        typ, literal = m.group("type"), m.group("value").strip()
+        if typ == "bool":
+            value: Any = {"true": True, "false": False, "1": True, "0": False}.get(literal.lower())
+        elif typ in ("string", "wstring") or typ.startswith(("string<", "wstring<")):
+            value = ast.literal_eval(literal) if literal[:1] in "'\"" else literal
+        elif typ.startswith("float"):
+            value = float(literal)
+        elif typ in _NUMPY_DTYPES:
+            value = int(literal, 0)
+        else:
+            continue
+        if value is not None:
+            out[m.group("field")] = value
+    return out
 
 
 def _service_type(store: Typestore, n: str) -> ServiceType:
@@ -275,8 +316,11 @@ def _add_defaults(store: Typestore, cls: Any) -> None:
         return
     namespace: dict[str, Any] = {"_orig": cls.__init__, "_M": _MISSING}
     params, args = [], []
+    written = _FILE_DEFAULTS.get(name, {})
     for i, (fname, desc) in enumerate(fields):
         constant, value = _immutable_default(desc)
+        if constant and fname in written:
+            value = written[fname]
         if constant:
             namespace[f"_c{i}"] = value
             params.append(f"{fname}=_c{i}")
