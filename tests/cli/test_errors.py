@@ -111,12 +111,12 @@ def test_params_file_with_a_plugin_we_cannot_load(capsys: Any, tmp_path: Path,
                                                    room_map: Path) -> None:
     params = tmp_path / "nav2.yaml"
     params.write_text("controller_server:\n  ros__parameters:\n    controller_plugins: [FollowPath]\n"
-                      "    FollowPath:\n      plugin: nav2_mppi_controller::MPPIController\n")
+                      "    FollowPath:\n      plugin: nav2_graceful_controller::GracefulController\n")
     code, lines = eddie(capsys, "nav", "--map", str(room_map), "--world", "office",
                         "--params", str(params), "--run-dir", str(tmp_path / "run"))
     assert code == 2
     assert lines[-1].startswith("eddie: error:")
-    assert "nav2_mppi_controller::MPPIController" in lines[-1] and "FollowPath" in lines[-1]
+    assert "nav2_graceful_controller::GracefulController" in lines[-1] and "FollowPath" in lines[-1]
 
 
 def test_slam_params_file_with_a_syntax_error(capsys: Any, tmp_path: Path) -> None:

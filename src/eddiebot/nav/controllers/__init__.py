@@ -24,6 +24,7 @@ from eddiebot.nav.controllers.checkers import (
     SimpleProgressCheckerConfig,
 )
 from eddiebot.nav.controllers.dwb import DWBConfig, DWBController, dwb_config_from_params
+from eddiebot.nav.controllers.mppi import MPPIConfig, MPPIController
 from eddiebot.nav.controllers.rpp import (
     RegulatedPurePursuitConfig,
     RegulatedPurePursuitController,
@@ -54,6 +55,7 @@ CONTROLLER_PLUGINS: dict[str, type[Any]] = {
     "nav2_regulated_pure_pursuit_controller::RegulatedPurePursuitController":
         RegulatedPurePursuitController,
     "dwb_core::DWBLocalPlanner": DWBController,
+    "nav2_mppi_controller::MPPIController": MPPIController,
 }
 PROGRESS_CHECKER_PLUGINS: dict[str, type[Any]] = {
     "nav2_controller::SimpleProgressChecker": SimpleProgressChecker,
@@ -140,6 +142,9 @@ def build_controller_server(params: Mapping[str, Any] | None = None,
         if cls is DWBController:
             out.controllers[name] = DWBController(dwb_config_from_params(sub, where), name,
                                                   cfg.controller_frequency)
+        elif cls is MPPIController:
+            out.controllers[name] = MPPIController.from_params(
+                sub, name, cfg.controller_frequency, server)
         else:
             out.controllers[name] = RegulatedPurePursuitController(
                 from_params(RegulatedPurePursuitConfig, sub, server=where), name,
@@ -169,6 +174,8 @@ __all__ = [
     "ControllerServerConfig",
     "DWBConfig",
     "DWBController",
+    "MPPIConfig",
+    "MPPIController",
     "PoseProgressChecker",
     "PoseProgressCheckerConfig",
     "RegulatedPurePursuitConfig",

@@ -6,9 +6,10 @@ costmap-filter mask servers, ...) and keys no eddiebot server reads. ROS 2 would
 without a word; :func:`audit_nav2_params` names each one once — ``not supported:
 docking_server (whole section)``, ``ignored: controller_server.FollowPath.foo`` — and
 returns the document without them, which the launch then accepts as is. A plugin the file
-asks for that cannot be configured (``nav2_mppi_controller::MPPIController``) is not a
-warning: :class:`~eddiebot.nav.errors.UnsupportedPlugin` names it, the server and the key,
-and the bring-up must stop.
+asks for that cannot be configured (``nav2_graceful_controller::GracefulController``, an MPPI
+critic eddiebot does not have) is not a warning:
+:class:`~eddiebot.nav.errors.UnsupportedPlugin` names it, the server and the key, and the
+bring-up must stop.
 
 The known keys of each server are its node's declared parameters plus the fields of the
 config dataclass of each plugin the file loads, so the audit follows the code.
@@ -175,6 +176,19 @@ def _audit_dwb(a: _Audit, where: str, params: dict[str, Any]) -> None:
             del params[key]
 
 
+def _audit_mppi(a: _Audit, where: str, params: dict[str, Any]) -> None:
+    from eddiebot.nav.controllers.mppi import CRITICS, mppi_known_keys
+
+    server, _, name = where.partition(".")
+    for critic in _names(params.get("critics", [])):
+        if critic not in CRITICS:
+            raise UnsupportedPlugin(server, f"{name}.critics", critic,
+                                    f"unknown MPPI critic; available: {sorted(CRITICS)}")
+    flat, blocks = mppi_known_keys(params)
+    nested = {b: (lambda k: lambda w, d: a.keys(w, d, k))(keys) for b, keys in blocks.items()}
+    a.keys(where, params, flat, nested)
+
+
 def _audit_controller_server(a: _Audit, params: dict[str, Any]) -> None:
     server = "controller_server"
     cfg = ControllerServerConfig()
@@ -182,6 +196,7 @@ def _audit_controller_server(a: _Audit, params: dict[str, Any]) -> None:
         "nav2_regulated_pure_pursuit_controller::RegulatedPurePursuitController":
             lambda w, d: a.keys(w, d, _fields(RegulatedPurePursuitConfig) | {"plugin"}),
         "dwb_core::DWBLocalPlanner": lambda w, d: _audit_dwb(a, w, d),
+        "nav2_mppi_controller::MPPIController": lambda w, d: _audit_mppi(a, w, d),
         "nav2_controller::SimpleProgressChecker":
             lambda w, d: a.keys(w, d, _fields(SimpleProgressCheckerConfig) | {"plugin"}),
         "nav2_controller::PoseProgressChecker":
