@@ -74,7 +74,37 @@ def test_a_second_simulator_is_refused_within_seconds(sim: Proc, env: dict[str, 
                           capture_output=True, text=True, timeout=30)
     assert slam.returncode == 2, slam.stderr
     assert "eddie slam: a simulator already runs" in slam.stderr
+    # so would `eddie launch sim` and `eddie run` of the simulator on sim time
+    for command, name in (
+            (["launch", "sim", "camera_width:=160", "camera_height:=120", "camera_rate:=5",
+              "--duration", "1"], "eddie launch sim"),
+            (["run", "eddiebot.sim.simulator", "--use-sim-time"],
+             "eddie run eddiebot.sim.simulator")):
+        t0 = time.monotonic()
+        other = subprocess.run([*EDDIE, *command], env=env, capture_output=True, text=True,
+                               timeout=30)
+        assert other.returncode == 2, other.stderr
+        assert time.monotonic() - t0 < 20.0
+        lines = _error_lines(other.stderr)
+        assert len(lines) == 1, other.stderr
+        assert f"{name}: a simulator already runs on ROS_DOMAIN_ID {domain}" in lines[0]
+        assert f"ROS_DOMAIN_ID={int(domain) + 1} {name} …" in lines[0]
+        assert "board on emulator" not in other.stderr  # refused before anything was built
     assert sim.popen.poll() is None  # the first one runs on
+
+
+def test_which_launches_would_publish_the_clock() -> None:
+    from eddiebot.cli._attach import publishes_clock
+    from eddiebot.core.launch import find_launch_file, parse_launch_file
+    from eddiebot.registry import NODES
+
+    sim = [spec.type for spec in parse_launch_file(find_launch_file("sim"), {}).nodes]
+    bringup = [spec.type for spec in parse_launch_file(find_launch_file("bringup"), {}).nodes]
+    assert publishes_clock(sim, True, NODES)
+    assert not publishes_clock(sim, False, NODES)  # a simulator on the wall clock: no /clock
+    assert not publishes_clock(bringup, True, NODES)
+    assert not publishes_clock(["eddiebot.demo.talker"], True, NODES)
+    assert publishes_clock(["eddiebot.sim.simulator"], True, NODES)
 
 
 def test_slam_without_a_simulator_says_what_it_looked_for(env: dict[str, str]) -> None:

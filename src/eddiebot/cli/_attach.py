@@ -3,7 +3,8 @@
 From the transport's graph view (liveliness tokens, `eddiebot.transport.graph.GraphCache`):
 
 - `refuse_second_simulator` — a process about to publish ``/clock`` stops when another
-  publishes it already (two simulators on one graph cross-wire every topic);
+  publishes it already (two simulators on one graph cross-wire every topic); `publishes_clock`
+  tells from a launch's node types whether it would (``eddie launch`` / ``eddie run``);
 - `wait_for_robot` — ``eddie slam`` / ``nav`` / ``vslam`` without ``--world`` wait for the
   simulator (a ``/clock`` publisher) or a real robot's bring-up (an ``/odom`` publisher).
 
@@ -14,6 +15,7 @@ nothing to attach to.
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -24,8 +26,12 @@ if TYPE_CHECKING:
     from eddiebot.transport.graph import GraphCache
     from eddiebot.transport.keys import GraphEntity
 
-__all__ = ["ATTACH_WAIT_S", "Robot", "graph_cache", "refuse_second_simulator",
+__all__ = ["ATTACH_WAIT_S", "Robot", "graph_cache", "publishes_clock", "refuse_second_simulator",
            "wait_for_robot"]
+
+#: The node class whose process drives the sim clock and publishes ``/clock``
+#: (`eddiebot.core.launch.spin_nodes` owns the clock when it is in the context).
+_CLOCK_OWNER = "eddiebot.sim.node:SimulatorNode"
 
 #: How long ``eddie slam`` / ``nav`` / ``vslam`` without ``--world`` wait for a robot, s.
 ATTACH_WAIT_S = 10.0
@@ -77,6 +83,13 @@ class Robot:
     def odom_session(self) -> str | None:
         """The running odometry's identity: its process and node (`eddiebot.maps.MapAnchor`)."""
         return None if self.odom is None else f"{self.odom.zid}{self.odom.node}"
+
+
+def publishes_clock(node_types: Iterable[str], use_sim_time: bool,
+                    registry: Mapping[str, str]) -> bool:
+    """Whether a process running nodes of these registered types would publish ``/clock``:
+    on sim time, with the simulator among them (decided before anything is built)."""
+    return use_sim_time and any(registry.get(t) == _CLOCK_OWNER for t in node_types)
 
 
 def refuse_second_simulator(context: Context, command: str) -> None:

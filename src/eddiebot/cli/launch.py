@@ -1,10 +1,16 @@
-"""``eddie launch FILE [name:=value ...]``: run a YAML launch file in this process."""
+"""``eddie launch FILE [name:=value ...]``: run a YAML launch file in this process.
+
+A launch that runs the simulator on sim time (``eddie launch sim``) publishes ``/clock``: it
+refuses to start when a simulator already runs on the same ROS_DOMAIN_ID, as ``eddie sim``
+does (`eddiebot.cli._attach.refuse_second_simulator`).
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
 
+from eddiebot.cli._attach import publishes_clock, refuse_second_simulator
 from eddiebot.cli._common import connect_transport
 from eddiebot.core.context import Context
 from eddiebot.core.errors import ParameterError
@@ -40,13 +46,23 @@ def run(args: argparse.Namespace) -> int:
                 print(f"{name}:={value}")
             return 0
         use_sim_time = str(desc.args.get("use_sim_time", "false")).lower() == "true"
-        context = Context(use_sim_time=use_sim_time)
-        nodes = build_nodes(desc, context, NODES)
     except (LaunchError, ParameterError) as exc:
         print(f"eddie launch: {exc}", file=sys.stderr)
         return 2
-    if not args.no_transport:
-        connect_transport(context)
+    context = Context(use_sim_time=use_sim_time)
+    try:
+        if not args.no_transport:
+            connect_transport(context)
+            if publishes_clock((spec.type for spec in desc.nodes), use_sim_time, NODES):
+                refuse_second_simulator(context, f"eddie launch {args.file}")
+        nodes = build_nodes(desc, context, NODES)
+    except (LaunchError, ParameterError) as exc:
+        context.shutdown()
+        print(f"eddie launch: {exc}", file=sys.stderr)
+        return 2
+    except BaseException:
+        context.shutdown()
+        raise
     print(f"launched {len(nodes)} nodes from {path}: "
           + ", ".join(n.fully_qualified_name for n in nodes), file=sys.stderr)
     return spin_nodes(nodes, context, real_time_factor=args.rate, duration_s=args.duration)

@@ -1,4 +1,9 @@
-"""``eddie run TYPE [--ros-args -p name:=value -r from:=to --params-file F]``: one node."""
+"""``eddie run TYPE [--ros-args -p name:=value -r from:=to --params-file F]``: one node.
+
+The simulator on sim time (``eddie run eddiebot.sim.simulator --use-sim-time``) publishes
+``/clock``: it refuses to start when a simulator already runs on the same ROS_DOMAIN_ID, as
+``eddie sim`` does (`eddiebot.cli._attach.refuse_second_simulator`).
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from eddiebot.cli._attach import publishes_clock, refuse_second_simulator
 from eddiebot.cli._common import connect_transport
 from eddiebot.core.context import Context
 from eddiebot.core.errors import ParameterError
@@ -46,11 +52,21 @@ def run(args: argparse.Namespace) -> int:
             if not sep:
                 raise LaunchError(f"-r expects FROM:=TO, got {item!r}")
             spec.remaps[src] = dst
-        context = Context(use_sim_time=args.use_sim_time)
-        nodes = build_nodes(LaunchDescription(nodes=[spec]), context, NODES)
-    except (LaunchError, ParameterError) as exc:
+    except LaunchError as exc:
         print(f"eddie run: {exc}", file=sys.stderr)
         return 2
-    if not args.no_transport:
-        connect_transport(context)
+    context = Context(use_sim_time=args.use_sim_time)
+    try:
+        if not args.no_transport:
+            connect_transport(context)
+            if publishes_clock([spec.type], args.use_sim_time, NODES):
+                refuse_second_simulator(context, f"eddie run {args.type}")
+        nodes = build_nodes(LaunchDescription(nodes=[spec]), context, NODES)
+    except (LaunchError, ParameterError) as exc:
+        context.shutdown()
+        print(f"eddie run: {exc}", file=sys.stderr)
+        return 2
+    except BaseException:
+        context.shutdown()
+        raise
     return spin_nodes(nodes, context)
