@@ -36,7 +36,8 @@ import itertools
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from collections import deque
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 import zenoh
@@ -155,6 +156,11 @@ class _TopicSub:
     zsub: Any
     transient_local: bool
     count: int
+    depth: int = 1
+    #: transient-local topics: publisher GID → its last ``depth`` samples (CDR bytes, type,
+    #: expiry), for subscriptions of this process that come after the Zenoh subscriber
+    #: fetched the publishers' history
+    history: dict[bytes, deque[tuple[bytes, str, int | None]]] = field(default_factory=dict)
 
 
 class ZenohTransport:
@@ -408,8 +414,16 @@ class ZenohTransport:
             if ts is None or (tl and not ts.transient_local):
                 if ts is not None:
                     _undeclare(ts.zsub)
-                zsub = self._declare_subscriber(topic, tl, sub.qos.depth)
-                ts = self._topic_subs[topic] = _TopicSub(zsub, tl, ts.count if ts else 0)
+                # in place before the declaration: the publishers' history may arrive during it
+                ts = self._topic_subs[topic] = _TopicSub(None, tl, ts.count if ts else 0,
+                                                         max(1, sub.qos.depth))
+                try:
+                    ts.zsub = self._declare_subscriber(topic, tl, sub.qos.depth)
+                except BaseException:
+                    del self._topic_subs[topic]
+                    raise
+            elif tl:
+                self._replay_history(sub, ts)
             ts.count += 1
         # a raw subscription of a type nothing here describes announces the hash it was
         # made for (learnt from the publishers' tokens)
@@ -418,6 +432,25 @@ class ZenohTransport:
                                                   learnt))
         for e in self.cache.publishers(topic):
             self._on_graph_change(e, True)
+
+    def _replay_history(self, sub: Subscription, ts: _TopicSub) -> None:
+        """Give a late transient-local subscription the samples the process's Zenoh
+        subscriber got from live publishers' history and since (Zenoh fetched it once, for
+        the first subscription)."""
+        live = {e.gid for e in self.cache.publishers(sub.topic_name)}
+        now = self.context.system_clock.now_ns()
+        for gid, samples in list(ts.history.items()):
+            if gid not in live:
+                del ts.history[gid]
+                continue
+            for data, remote, expires in list(samples):
+                if expires is not None and now > expires:
+                    continue
+                try:
+                    sub.deliver(data if getattr(sub, "raw", False) else deserialize(data, remote),
+                                expires)
+                except Exception:
+                    log.exception("dropping a sample on %s", sub.topic_name)
 
     def _declare_subscriber(self, topic: str, transient_local: bool, depth: int) -> Any:
         key = topic_wildcard_key(self.domain, topic)
@@ -471,12 +504,13 @@ class ZenohTransport:
                     lifespans[e.gid] = duration_ns(e.qos_profile.lifespan)
             return lifespans.get(gid)
 
-        def track(entry: Any, sample: Any) -> int | None:
-            """Count lost samples; the system time this sample expires (None: never)."""
+        def track(entry: Any, sample: Any) -> tuple[int | None, bytes | None]:
+            """Count lost samples; the system time this sample expires (None: never) and
+            its publisher's GID."""
             att = sample.attachment
             decoded = decode_attachment(att.to_bytes()) if att is not None else None
             if decoded is None:
-                return None
+                return None, None
             seq, stamp, gid = decoded
             previous = last_seq.get(gid)
             last_seq[gid] = seq
@@ -485,7 +519,7 @@ class ZenohTransport:
                     if sub.events is not None:
                         sub.events.on_messages_lost(seq - previous - 1)
             lifespan = lifespan_of(gid)
-            return None if lifespan is None else stamp + lifespan
+            return (None if lifespan is None else stamp + lifespan), gid
 
         def handler(sample: Any) -> None:
             try:
@@ -502,10 +536,16 @@ class ZenohTransport:
                     if ros_type_name(dds) == entry.type_name:  # same name, other definition
                         self.undecoded[topic] = self.undecoded.get(topic, 0) + 1
                     return
-                expires = track(entry, sample)
+                expires, gid = track(entry, sample)
                 if expires is not None and context.system_clock.now_ns() > expires:
                     return  # outlived the publisher's lifespan on the way
                 data = sample.payload.to_bytes()
+                ts = self._topic_subs.get(topic)
+                if ts is not None and ts.transient_local and gid is not None:
+                    kept = ts.history.get(gid)
+                    if kept is None:
+                        kept = ts.history[gid] = deque(maxlen=ts.depth)
+                    kept.append((data, remote, expires))
                 subs = list(entry.subscriptions)
                 if any(getattr(sub, "raw", False) for sub in subs):
                     # raw subscriptions (the recorder, hz, bw) take the CDR bytes as they came
