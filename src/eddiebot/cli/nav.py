@@ -17,6 +17,15 @@ robot whose running odometry the map was saved with (the map YAML's ``map_to_odo
 pose. Otherwise the run says it cannot know and AMCL waits for one (``--initial-pose`` or
 the dashboard). A pose outside the map, in unknown space or on an obstacle is an error.
 Send goals with ``eddie goal X Y YAW``.
+
+Costmap filters: ``--keepout MASK.yaml`` and ``--speed-mask MASK.yaml`` (map_server
+files: a keepout zone is occupied, a speed zone's value ``v`` limits the speed to
+``100 - v`` % unless the parameters file's ``speed_costmap_filter_info_server`` says
+otherwise) start a filter mask server and a costmap filter info server each and enable the
+filter in the costmaps. A parameters file with ``*filter_mask_server`` sections naming a
+``yaml_filename`` (relative to the file) starts them by itself. A mask that cannot be used
+(see :func:`eddiebot.nav.nodes.costmap_filters.check_mask`) stops the run before it starts,
+naming the file.
 """
 
 from __future__ import annotations
@@ -51,6 +60,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--attach-timeout", type=float, default=None,
                         help="without --world: how long to wait for a simulator or robot, s "
                         "(default 10)")
+    parser.add_argument("--keepout", type=Path, default=None, metavar="MASK.yaml",
+                        help="keepout zones: a map_server mask whose occupied cells the "
+                        "planner and controller keep out of")
+    parser.add_argument("--speed-mask", type=Path, default=None, metavar="MASK.yaml",
+                        help="speed zones: a map_server mask; value v limits the speed to "
+                        "100 - v %% of the maximum")
     parser.add_argument("--run-dir", type=Path, default=None,
                         help="where the resolved parameters are written (default a temp dir)")
     add_run_arguments(parser)
@@ -152,7 +167,72 @@ def run(args: argparse.Namespace) -> int:
     pose, line = (None, "") if args.localization != "amcl" else initial_pose(args, None, None)
     launch_args = _launch_args(args, pose, line)
     launch_args.update({"world": args.world, "seed": str(args.seed), **camera_args(args.camera)})
-    return run_stack(args, "nav_sim", launch_args)
+    sections = filter_sections(args, Path(launch_args["params_file"]))
+    if not sections:
+        return run_stack(args, "nav_sim", launch_args)
+    from eddiebot.cli._stack import build_description
+    from eddiebot.core.context import Context
+    from eddiebot.core.launch import build_nodes
+    from eddiebot.nav.nodes.costmap_filters import build_filter_servers
+    from eddiebot.registry import NODES
+
+    context = Context(use_sim_time=True)
+    return run_nodes(args, context, lambda: [
+        *build_nodes(build_description("nav_sim", launch_args), context, NODES),
+        *build_filter_servers(sections, context, use_sim_time=True)],
+        real_time_factor=None if args.fast else args.rate, owns_sim_clock=True)
+
+
+def filter_sections(args: argparse.Namespace, resolved: Path) -> list[Any]:
+    """The costmap filter servers to start: ``--keepout`` / ``--speed-mask`` added to the
+    resolved parameters (rewritten in place), plus those the parameters file names; each
+    mask checked against the map. Raises `CliError` naming a mask that cannot be used."""
+    import yaml
+
+    from eddiebot.maps import MapError, load_map
+    from eddiebot.nav.nodes.costmap_filters import (
+        MaskError,
+        add_filter_masks,
+        check_mask,
+        filter_server_sections,
+    )
+
+    keepout, speed = getattr(args, "keepout", None), getattr(args, "speed_mask", None)
+    for path in (keepout, speed):
+        if path is not None and not path.is_file():
+            raise CliError(f"eddie nav: {path}: no such mask file")
+    text = resolved.read_text()
+    doc = yaml.safe_load(text) or {}
+    add_filter_masks(doc, keepout=keepout, speed=speed)
+    source = args.params or default_params()
+    sections = filter_server_sections(doc, base_dir=Path(source).resolve().parent)
+    if sections:
+        # the servers run beside the launch: their sections go to a file of their own
+        servers = {s.node_name: {"ros__parameters": s.params} for s in sections}
+        for name in servers:
+            doc.pop(name, None)
+            doc.pop("/" + name, None)
+        resolved.write_text(text.splitlines()[0] + "\n" + yaml.safe_dump(doc, sort_keys=False))
+        filters_file = resolved.parent / "costmap_filters.yaml"
+        filters_file.write_text(yaml.safe_dump(servers, sort_keys=False))
+        print(f"costmap filter servers: {filters_file}", flush=True)
+    nav_map = None
+    if args.localization == "amcl":
+        try:
+            nav_map = load_map(args.map)
+        except MapError:
+            nav_map = None
+    for section in sections:
+        if section.node_name.endswith("filter_mask_server"):
+            try:
+                check_mask(section, doc, nav_map)
+            except MaskError as exc:
+                raise CliError(f"eddie nav: {exc}") from exc
+    for section in sections:
+        if section.node_name.endswith("filter_mask_server"):
+            print(f"filter mask: {section.params['yaml_filename']} on "
+                  f"{section.params.get('topic_name', 'filter_mask')}", flush=True)
+    return sections
 
 
 def _launch_args(args: argparse.Namespace, pose: tuple[float, float, float] | None,
@@ -197,13 +277,17 @@ def _run_attached(args: argparse.Namespace) -> int:
             args, robot, lambda: odom_pose(context))
         launch_args = _launch_args(args, pose, line)
         launch_args["use_sim_time"] = "true" if robot.simulated else "false"
+        sections = filter_sections(args, Path(launch_args["params_file"]))
         cloud = robot.simulated and cache is not None and not cache.publishers("/points")
     except BaseException:
         context.shutdown()
         raise
 
     def build() -> list[Any]:
+        from eddiebot.nav.nodes.costmap_filters import build_filter_servers
+
         nodes = build_nodes(parse_launch_file(find_launch_file("nav"), launch_args), context, NODES)
+        nodes += build_filter_servers(sections, context, use_sim_time=robot.simulated)
         if cloud:  # the simulator publishes no /points: the local costmap's source
             nodes += build_nodes(parse_launch_file(find_launch_file("depth_cloud"), {
                 "use_sim_time": "true"}), context, NODES)

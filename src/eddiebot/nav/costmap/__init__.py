@@ -1,7 +1,7 @@
 """Nav2-style layered costmaps: cost grid, layers, filters, global and rolling maps.
 
 A :class:`LayeredCostmap` owns a master :class:`Costmap2D` and ordered layers (static,
-obstacle, range, inflation) and filters (keepout, speed), updated by bounds then costs as
+obstacle, range, inflation) and filters (keepout, speed, binary), updated by bounds then costs as
 Nav2 does. Build one from a costmap node's parameters with :func:`build_costmap`; publish it
 with :func:`to_occupancy_grid` (Nav2's cost -> 0..100 translation).
 """
@@ -9,6 +9,8 @@ with :func:`to_occupancy_grid` (Nav2's cost -> 0..100 translation).
 from eddiebot.nav.costmap.costmap2d import Costmap2D
 from eddiebot.nav.costmap.filters import (
     NO_SPEED_LIMIT,
+    BinaryFilter,
+    CostmapFilter,
     CostmapFilterConfig,
     CostmapFilterInfo,
     KeepoutFilter,
@@ -53,8 +55,10 @@ from eddiebot.nav.costmap.layers import (
 __all__ = [
     "COSTMAP_PLUGINS",
     "NO_SPEED_LIMIT",
+    "BinaryFilter",
     "Costmap2D",
     "CostmapConfig",
+    "CostmapFilter",
     "CostmapFilterConfig",
     "CostmapFilterInfo",
     "InflationLayer",

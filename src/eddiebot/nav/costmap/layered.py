@@ -18,7 +18,7 @@ import numpy.typing as npt
 from eddiebot.maps import OccupancyMap
 from eddiebot.nav.cost_values import FREE_SPACE, NO_INFORMATION
 from eddiebot.nav.costmap.costmap2d import Costmap2D
-from eddiebot.nav.costmap.filters import CostmapFilterConfig, KeepoutFilter, SpeedFilter
+from eddiebot.nav.costmap.filters import FILTER_PLUGINS, CostmapFilter, SpeedFilter
 from eddiebot.nav.costmap.footprint import (
     inscribed_and_circumscribed_radius,
     make_footprint_from_radius,
@@ -251,8 +251,7 @@ COSTMAP_PLUGINS: dict[str, type[Layer]] = {
     "nav2_costmap_2d::VoxelLayer": ObstacleLayer,
     "nav2_costmap_2d::InflationLayer": InflationLayer,
     "nav2_costmap_2d::RangeSensorLayer": RangeLayer,
-    "nav2_costmap_2d::KeepoutFilter": KeepoutFilter,
-    "nav2_costmap_2d::SpeedFilter": SpeedFilter,
+    **FILTER_PLUGINS,
 }
 
 _DEFAULT_TYPES = {
@@ -292,8 +291,8 @@ def _layer_from_params(name: str, params: Mapping[str, Any], server: str) -> Lay
         cfg = ObstacleLayerConfig(**{**cfg.__dict__, "sources": sources})
         cfg.validate(where)
         return ObstacleLayer(name, cfg)
-    if cls in (KeepoutFilter, SpeedFilter):
-        return cls(name, from_params(CostmapFilterConfig, sub, server=where))  # type: ignore[call-arg]
+    if issubclass(cls, CostmapFilter):
+        return cls(name, from_params(cls.config_class, sub, server=where))
     return cls(name)  # pragma: no cover
 
 

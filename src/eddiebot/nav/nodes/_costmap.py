@@ -5,7 +5,8 @@ helper wires a :class:`~eddiebot.nav.costmap.LayeredCostmap` to the bus: ``/map`
 layers, LaserScan and PointCloud2 observation sources for obstacle layers, ``sensor_msgs/Range`` topics for
 range layers, an update timer at ``update_frequency`` (robot pose from TF), the
 ``/<name>/costmap`` (OccupancyGrid) and ``/<name>/costmap_raw`` (nav2_msgs/Costmap)
-publishers at ``publish_frequency``, and ``/<name>/clear_entirely_<name>``.
+publishers at ``publish_frequency``, ``/<name>/clear_entirely_<name>``, and the costmap
+filters' topics (:class:`~eddiebot.nav.nodes.costmap_filters.FilterHost`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ from eddiebot.nav.costmap import (
     to_occupancy_grid,
 )
 from eddiebot.nav.nodes._common import robot_pose
+from eddiebot.nav.nodes.costmap_filters import FilterHost
 
 __all__ = ["CostmapHost", "cloud_xyz"]
 
@@ -90,6 +92,7 @@ class CostmapHost:
         self._footprint_pub = node.create_lifecycle_publisher(
             PolygonStamped, f"/{name}/published_footprint", 1)
         self._pubs = [self._grid_pub, self._raw_pub, self._footprint_pub]
+        self.filters = FilterHost(node, costmap, buffer, on_mask=self.update)
 
     @property
     def global_frame(self) -> str:
@@ -134,6 +137,7 @@ class CostmapHost:
             self._timers.append(node.create_timer(1.0 / cfg.publish_frequency, self.publish))
         self._srv = node.create_service(ClearEntireCostmap,
                                         f"/{self.name}/clear_entirely_{self.name}", self._on_clear)
+        self.filters.activate()
 
     def deactivate(self) -> None:
         for s in self._subs:
@@ -143,6 +147,7 @@ class CostmapHost:
         if self._srv is not None:
             self.node.destroy_service(self._srv)
         self._subs, self._timers, self._srv = [], [], None
+        self.filters.deactivate()
 
     def destroy(self) -> None:
         self.deactivate()
@@ -245,7 +250,9 @@ class CostmapHost:
                 layer.set_time(now_ns)  # no_readings_timeout
             elif isinstance(layer, StaticLayer) and self.costmap.rolling_window:
                 layer.map_to_global = self._map_pose()
+        self.filters.before_update()
         self.costmap.update_map(pose)
+        self.filters.publish_changes()
         self.updated = True
 
     def _map_pose(self) -> npt.NDArray[np.float64] | None:

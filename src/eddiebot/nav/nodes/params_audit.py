@@ -39,7 +39,7 @@ from eddiebot.nav.controllers.checkers import (
 )
 from eddiebot.nav.controllers.dwb import DWBConfig
 from eddiebot.nav.controllers.rpp import RegulatedPurePursuitConfig
-from eddiebot.nav.costmap.filters import CostmapFilterConfig
+from eddiebot.nav.costmap.filters import CostmapFilter
 from eddiebot.nav.costmap.layered import COSTMAP_PLUGINS, CostmapConfig
 from eddiebot.nav.costmap.layers import (
     InflationLayerConfig,
@@ -148,8 +148,8 @@ def _audit_costmap(a: _Audit, where: str, params: dict[str, Any], server: str) -
             kinds[plugin] = layer_keys(InflationLayerConfig)
         elif name == "RangeLayer":
             kinds[plugin] = layer_keys(RangeLayerConfig)
-        else:
-            kinds[plugin] = layer_keys(CostmapFilterConfig)
+        elif issubclass(cls, CostmapFilter):
+            kinds[plugin] = layer_keys(cls.config_class)
     default = {"static_layer": "nav2_costmap_2d::StaticLayer",
                "obstacle_layer": "nav2_costmap_2d::ObstacleLayer",
                "inflation_layer": "nav2_costmap_2d::InflationLayer"}
@@ -320,6 +320,19 @@ _SERVERS: dict[str, Callable[[_Audit, dict[str, Any]], None]] = {
     "velocity_smoother": _flat_server("velocity_smoother", _fields(VelocitySmootherConfig)),
     "collision_monitor": _audit_collision_monitor,
 }
+
+
+def _filter_server_audit(name: str) -> Callable[[_Audit, dict[str, Any]], None] | None:
+    """Filter mask and info servers go by any name ending as Nav2's sample files' do."""
+    from eddiebot.nav.nodes import costmap_filters as cf
+
+    if cf.is_filter_mask_server(name):
+        return lambda a, p: a.keys(name, p, set(cf.FilterMaskServer.PARAMETERS) | _NODE_KEYS)
+    if cf.is_filter_info_server(name):
+        return lambda a, p: a.keys(name, p, set(cf.CostmapFilterInfoServer.PARAMETERS) | _NODE_KEYS)
+    return None
+
+
 #: lifecycle managers are launched with their node lists; a file's values are not read
 _COSTMAP_NODES = {"global_costmap": "planner_server", "local_costmap": "controller_server"}
 
@@ -349,7 +362,7 @@ def audit_nav2_params(doc: Mapping[str, Any]) -> ParamsAudit:
                 warnings.append(f"not supported: {name}/{key} (whole section)")
                 del body[key]
             continue
-        audit = _SERVERS.get(name)
+        audit = _SERVERS.get(name) or _filter_server_audit(name)
         if audit is None or not isinstance(body, dict):
             warnings.append(f"not supported: {name} (whole section)")
             del out[section]
