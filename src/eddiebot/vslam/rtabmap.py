@@ -374,7 +374,9 @@ class Rtabmap:
             stats["Loop/Mahalanobis/"] = mahalanobis
         # --- proximity by space ---
         proximity_id = 0
-        if p.rgbd_proximity_by_space and not loop_id and (
+        # as upstream, a small displacement after a closure skips proximity as it skips the
+        # Bayes update (else a slow robot links each node to its own trail just out of STM)
+        if p.rgbd_proximity_by_space and not loop_id and not skip_update and (
                 not self.localization_mode or self._localized):
             near = self._proximity(node, camera)
             if near is not None:
