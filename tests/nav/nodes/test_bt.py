@@ -272,3 +272,57 @@ def test_plugin_lib_names_resolve_modules():
     assert [tree.tick_once() for _ in range(3)] == [R, R, S]
     with pytest.raises(TreeError, match="'no_such_bt_plugin' is neither an entry point"):
         f.load_plugin("no_such_bt_plugin")
+
+
+def test_timeout_halts_a_slow_child_and_delay_waits():
+    clock = Clock()
+    t = load('<Timeout msec="500"><Scripted name="x" script="R"/></Timeout>', clock)
+    for _ in range(5):
+        assert t.tick_once() == R
+        clock.ns += 100_000_000
+    assert t.tick_once() == F
+    assert node(t, "x").halts == 1 and node(t, "x").ticks == 5
+    clock = Clock()
+    t = load('<Delay delay_msec="300"><Scripted name="x" script="S"/></Delay>', clock)
+    statuses = []
+    for _ in range(4):
+        statuses.append(t.tick_once())
+        clock.ns += 100_000_000
+    assert statuses == [R, R, R, S] and node(t, "x").ticks == 1
+
+
+def test_battery_conditions_read_the_last_battery_state():
+    from eddiebot.msgs.sensor_msgs import BatteryState
+
+    class Ctx(TreeContext):
+        def latest(self, topic, msg_type=None):
+            return msgs.get(topic)
+
+    msgs = {}
+    f = BehaviorTreeFactory()
+    tree = f.create_tree_from_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="M"><Sequence><IsBatteryCharging/>'
+        '<IsBatteryLow min_battery="0.2" battery_topic="/battery"/></Sequence></BehaviorTree>'
+        '</root>', None, Ctx())
+    assert tree.tick_once() == F  # nothing received yet
+    msgs["/battery_status"] = BatteryState(
+        power_supply_status=BatteryState.POWER_SUPPLY_STATUS_CHARGING)
+    msgs["/battery"] = BatteryState(percentage=0.5)
+    assert tree.tick_once() == F  # charging, not low
+    msgs["/battery"] = BatteryState(percentage=0.15)
+    assert tree.tick_once() == S
+
+
+def test_plugin_lib_names_resolve_entry_points(tmp_path, monkeypatch):
+    # a distribution on sys.path that declares its BT nodes as an entry point, as an
+    # installed package of the user's would
+    dist = tmp_path / "user_bt_nodes-0.1.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: user-bt-nodes\nVersion: 0.1\n")
+    (dist / "entry_points.txt").write_text(
+        "[eddiebot.nav.bt_nodes]\nuser_counters = navnodes_bt_plugin:register_bt_nodes\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    f = BehaviorTreeFactory()
+    assert "CountTicks" not in f.builders
+    f.load_plugin("user_counters")
+    assert "CountTicks" in f.builders

@@ -3,7 +3,7 @@
 BT.CPP: ``Sequence``, ``SequenceWithMemory`` (v3 ``SequenceStar``), ``ReactiveSequence``,
 ``Fallback``, ``ReactiveFallback``, ``Parallel``, ``IfThenElse``, ``WhileDoElse``;
 decorators ``Inverter``, ``ForceSuccess``, ``ForceFailure``, ``KeepRunningUntilFailure``,
-``Repeat``, ``RetryUntilSuccessful``; leaves ``AlwaysSuccess``, ``AlwaysFailure``,
+``Repeat``, ``RetryUntilSuccessful``, ``Timeout``, ``Delay``; leaves ``AlwaysSuccess``, ``AlwaysFailure``,
 ``SetBlackboard``. Nav2 (nav2_behavior_tree): ``PipelineSequence``, ``RecoveryNode``,
 ``RoundRobin``, ``RateController``, ``DistanceController``, ``SpeedController``,
 ``GoalUpdatedController``, ``GoalUpdater``, ``PathLongerOnApproach``, ``SingleTrigger``.
@@ -373,6 +373,54 @@ class RetryUntilSuccessful(DecoratorNode):
     def halt(self) -> None:
         self.tries = 0
         super().halt()
+
+
+class Timeout(DecoratorNode):
+    """BT.CPP Timeout: halts the child and fails once it ran ``msec`` ms."""
+
+    PORTS: ClassVar[dict[str, Port]] = {
+        "msec": input_port(int, description="After a certain amount of time, halt() the child "
+                           "if it is still running.")}
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.start = 0
+
+    def tick(self) -> Status:
+        now = self.context.now_ns()
+        if self.status in (Status.IDLE, K):
+            self.start = now
+        self.status = R
+        if now - self.start >= int(self.get_input("msec", 0)) * 1_000_000:
+            self.reset_child()
+            return F
+        s = self.child.execute_tick()
+        if s != R:
+            self.reset_child()
+        return s
+
+
+class Delay(DecoratorNode):
+    """BT.CPP Delay: RUNNING for ``delay_msec`` ms, then ticks the child."""
+
+    PORTS: ClassVar[dict[str, Port]] = {
+        "delay_msec": input_port(int, description="Tick the child after a few milliseconds")}
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.start = 0
+
+    def tick(self) -> Status:
+        now = self.context.now_ns()
+        if self.status in (Status.IDLE, K):
+            self.start = now
+        self.status = R
+        if now - self.start < int(self.get_input("delay_msec", 0)) * 1_000_000:
+            return R
+        s = self.child.execute_tick()
+        if s != R:
+            self.reset_child()
+        return s
 
 
 # -- BT.CPP leaves -------------------------------------------------------------------------
@@ -790,7 +838,8 @@ CONTROL_NODES: dict[str, type] = {
     cls.__name__: cls
     for cls in (Sequence, SequenceWithMemory, ReactiveSequence, Fallback, ReactiveFallback,
                 Parallel, IfThenElse, WhileDoElse, Inverter, ForceSuccess, ForceFailure,
-                KeepRunningUntilFailure, Repeat, RetryUntilSuccessful, AlwaysSuccess,
+                KeepRunningUntilFailure, Repeat, RetryUntilSuccessful, Timeout, Delay,
+                AlwaysSuccess,
                 AlwaysFailure, SetBlackboard, PipelineSequence, RecoveryNode, RoundRobin,
                 RateController, DistanceController, SpeedController, GoalUpdatedController,
                 GoalUpdater, PathLongerOnApproach, SingleTrigger)

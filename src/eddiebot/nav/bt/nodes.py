@@ -397,6 +397,28 @@ class Wait(BtActionNode):
         self.goal.time = _duration(self.get_input("wait_duration"))
 
 
+class AssistedTeleop(BtActionNode):
+    ACTION = "AssistedTeleop"
+    DEFAULT_SERVER = "assisted_teleop"
+    PORTS: ClassVar[dict[str, Port]] = {
+        **_basic(),
+        "time_allowance": input_port(float, 10.0, "Allowed time for running assisted teleop"),
+        "is_recovery": input_port(bool, False, "If true the recovery count will be incremented"),
+        "error_code_id": output_port(int, "The assisted teleop behavior server error code"),
+    }
+
+    def on_tick(self) -> None:
+        self.goal.time_allowance = _duration(self.get_input("time_allowance"))
+        if bool(self.get_input("is_recovery")):
+            bb = self.config.blackboard
+            bb.set(RECOVERIES_KEY, int(bb.get(RECOVERIES_KEY, 0) or 0) + 1)
+
+    def on_cancelled(self, result: Any) -> Status:
+        # Nav2: an assisted teleop stopped by the operator counts as done
+        self.set_output("error_code_id", 0)
+        return S
+
+
 class _CancelNode(_Remote):
     """Nav2's ``BtCancelActionNode``: cancels every goal this tree has on the server."""
 
@@ -428,6 +450,10 @@ class CancelDriveOnHeading(_CancelNode):
     DEFAULT_SERVER = "drive_on_heading"
 
 
+class CancelAssistedTeleop(_CancelNode):
+    DEFAULT_SERVER = "assisted_teleop"
+
+
 # -- services --------------------------------------------------------------------------------
 class BtServiceNode(_Remote):
     """Nav2's ``BtServiceNode``: one request per run, polled until its response."""
@@ -441,10 +467,13 @@ class BtServiceNode(_Remote):
         self._client: Any = None
         self._since = 0
         if getattr(self.context, "node", None) is not None:
-            self._client = self.context.service_client(_nav2(self.SERVICE), self.server_name())
+            self._client = self.context.service_client(self.srv_type(), self.server_name())
+
+    def srv_type(self) -> Any:
+        return _nav2(self.SERVICE)
 
     def make_request(self) -> Any:
-        return _nav2(self.SERVICE).Request()
+        return self.srv_type().Request()
 
     def on_completion(self, response: Any) -> Status:
         return S
@@ -453,7 +482,7 @@ class BtServiceNode(_Remote):
         ctx = self.context
         now = ctx.now_ns()
         if self.status != R:
-            self._client = ctx.service_client(_nav2(self.SERVICE), self.server_name())
+            self._client = ctx.service_client(self.srv_type(), self.server_name())
             if self._client is None:
                 self.note_failure("no node to reach the service")
                 return F
@@ -482,6 +511,18 @@ class BtServiceNode(_Remote):
 
     def halt(self) -> None:
         self._future = None
+
+
+class ReinitializeGlobalLocalization(BtServiceNode):
+    """Calls AMCL's ``reinitialize_global_localization`` (std_srvs/Empty)."""
+
+    DEFAULT_SERVER = "reinitialize_global_localization"
+    PORTS: ClassVar[dict[str, Port]] = _basic(server=False)
+
+    def srv_type(self) -> Any:
+        from eddiebot.msgs.std_srvs import Empty
+
+        return Empty
 
 
 class ClearEntireCostmap(BtServiceNode):
@@ -850,6 +891,70 @@ class InitialPoseReceived(LeafNode):
         return S if bool(self.get_input_or_blackboard("initial_pose_received", False)) else F
 
 
+class IsBatteryLow(LeafNode):
+    """SUCCESS while the last ``sensor_msgs/BatteryState`` on ``battery_topic`` is at or
+    below ``min_battery`` (percentage, or volts with ``is_voltage``)."""
+
+    PORTS: ClassVar[dict[str, Port]] = {
+        "min_battery": input_port(float, description="Minimum battery percentage/voltage"),
+        "battery_topic": input_port(str, "/battery_status", "Battery topic"),
+        "is_voltage": input_port(bool, False, "If true voltage will be used to check for low "
+                                 "battery"),
+    }
+
+    def _last(self) -> Any:
+        from eddiebot.msgs.sensor_msgs import BatteryState
+
+        return self.context.latest(str(self.get_input("battery_topic")), BatteryState)
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        if getattr(self.context, "node", None) is not None:
+            self._last()
+
+    def tick(self) -> Status:
+        msg = self._last()
+        if msg is None:
+            return F
+        level = msg.voltage if bool(self.get_input("is_voltage")) else msg.percentage
+        return S if float(level) <= float(self.get_input("min_battery", 0.0)) else F
+
+
+class IsBatteryCharging(IsBatteryLow):
+    PORTS: ClassVar[dict[str, Port]] = {
+        "battery_topic": input_port(str, "/battery_status", "Battery topic")}
+
+    def tick(self) -> Status:
+        from eddiebot.msgs.sensor_msgs import BatteryState
+
+        msg = self._last()
+        charging = BatteryState.POWER_SUPPLY_STATUS_CHARGING
+        return S if msg is not None and int(msg.power_supply_status) == charging else F
+
+
+class TransformAvailable(LeafNode):
+    """SUCCESS once TF gives ``parent`` → ``child`` (then always, as Nav2's node)."""
+
+    PORTS: ClassVar[dict[str, Port]] = {
+        "child": input_port(str, "", "Child frame for transform"),
+        "parent": input_port(str, "", "parent frame for transform"),
+    }
+
+    def __init__(self, *args: Any) -> None:
+        super().__init__(*args)
+        self.was_found = False
+        if not self.get_input("child") or not self.get_input("parent"):
+            raise ValueError("child and parent frames must both be set")
+
+    def tick(self) -> Status:
+        if self.was_found:
+            return S
+        found = self.context.robot_pose(str(self.get_input("parent")),
+                                        str(self.get_input("child"))) is not None
+        self.was_found = found
+        return S if found else F
+
+
 def path_length_from(path_xy: Any, x: float, y: float) -> float:
     """Length of ``path_xy`` ((N, 2), m) from its pose closest to (x, y) to its end."""
     import numpy as np
@@ -870,12 +975,14 @@ _SELECTORS = [_selector("controller", "controller_selector"),
 
 NAV2_NODES: dict[str, type] = {
     cls.__name__: cls
-    for cls in (ComputePathToPose, ComputePathThroughPoses, FollowPath, SmoothPath, Spin,
-                BackUp, DriveOnHeading, Wait, CancelControl, CancelSpin, CancelBackUp,
-                CancelWait, CancelDriveOnHeading, ClearEntireCostmap, ClearCostmapAroundRobot,
-                ClearCostmapExceptRegion, IsPathValid, *_SELECTORS, RemovePassedGoals,
-                TruncatePath, GetPoseFromPath, GoalUpdated, GlobalUpdatedGoal,
-                AreErrorCodesPresent, WouldAControllerRecoveryHelp, WouldAPlannerRecoveryHelp,
-                WouldASmootherRecoveryHelp, PathExpiringTimer, TimeExpired, DistanceTraveled,
-                GoalReached, InitialPoseReceived)
+    for cls in (
+        ComputePathToPose, ComputePathThroughPoses, FollowPath, SmoothPath, Spin, BackUp,
+        DriveOnHeading, Wait, AssistedTeleop, CancelControl, CancelSpin, CancelBackUp,
+        CancelWait, CancelDriveOnHeading, CancelAssistedTeleop, ClearEntireCostmap,
+        ClearCostmapAroundRobot, ClearCostmapExceptRegion, ReinitializeGlobalLocalization,
+        IsPathValid, *_SELECTORS, RemovePassedGoals, TruncatePath, GetPoseFromPath,
+        GoalUpdated, GlobalUpdatedGoal, AreErrorCodesPresent, WouldAControllerRecoveryHelp,
+        WouldAPlannerRecoveryHelp, WouldASmootherRecoveryHelp, PathExpiringTimer, TimeExpired,
+        DistanceTraveled, GoalReached, InitialPoseReceived, IsBatteryLow, IsBatteryCharging,
+        TransformAvailable)
 }
