@@ -1,6 +1,7 @@
 """Behaviour-tree nodes with BehaviorTree.CPP v4 / Nav2 semantics, on scripted leaves
 loaded from XML (no servers)."""
 
+from pathlib import Path
 from typing import ClassVar
 
 import pytest
@@ -326,3 +327,16 @@ def test_plugin_lib_names_resolve_entry_points(tmp_path, monkeypatch):
     assert "CountTicks" not in f.builders
     f.load_plugin("user_counters")
     assert "CountTicks" in f.builders
+
+
+def test_tree_paths_resolve_to_the_shipped_nav2_trees(tmp_path):
+    from eddiebot.nav.bt import TREES_DIR, resolve_tree_path
+
+    assert len(list(TREES_DIR.glob("*.xml"))) == 12
+    ros = "/opt/ros/jazzy/share/nav2_bt_navigator/behavior_trees/follow_point.xml"
+    assert resolve_tree_path(ros) == TREES_DIR / "follow_point.xml"
+    assert resolve_tree_path("follow_point.xml") == TREES_DIR / "follow_point.xml"
+    mine = tmp_path / "follow_point.xml"
+    mine.write_text("<root/>")
+    assert resolve_tree_path(str(mine)) == mine  # an existing file is the user's
+    assert resolve_tree_path("/elsewhere/follow_point.xml") == Path("/elsewhere/follow_point.xml")
