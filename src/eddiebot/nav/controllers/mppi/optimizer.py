@@ -10,7 +10,6 @@ a 9-point Savitzky-Golay filter over the last four commands, and shifted one ``m
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -60,26 +59,40 @@ def savitzky_golay(sequence: F64, history: F64) -> F64:
     return out
 
 
-def integrate(pose: F64, vx: F64, wz: F64, dt: float) -> tuple[F64, F64, F64]:
+class _Buffers:
+    """Work arrays of one batch, allocated once: fresh 1 MB arrays each cycle cost more in
+    page faults than the arithmetic on them."""
+
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        self.yaws = np.empty(shape)
+        self.x = np.empty(shape)
+        self.y = np.empty(shape)
+        self.dx = np.empty(shape)
+        self.dy = np.empty(shape)
+        self.heading = np.empty(shape, dtype=np.float32)
+        self.trig = np.empty(shape, dtype=np.float32)
+
+
+def integrate(pose: F64, vx: F64, wz: F64, dt: float, buffers: _Buffers | None = None
+              ) -> tuple[F64, F64, F64]:
     """``integrateStateVelocities``: poses after each step of (…, time_steps) velocities from
-    ``pose`` (x, y, yaw); each step moves along the heading reached at the previous one."""
+    ``pose`` (x, y, yaw); each step moves along the heading reached at the previous one.
+    The headings' sines and cosines are taken in float32, as upstream computes throughout.
+    With ``buffers`` the results are written into (and returned from) them."""
+    b = buffers or _Buffers(np.shape(vx))
     yaw0 = float(pose[2])
-    yaws = np.cumsum(wz * dt, axis=-1) + yaw0
-    c = np.empty_like(yaws)
-    s = np.empty_like(yaws)
-    c[..., 0] = math.cos(yaw0)
-    s[..., 0] = math.sin(yaw0)
-    np.cos(yaws[..., :-1], out=c[..., 1:])
-    np.sin(yaws[..., :-1], out=s[..., 1:])
-    c *= vx
-    s *= vx
-    x = np.cumsum(c, axis=-1)
-    x *= dt
-    x += pose[0]
-    y = np.cumsum(s, axis=-1)
-    y *= dt
-    y += pose[1]
-    return x, y, yaws
+    np.cumsum(wz, axis=-1, out=b.yaws)
+    b.yaws *= dt
+    b.yaws += yaw0
+    b.heading[..., 0] = yaw0
+    b.heading[..., 1:] = b.yaws[..., :-1]
+    for trig, d, out, origin in ((np.cos, b.dx, b.x, pose[0]), (np.sin, b.dy, b.y, pose[1])):
+        trig(b.heading, out=b.trig)
+        np.multiply(b.trig, vx, out=d)
+        np.cumsum(d, axis=-1, out=out)
+        out *= dt
+        out += origin
+    return b.x, b.y, b.yaws
 
 
 class Optimizer:
@@ -127,18 +140,21 @@ class Optimizer:
         self.wz = np.zeros((b, t))
         self.cvx = np.zeros((b, t))
         self.cwz = np.zeros((b, t))
-        self.traj_x = np.zeros((b, t))
-        self.traj_y = np.zeros((b, t))
-        self.traj_yaw = np.zeros((b, t))
+        self._buffers = _Buffers((b, t))
+        self.traj_x, self.traj_y, self.traj_yaw = self._buffers.x, self._buffers.y, \
+            self._buffers.yaws
         # upstream's noise thread (regenerate_noises) or configure (not) draws them now too
         self._generate_noises()
 
     def _generate_noises(self) -> None:
         s = self.settings
         shape = (s.batch_size, s.time_steps)
-        self.noise_vx = self.rng.standard_normal(shape)
+        if getattr(self, "noise_vx", np.empty(0)).shape != shape:
+            self.noise_vx = np.empty(shape)
+            self.noise_wz = np.empty(shape)
+        self.rng.standard_normal(out=self.noise_vx)
         self.noise_vx *= s.vx_std
-        self.noise_wz = self.rng.standard_normal(shape)
+        self.rng.standard_normal(out=self.noise_wz)
         self.noise_wz *= s.wz_std
 
     def set_speed_limit(self, speed_limit: float, percentage: bool) -> None:
@@ -217,7 +233,8 @@ class Optimizer:
         _kernels.predict_velocities(self.cvx, self.cwz, self.vx, self.wz,
                                     s.model_dt * c.ax_max, s.model_dt * c.ax_min,
                                     s.model_dt * c.az_max)
-        self.traj_x, self.traj_y, self.traj_yaw = integrate(pose, self.vx, self.wz, s.model_dt)
+        self.traj_x, self.traj_y, self.traj_yaw = integrate(pose, self.vx, self.wz, s.model_dt,
+                                                            self._buffers)
 
     def _update_control_sequence(self) -> None:
         s = self.settings
