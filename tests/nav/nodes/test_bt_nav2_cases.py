@@ -355,3 +355,80 @@ def test_path_expiring_timer():
     assert tree.tick_once() == Status.FAILURE
     clock.ns += 500_000_000
     assert tree.tick_once() == Status.SUCCESS
+
+
+class PoseContext(TreeContext):
+    """A context whose robot stands where the test puts it."""
+
+    def __init__(self, pose=(0.0, 0.0, 0.0)):
+        super().__init__(clock=lambda: 0)
+        self.pose = pose
+
+    def robot_pose(self, global_frame=None, base_frame=None):
+        return self.pose
+
+
+def test_distance_controller():
+    """test_distance_controller.cpp: the robot moves 0.51 m at a time; the child (distance
+    1.0) is ticked every second step."""
+    ctx = PoseContext()
+    f = BehaviorTreeFactory()
+    f.register_node_type("Dummy", Dummy)
+    tree = f.create_tree_from_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="T"><DistanceController distance="1.0">'
+        '<Dummy name="c1"/></DistanceController></BehaviorTree></root>', None, ctx)
+    dummy = tree.find("c1")[0]
+    dummy.status = Status.SUCCESS
+    assert tree.tick_once() == Status.SUCCESS
+    assert dummy.status == Status.IDLE
+    for i in range(1, 21):
+        ctx.pose = (i * 0.51, 0.0, 0.0)
+        dummy.status = Status.SUCCESS
+        if i % 2:
+            assert tree.tick_once() == Status.RUNNING, i
+        else:
+            assert tree.tick_once() == Status.SUCCESS, i
+            assert dummy.status == Status.IDLE
+
+
+def test_goal_updated_controller():
+    from eddiebot.nav.bt import Blackboard
+    from eddiebot.nav.nodes._common import pose_stamped
+
+    bb = Blackboard()
+    bb.set("goal", pose_stamped(0.0, 0.0, 0.0, "map", 0))
+    bb.set("goals", [])
+    f = BehaviorTreeFactory()
+    f.register_node_type("Dummy", Dummy)
+    tree = f.create_tree_from_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="T"><GoalUpdatedController>'
+        '<Dummy name="c1"/></GoalUpdatedController></BehaviorTree></root>', bb, TreeContext())
+    dummy = tree.find("c1")[0]
+    goal2 = pose_stamped(0.0, 0.0, 0.0, "map", 5)
+    dummy.status = Status.SUCCESS
+    assert tree.tick_once() == Status.SUCCESS  # first tick: the child runs
+    bb.set("goal", goal2)
+    dummy.status = Status.SUCCESS
+    assert tree.tick_once() == Status.SUCCESS  # updated goal: the child runs
+    assert tree.tick_once() == Status.RUNNING  # no update: the child is not ticked
+    assert dummy.status == Status.IDLE
+    bb.set("goals", [goal2])
+    dummy.status = Status.SUCCESS
+    assert tree.tick_once() == Status.SUCCESS  # updated goals
+
+
+def test_remove_passed_goals():
+    """test_remove_passed_goals_action.cpp: robot at (0.25, 0), radius 0.5: of the goals at
+    x = 0, 0.5, 1, 2 the first two are passed."""
+    from eddiebot.nav.bt import Blackboard
+    from eddiebot.nav.nodes._common import pose_stamped
+
+    bb = Blackboard()
+    poses = [pose_stamped(x, 0.0, 0.0, "map", 0) for x in (0.0, 0.5, 1.0, 2.0)]
+    bb.set("goals", poses)
+    tree = BehaviorTreeFactory().create_tree_from_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="T"><RemovePassedGoals radius="0.5" '
+        'input_goals="{goals}" output_goals="{goals}"/></BehaviorTree></root>', bb,
+        PoseContext((0.25, 0.0, 0.0)))
+    assert tree.tick_once() == Status.SUCCESS
+    assert bb.get("goals") == poses[2:]
