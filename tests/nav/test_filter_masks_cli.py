@@ -12,7 +12,7 @@ import yaml
 
 from eddiebot.cli.main import main
 from eddiebot.cli.nav import filter_sections, resolve_params
-from eddiebot.maps import OccupancyMap, save_map
+from eddiebot.maps import OccupancyMap, load_map, save_map
 from eddiebot.nav.params_file import default_params
 
 
@@ -56,8 +56,21 @@ def test_masks_are_added_to_the_resolved_parameters(tmp_path: Path) -> None:
 def test_without_masks_nothing_starts(tmp_path: Path) -> None:
     resolved = resolve_params(default_params(), tmp_path / "run", None)
     before = resolved.read_text()
-    assert filter_sections(_args(tmp_path, keepout=None, speed_mask=None), resolved) == []
+    args = _args(tmp_path, keepout=None, speed_mask=None, dashboard=False)
+    assert filter_sections(args, resolved) == []
     assert resolved.read_text() == before
+
+
+def test_the_dashboard_gets_an_empty_keepout_mask_to_paint_on(tmp_path: Path) -> None:
+    resolved = resolve_params(default_params(), tmp_path / "run", None)
+    args = _args(tmp_path, keepout=None, speed_mask=None, dashboard=True)
+    sections = filter_sections(args, resolved)
+    assert [s.node_name for s in sections] == ["keepout_filter_mask_server",
+                                               "keepout_costmap_filter_info_server"]
+    mask = load_map(sections[0].params["yaml_filename"])
+    room = load_map(args.map)
+    assert mask.data.shape == room.data.shape and mask.origin == room.origin
+    assert not mask.data.any()
 
 
 def test_a_mask_off_the_map_stops_eddie_nav_naming_it(capsys: Any, tmp_path: Path) -> None:

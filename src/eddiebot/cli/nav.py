@@ -22,7 +22,9 @@ Costmap filters: ``--keepout MASK.yaml`` and ``--speed-mask MASK.yaml`` (map_ser
 files: a keepout zone is occupied, a speed zone's value ``v`` limits the speed to
 ``100 - v`` % unless the parameters file's ``speed_costmap_filter_info_server`` says
 otherwise) start a filter mask server and a costmap filter info server each and enable the
-filter in the costmaps. A parameters file with ``*filter_mask_server`` sections naming a
+filter in the costmaps; with ``--dashboard`` and no keepout mask, an empty one shaped as the
+map is served so the dashboard's keepout paint tool has a server to send its zones to. A
+parameters file with ``*filter_mask_server`` sections naming a
 ``yaml_filename`` (relative to the file) starts them by itself. A mask that cannot be used
 (see :func:`eddiebot.nav.nodes.costmap_filters.check_mask`) stops the run before it starts,
 naming the file.
@@ -187,9 +189,10 @@ def filter_sections(args: argparse.Namespace, resolved: Path) -> list[Any]:
     """The costmap filter servers to start: ``--keepout`` / ``--speed-mask`` added to the
     resolved parameters (rewritten in place), plus those the parameters file names; each
     mask checked against the map. Raises `CliError` naming a mask that cannot be used."""
+    import numpy as np
     import yaml
 
-    from eddiebot.maps import MapError, load_map
+    from eddiebot.maps import MapError, OccupancyMap, load_map, save_map
     from eddiebot.nav.nodes.costmap_filters import (
         MaskError,
         add_filter_masks,
@@ -203,9 +206,23 @@ def filter_sections(args: argparse.Namespace, resolved: Path) -> list[Any]:
             raise CliError(f"eddie nav: {path}: no such mask file")
     text = resolved.read_text()
     doc = yaml.safe_load(text) or {}
-    add_filter_masks(doc, keepout=keepout, speed=speed)
     source = args.params or default_params()
-    sections = filter_server_sections(doc, base_dir=Path(source).resolve().parent)
+    base_dir = Path(source).resolve().parent
+    nav_map = None
+    if args.localization == "amcl":
+        try:
+            nav_map = load_map(args.map)
+        except MapError:
+            nav_map = None
+    if keepout is None and nav_map is not None and getattr(args, "dashboard", False) and not any(
+            s.node_name == "keepout_filter_mask_server"
+            for s in filter_server_sections(doc, base_dir)):
+        # the dashboard's keepout paint tool needs a keepout mask server: an empty mask
+        keepout = save_map(OccupancyMap(np.zeros_like(nav_map.data), nav_map.resolution,
+                                        nav_map.origin, nav_map.frame_id),
+                           resolved.parent / "keepout_mask")
+    add_filter_masks(doc, keepout=keepout, speed=speed)
+    sections = filter_server_sections(doc, base_dir=base_dir)
     if sections:
         # the servers run beside the launch: their sections go to a file of their own
         servers = {s.node_name: {"ros__parameters": s.params} for s in sections}
@@ -216,12 +233,6 @@ def filter_sections(args: argparse.Namespace, resolved: Path) -> list[Any]:
         filters_file = resolved.parent / "costmap_filters.yaml"
         filters_file.write_text(yaml.safe_dump(servers, sort_keys=False))
         print(f"costmap filter servers: {filters_file}", flush=True)
-    nav_map = None
-    if args.localization == "amcl":
-        try:
-            nav_map = load_map(args.map)
-        except MapError:
-            nav_map = None
     for section in sections:
         if section.node_name.endswith("filter_mask_server"):
             try:

@@ -126,9 +126,14 @@ class Command:
     angular: float = 0.0
     engage: bool | None = None
     name: str = ""
+    #: keepout: the rectangle's other corner (``x``, ``y`` the first), display frame, m
+    x1: float = 0.0
+    y1: float = 0.0
+    #: keepout: clear every zone instead of painting one
+    clear: bool = False
 
 
-_OPS = {"goal", "initialpose", "teleop", "estop", "cancel", "save_map", "ping", "view"}
+_OPS = {"goal", "initialpose", "teleop", "estop", "cancel", "save_map", "ping", "view", "keepout"}
 #: views a connection opens on request (``{"op": "view", "name": ..., "engage": bool}``);
 #: they change what the page receives, never the robot, so a read-only page may open them
 VIEWS = ("tf", "cloud")
@@ -198,6 +203,22 @@ def _parse_op(op: str, obj: dict[str, Any],
         if not isinstance(name, str) or len(name) > 200 or "\x00" in name:
             raise CommandError("save_map: 'name' must be a short string")
         return Command(op, name=name)
+    if op == "keepout":
+        clear = obj.get("clear", False)
+        if not isinstance(clear, bool):
+            raise CommandError("keepout: 'clear' must be true or false")
+        if clear:
+            return Command(op, clear=True)
+        x0, y0, x1, y1 = (_finite(obj, k) for k in ("x0", "y0", "x1", "y1"))
+        if x0 == x1 or y0 == y1:
+            raise CommandError("keepout: the rectangle has no area")
+        if map_bounds is not None:
+            xmin, ymin, xmax, ymax = map_bounds
+            if max(x0, x1) < xmin or min(x0, x1) > xmax or max(y0, y1) < ymin or min(y0, y1) > ymax:
+                raise CommandError(
+                    f"keepout ({x0:.2f}, {y0:.2f})..({x1:.2f}, {y1:.2f}) is outside the map "
+                    f"[{xmin:.2f}, {xmax:.2f}] x [{ymin:.2f}, {ymax:.2f}]")
+        return Command(op, x=x0, y=y0, x1=x1, y1=y1)
     if op == "view":
         name, engage = obj.get("name"), obj.get("engage")
         if name not in VIEWS:

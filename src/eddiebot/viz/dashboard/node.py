@@ -12,16 +12,23 @@ are converted only while a page has that view open (2 Hz at most; the assembled 
 velocity source that holds ``cmd_vel`` is worked out as twist_mux does, from the mux's own
 parameters (read from the running ``twist_mux`` node, twist_mux's defaults until it answers)
 and the commands and locks seen on its input topics.
+
+Keepout zones painted on the page go into a copy of the current keepout mask (the one on
+``/keepout_filter_mask``, else an empty one shaped as ``/map``), which is written to a
+map_server file and handed to the keepout filter mask server's ``load_map``: the server
+publishes it and the costmaps' keepout filters take it.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import tempfile
 import threading
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 from xml.etree import ElementTree
 
@@ -38,6 +45,7 @@ from eddiebot.core.parameters import value_from_msg
 from eddiebot.core.qos import QoSProfile, qos_profile_latched, qos_profile_sensor_data
 from eddiebot.core.task import Future
 from eddiebot.core.tf import Buffer, TransformException
+from eddiebot.maps import OccupancyMap, map_from_msg, map_to_world, save_map
 from eddiebot.msgs import get_action, get_message, get_service
 from eddiebot.robot.urdf import BASE_RADIUS_M
 from eddiebot.viz.dashboard.core import (
@@ -106,6 +114,8 @@ class DashboardTopics:
     cloud_map: str = "/rtabmap/cloud_map"
     points: str = "/points"
     twist_mux: str = "/twist_mux"
+    keepout_mask: str = "/keepout_filter_mask"
+    keepout_mask_server: str = "/keepout_filter_mask_server/load_map"
 
 
 def footprint_from_urdf(text: str) -> float | None:
@@ -228,6 +238,11 @@ class DashboardNode(Node):
         self._nav_handles: list[Any] = []
         self._map_saver = self.create_client(get_service("nav2_msgs/srv/SaveMap"), t.map_saver)
         self._slam_saver = self.create_client(get_service("slam_toolbox/srv/SaveMap"), t.slam_saver)
+        self._mask_loader = self.create_client(get_service("nav2_msgs/srv/LoadMap"),
+                                               t.keepout_mask_server)
+        self._keepout: OccupancyMap | None = None
+        self._keepout_dir: Path | None = None
+        self._keepout_count = 0
 
         tf_msg = msg("tf2_msgs/msg/TFMessage")
         grid = msg("nav_msgs/msg/OccupancyGrid")
@@ -263,6 +278,7 @@ class DashboardNode(Node):
         cloud = msg("sensor_msgs/msg/PointCloud2")
         self._sub(cloud, t.cloud_map, functools.partial(self._on_cloud, "cloud_map"), qos_profile_latched)
         self._sub(cloud, t.points, functools.partial(self._on_cloud, "points"), qos_profile_sensor_data)
+        self._sub(grid, t.keepout_mask, self._on_keepout_mask, qos_profile_latched)
         self._subscribe_mux()
         try:
             self._mux_params = ParameterClient(self, t.twist_mux)
@@ -924,6 +940,79 @@ class DashboardNode(Node):
             res = f.result()
             ok = bool(res.result) if isinstance(res.result, (bool, np.bool_)) else int(res.result) == 0
             done(ok, f"{what}: {'saved' if ok else 'failed'} ({name or 'map'})")
+
+        fut.add_done_callback(answered)
+
+    # -- keepout zones ----------------------------------------------------------------------
+    def _on_keepout_mask(self, msg: Any) -> None:
+        with self._cmd_lock:
+            self._keepout = map_from_msg(msg)
+
+    def _keepout_base(self) -> OccupancyMap | None:
+        """The mask to paint on: the current keepout mask, else an empty one shaped as /map."""
+        if self._keepout is not None:
+            return self._keepout
+        meta = self._grid_meta.get("map")
+        if meta is None:
+            return None
+        return OccupancyMap(np.zeros((meta.height, meta.width), np.int8), meta.resolution,
+                            meta.origin, meta.frame_id)
+
+    def paint_keepout(self, rect: tuple[float, float, float, float] | None,
+                      done: Callable[[bool, str], None]) -> None:
+        """Mark the cells of ``rect`` (x0, y0, x1, y1 in the display frame, m) occupied in the
+        keepout mask, or clear the mask (``rect`` None), and hand the mask to the keepout
+        mask server's ``load_map``; ``done(ok, text)`` runs when it answers."""
+        server = self.topics.keepout_mask_server
+        if not self._mask_loader.service_is_ready():
+            done(False, f"no keepout mask server: {server} does not answer (eddie nav "
+                        "--dashboard starts one)")
+            return
+        with self._cmd_lock:
+            base = self._keepout_base()
+        if base is None:
+            done(False, "keepout: no map yet to shape the mask on")
+            return
+        data = np.zeros_like(base.data) if rect is None else base.data.copy()
+        cells = 0
+        if rect is not None:
+            where = self._to_display(base.frame_id)
+            if where is None:
+                done(False, f"keepout: the mask frame {base.frame_id} is not placed in the "
+                            f"display frame {self.display_frame} yet")
+                return
+            jj, ii = np.mgrid[0:base.height, 0:base.width]
+            centres = map_to_world(base, np.stack([ii, jj], axis=-1))
+            c, s = math.cos(where[2]), math.sin(where[2])
+            dx = where[0] + c * centres[..., 0] - s * centres[..., 1]
+            dy = where[1] + s * centres[..., 0] + c * centres[..., 1]
+            x0, y0, x1, y1 = rect
+            inside = ((dx >= min(x0, x1)) & (dx <= max(x0, x1))
+                      & (dy >= min(y0, y1)) & (dy <= max(y0, y1)))
+            cells = int(inside.sum())
+            if cells == 0:
+                done(False, "keepout: the rectangle covers no cell of the mask")
+                return
+            data[inside] = 100
+        if self._keepout_dir is None:
+            self._keepout_dir = Path(tempfile.mkdtemp(prefix="eddie_keepout_"))
+        self._keepout_count += 1
+        try:
+            path = save_map(OccupancyMap(data, base.resolution, base.origin, base.frame_id),
+                            self._keepout_dir / f"keepout_{self._keepout_count}")
+        except OSError as exc:
+            done(False, f"keepout: cannot write the mask: {exc}")
+            return
+        fut = self._mask_loader.call_async(self._mask_loader.srv_type.Request(map_url=str(path)))
+        what = f"{cells} cells kept out" if rect is not None else "keepout zones cleared"
+
+        def answered(f: Future) -> None:
+            if f.exception() is not None:
+                done(False, f"{server}: {f.exception()}")
+                return
+            code = int(f.result().result)
+            done(code == 0, f"{server}: {what} ({path.name})" if code == 0
+                 else f"{server}: load_map failed with result {code} ({path})")
 
         fut.add_done_callback(answered)
 

@@ -280,6 +280,10 @@ async def _serve_connection(ws: WebSocket, node: DashboardNode, hub: Hub,
             elif cmd.op == "save_map":
                 node.save_map(cmd.name, lambda ok, text: reply_threadsafe(
                     text_frame("ack" if ok else "error", op="save_map", msg=text)))
+            elif cmd.op == "keepout":
+                node.paint_keepout(None if cmd.clear else (cmd.x, cmd.y, cmd.x1, cmd.y1),
+                                   lambda ok, text: reply_threadsafe(
+                                       text_frame("ack" if ok else "error", op="keepout", msg=text)))
         except CommandError as exc:
             await reply_error(op or exc.op, str(exc))
 

@@ -309,7 +309,12 @@
     }
     if (shown("show-tf") && state.tf) drawFrames(px);
     else state.drawn.tfFrames = 0;
-    if (state.drag && state.drag.kind !== "pan") {
+    if (state.drag && state.drag.kind === "keepout") {
+      const d = state.drag;
+      ctx.fillStyle = "rgba(230,40,40,0.35)"; ctx.strokeStyle = "#e02828"; ctx.lineWidth = 2 * px;
+      ctx.fillRect(d.x0, d.y0, d.x1 - d.x0, d.y1 - d.y0);
+      ctx.strokeRect(d.x0, d.y0, d.x1 - d.x0, d.y1 - d.y0);
+    } else if (state.drag && state.drag.kind !== "pan") {
       const d = state.drag;
       const yaw = Math.atan2(d.y1 - d.y0, d.x1 - d.x0);
       arrow(d.x0, d.y0, yaw, Math.max(0.3, Math.hypot(d.x1 - d.x0, d.y1 - d.y0)), d.kind === "goal" ? "#e040e0" : "#30e030");
@@ -444,6 +449,8 @@
   }
   $("mode-goal").addEventListener("click", () => setMode("goal"));
   $("mode-initialpose").addEventListener("click", () => setMode("initialpose"));
+  $("mode-keepout").addEventListener("click", () => setMode("keepout"));
+  $("clear-keepout").addEventListener("click", () => send({ op: "keepout", clear: true }));
   $("cancel").addEventListener("click", () => send({ op: "cancel" }));
   $("estop").addEventListener("click", () => { releaseKeys(false); send({ op: "estop" }); });
   $("save-map").addEventListener("click", () => send({ op: "save_map", name: $("map-name").value.trim() }));
@@ -477,6 +484,12 @@
     state.drag = null;
     if (!d || d.kind === "pan") return;
     if (e.target === canvas) [d.x1, d.y1] = screenToWorld(e.offsetX, e.offsetY);
+    if (d.kind === "keepout") {
+      if (d.x1 !== d.x0 && d.y1 !== d.y0) send({ op: "keepout", x0: d.x0, y0: d.y0, x1: d.x1, y1: d.y1 });
+      setMode(d.kind);
+      dirty = true;
+      return;
+    }
     const moved = Math.hypot(d.x1 - d.x0, d.y1 - d.y0) * state.view.scale > 3;
     const yaw = moved ? Math.atan2(d.y1 - d.y0, d.x1 - d.x0) : (state.pose ? state.pose.yaw : 0);
     send({ op: d.kind, x: d.x0, y: d.y0, yaw });
