@@ -38,14 +38,15 @@ RES = 0.05
 
 
 def _mask_file(tmp_path: Path, name: str, value: int, box: tuple[float, float, float, float],
-               res: float = RES, origin: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Path:
+               res: float = RES, origin: tuple[float, float, float] = (0.0, 0.0, 0.0),
+               mode: str = "raw") -> Path:
     """A 6 m x 6 m mask (the room's) with ``value`` in box (x0, y0, x1, y1), m; raw mode keeps
-    the values exactly."""
+    the values exactly, trinary is what a user paints (black: keep out, white: free)."""
     n = round(6.0 / res)
     data = np.zeros((n, n), dtype=np.int8)
     x0, y0, x1, y1 = (round(v / res) for v in box)
     data[y0:y1, x0:x1] = value
-    return save_map(OccupancyMap(data, res, origin, "map"), tmp_path / name, mode="raw")
+    return save_map(OccupancyMap(data, res, origin, "map"), tmp_path / name, mode=mode)
 
 
 def _with_filters(stack: Any, doc: dict[str, Any]) -> list[Any]:
@@ -112,7 +113,9 @@ def test_keepout_mask_blocks_a_corridor_and_the_plan_goes_around(
     # short way from (1, 1) to (5, 1); the user's mask closes it
     doc = nav_stub_params()
     if keepout:
-        add_filter_masks(doc, keepout=_mask_file(tmp_path, "keepout", 100, (2.7, 0.0, 3.3, 2.0)))
+        mask = _mask_file(tmp_path, "keepout", 100, (2.7, 0.0, 3.3, 2.0), mode="trinary")
+        assert mask.with_suffix(".pgm").is_file()
+        add_filter_masks(doc, keepout=mask)
     stack = make_stack(servers=("map_server", "planner_server", "controller_server"), params=doc,
                        start=(2.0, 1.0, 0.0))
     _with_filters(stack, doc)
