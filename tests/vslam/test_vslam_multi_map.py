@@ -85,3 +85,29 @@ def test_unmerged_maps_reload_in_their_own_frames(tmp_path):
         slam = Rtabmap({**PARAMS, "Mem/InitWMWithAllNodes": "true"}, database=db)
         assert slam.frame_of(1) == 0 and slam.frame_of(RESET_AT + 1) == 1
         assert slam.map_id == 2 and slam.current_frame == 2
+
+
+def test_export_writes_one_file_per_unmerged_map(tmp_path, capsys):
+    import argparse
+
+    from eddiebot.cli import vslam as cli
+    from eddiebot.vslam.tum import read_tum_trajectory
+
+    with SessionDatabase(tmp_path / "m.db", delete_on_start=True) as db:
+        _run(Rtabmap({**PARAMS, "RGBD/CreateOccupancyGrid": "true"}, database=db),
+             ROUTE[:RESET_AT + 3])
+    parser = argparse.ArgumentParser()
+    cli.add_arguments(parser)
+    args = parser.parse_args(["db", "export", str(tmp_path / "m.db"), "--ply",
+                              str(tmp_path / "c.ply"), "--poses", str(tmp_path / "p.tum")])
+    assert cli.run(args) == 0
+    assert "2 maps not merged" in capsys.readouterr().out
+    # the first map (6 nodes) in the given files, the second (3 nodes) beside them
+    first, _ = read_tum_trajectory(tmp_path / "p.tum")
+    second, poses = read_tum_trajectory(tmp_path / "p_map1.tum")
+    assert first.size == RESET_AT and second.size == 3
+    # in its own frame: where the re-initialised odometry put it
+    np.testing.assert_allclose(poses[0][:2, 3], (OFFSET @ planar_pose(1.5, 0, 0))[:2, 3],
+                               atol=0.01)
+    assert (tmp_path / "c.ply").read_bytes().startswith(b"ply")
+    assert (tmp_path / "c_map1.ply").read_bytes().startswith(b"ply")

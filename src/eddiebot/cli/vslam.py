@@ -9,7 +9,7 @@
                        --camera-info FILE.yaml]
     eddie vslam loops DIR -o FILE.csv
     eddie vslam db info FILE
-    eddie vslam db export FILE [--ply OUT.ply] [--poses OUT.tum]
+    eddie vslam db export FILE [--ply OUT.ply] [--poses OUT.tum]   (one file per unmerged map)
 
 With ``--world`` (or ``sim``, default world office) it runs the simulator, Eddie's base stack
 and the ``rtabmap`` node with the report's parameters (``launch/vslam.yaml``). Without
@@ -493,31 +493,44 @@ def _db_export(args: argparse.Namespace) -> int:
                 {"Mem/IncrementalMemory": "false", "Mem/InitWMWithAllNodes": "true"})
             core = Rtabmap(p, database=db)
             stamps = {n.id: n.stamp_ns for n in db.nodes()}
-            poses, _ = core.graph()
-            if args.poses is not None:
-                ids = sorted(i for i in poses if i in stamps)
-                write_tum_trajectory(args.poses, [stamps[i] / 1e9 for i in ids],
-                                     [poses[i] for i in ids])
-                print(f"wrote {len(ids)} poses to {args.poses}")
-            if args.ply is not None:
-                xyz, rgb = _cloud_from_db(db, core, args.voxel)
-                write_ply(args.ply, xyz, rgb)
-                print(f"wrote {xyz.shape[0]} points to {args.ply}")
+            all_poses, _ = core.graph()
+            # maps not merged (an odometry reset, another session) are in frames of their
+            # own: the largest goes to the given file, each other one beside it (_map<id>)
+            frames = sorted(core.map_frames().items(), key=lambda kv: (-len(kv[1]), kv[0]))
+            if len(frames) > 1:
+                print(f"{len(frames)} maps not merged with each other: one file each")
+            for k, (frame, ids_in) in enumerate(frames):
+                poses = {i: all_poses[i] for i in ids_in}
+                if args.poses is not None:
+                    out = _map_path(args.poses, frame, k)
+                    ids = sorted(i for i in poses if i in stamps)
+                    write_tum_trajectory(out, [stamps[i] / 1e9 for i in ids],
+                                         [poses[i] for i in ids])
+                    print(f"wrote {len(ids)} poses to {out}")
+                if args.ply is not None:
+                    out = _map_path(args.ply, frame, k)
+                    xyz, rgb = _cloud_from_db(db, core, args.voxel, poses)
+                    write_ply(out, xyz, rgb)
+                    print(f"wrote {xyz.shape[0]} points to {out}")
     except (DatabaseError, VslamError, OSError) as exc:
         print(f"eddie vslam db export: {exc}", file=sys.stderr)
         return 1
     return 0
 
 
-def _cloud_from_db(db: Any, core: Any, voxel: float) -> tuple[Any, Any]:
-    """Clouds re-made from the stored images (loaded nodes carry no cloud) at the optimised
-    poses."""
+def _map_path(path: Path, frame: int, rank: int) -> Path:
+    """The export file of one map: `path` for the largest, `<stem>_map<id><suffix>` beside."""
+    return path if rank == 0 else path.with_name(f"{path.stem}_map{frame}{path.suffix}")
+
+
+def _cloud_from_db(db: Any, core: Any, voxel: float, poses: dict[int, Any]) -> tuple[Any, Any]:
+    """Clouds re-made from the stored images (loaded nodes carry no cloud) at `poses` (the
+    optimised poses of one map)."""
     import numpy as np
 
     from eddiebot.vslam.database import camera_from_json
     from eddiebot.vslam.occupancy import assemble_cloud, depth_cloud
 
-    poses = core.optimized_poses
     clouds = {}
     rows = db._conn.execute("SELECT id, calibration FROM Data").fetchall()
     p = core.params
