@@ -31,6 +31,9 @@ NODES: dict[str, str] = {
     "eddiebot.vslam.rtabmap": "eddiebot.vslam.node:RtabmapNode",
     "eddiebot.nav.map_server": "eddiebot.nav.nodes.map_server:MapServer",
     "eddiebot.nav.map_saver": "eddiebot.nav.nodes.map_server:MapSaver",
+    "eddiebot.nav.filter_mask_server": "eddiebot.nav.nodes.costmap_filters:FilterMaskServer",
+    "eddiebot.nav.costmap_filter_info_server":
+        "eddiebot.nav.nodes.costmap_filters:CostmapFilterInfoServer",
     "eddiebot.nav.amcl": "eddiebot.nav.nodes.amcl:AmclNode",
     "eddiebot.nav.planner_server": "eddiebot.nav.nodes.planner_server:PlannerServer",
     "eddiebot.nav.controller_server": "eddiebot.nav.nodes.controller_server:ControllerServer",

@@ -20,6 +20,7 @@ from eddiebot.core.action import ActionClient, GoalStatus
 from eddiebot.maps import OccupancyMap, save_map
 from eddiebot.msgs.geometry_msgs import Twist
 from eddiebot.msgs.nav2_msgs import ComputePathToPose, CostmapFilterInfo, SpeedLimit
+from eddiebot.msgs.nav_msgs import OccupancyGrid
 from eddiebot.msgs.std_msgs import Bool
 from eddiebot.nav.cost_values import LETHAL_OBSTACLE
 from eddiebot.nav.nodes._common import pose_stamped
@@ -346,3 +347,51 @@ def test_add_filter_masks_enables_a_disabled_filter(nav_stub_params: Any, tmp_pa
     info = doc["keepout_costmap_filter_info_server"]["ros__parameters"]
     assert (info["type"], info["mask_topic"]) == (0, "/keepout_filter_mask")
     assert math.isclose(info["multiplier"], 1.0)
+
+
+def test_filter_servers_from_a_launch_file(tmp_path: Path) -> None:
+    from eddiebot.core.launch import build_nodes, parse_launch_file
+    from eddiebot.registry import NODES
+
+    mask = _mask_file(tmp_path, "zones", 100, (1.0, 1.0, 2.0, 2.0), mode="trinary")
+    launch = tmp_path / "filters.yaml"
+    launch.write_text(f"""
+launch:
+  - node:
+      type: eddiebot.nav.filter_mask_server
+      name: keepout_filter_mask_server
+      param:
+        - {{name: yaml_filename, value: "{mask}"}}
+        - {{name: topic_name, value: /keepout_filter_mask}}
+  - node:
+      type: eddiebot.nav.costmap_filter_info_server
+      name: keepout_costmap_filter_info_server
+      param:
+        - {{name: filter_info_topic, value: /keepout_costmap_filter_info}}
+        - {{name: mask_topic, value: /keepout_filter_mask}}
+  - node:
+      type: eddiebot.core.lifecycle_manager
+      name: lifecycle_manager_costmap_filters
+      param:
+        - {{name: node_names, value: [keepout_filter_mask_server, keepout_costmap_filter_info_server]}}
+        - {{name: autostart, value: true}}
+""")
+    ctx = Context(use_sim_time=True)
+    try:
+        ex = SingleThreadedExecutor(context=ctx)
+        for n in build_nodes(parse_launch_file(launch, {}), ctx, NODES):
+            ex.add_node(n)
+        ex.spin_for(1.0)
+        probe = Node("probe", context=ctx)
+        infos: list[Any] = []
+        masks: list[Any] = []
+        probe.create_subscription(CostmapFilterInfo, "/keepout_costmap_filter_info", infos.append,
+                                  FILTER_QOS)
+        probe.create_subscription(OccupancyGrid, "/keepout_filter_mask", masks.append, FILTER_QOS)
+        ex.add_node(probe)
+        ex.spin_for(0.5)
+        assert [(i.type, i.filter_mask_topic) for i in infos] == [(0, "/keepout_filter_mask")]
+        assert len(masks) == 1 and masks[0].header.frame_id == "map"
+        assert int((np.asarray(masks[0].data) == 100).sum()) == 400  # 1 m x 1 m at 0.05 m
+    finally:
+        ctx.shutdown()
