@@ -321,8 +321,11 @@ class ConstraintCritic(Critic):
         c = self.config
         if not c.enabled:
             return
-        out = np.maximum(data.vx - self.max_vel, 0.0) + np.maximum(self.min_vel - data.vx, 0.0)
-        _add(data, np.sum(out * data.model_dt, axis=1) * c.cost_weight, c.cost_power)
+        # max(vx - max_vel, 0) + max(min_vel - vx, 0) == |vx - clip(vx, min_vel, max_vel)|
+        out = np.clip(data.vx, self.min_vel, self.max_vel)
+        np.subtract(data.vx, out, out=out)
+        np.abs(out, out=out)
+        _add(data, out.sum(axis=1) * (data.model_dt * c.cost_weight), c.cost_power)
 
 
 class _CollisionCritic(Critic):
@@ -571,8 +574,8 @@ class PreferForwardCritic(Critic):
         if not c.enabled or within_position_goal_tolerance(
                 c.threshold_to_consider, data.pose, data.goal):
             return
-        back = np.maximum(-data.vx, 0.0)
-        _add(data, np.sum(back * data.model_dt, axis=1) * c.cost_weight, c.cost_power)
+        back = -np.minimum(data.vx, 0.0).sum(axis=1)
+        _add(data, back * (data.model_dt * c.cost_weight), c.cost_power)
 
 
 class TwirlingCritic(Critic):
