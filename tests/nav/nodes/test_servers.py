@@ -151,3 +151,36 @@ def test_lost_localization_holds_then_aborts_the_goal(make_stack, nav_stub_param
     assert result.result().status == GoalStatus.STATUS_ABORTED
     assert result.result().result.error_code == 102  # TF_ERROR
     assert "localization lost" in result.result().result.error_msg
+
+
+def test_is_path_valid_finds_the_first_blocked_pose(make_stack):
+    """Nav2's is_path_valid: a planned path is valid; a straight line through the box is
+    invalid at the first pose in the box's inscribed zone, counted from the robot's pose."""
+    from eddiebot.msgs.nav2_msgs import IsPathValid
+    from eddiebot.msgs.nav_msgs import Path
+
+    stack = make_stack(servers=("map_server", "planner_server"))
+    client = stack.probe.create_client(IsPathValid, "/is_path_valid")
+
+    def check(path):
+        fut = client.call_async(IsPathValid.Request(path=path))
+        stack.spin(0.3)
+        return fut.result()
+
+    planned = _plan(stack, 4.5, 1.0)
+    assert len(planned.poses) > 10
+    assert check(planned).is_valid
+    line = Path()
+    line.header.frame_id = "map"
+    line.poses = [pose_stamped(1.0 + 0.1 * i, 3.0, 0.0, "map") for i in range(41)]
+    answer = check(line)
+    assert not answer.is_valid
+    (index,) = answer.invalid_pose_indices
+    # the box starts at x = 2.6 (index 16); its inscribed zone reaches a robot radius before
+    assert 12 <= index <= 16
+    # poses behind the robot's closest pose are not checked
+    back = Path()
+    back.header.frame_id = "map"
+    back.poses = [pose_stamped(3.0, 3.0, 0.0, "map"), pose_stamped(1.0, 1.0, 0.0, "map"),
+                  pose_stamped(1.5, 1.0, 0.0, "map")]
+    assert check(back).is_valid

@@ -5,7 +5,8 @@ Parameters as Nav2's ``planner_server`` (``planner_plugins`` list, each with ``p
 ``global_costmap.`` (Nav2's separate ``global_costmap/global_costmap`` node, folded in:
 see :func:`eddiebot.nav.nodes._common.nest_nav2_params`). Serves ``compute_path_to_pose``
 and ``compute_path_through_poses`` (nav2_msgs, Jazzy error codes from the typed planner
-failures), publishes ``/plan``, ``/global_costmap/costmap`` and ``costmap_raw``.
+failures) and the ``is_path_valid`` service, publishes ``/plan``,
+``/global_costmap/costmap`` and ``costmap_raw``.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ class PlannerServer(NavServer):
         self._listener: TransformListener | None = None
         self._actions: list[ActionServer] = []
         self._plan_pub: Any = None
+        self._is_path_valid: Any = None
 
     def on_configure(self, state: State) -> TransitionCallbackReturn:
         def build() -> None:
@@ -64,7 +66,7 @@ class PlannerServer(NavServer):
         return self.configure_with(build)
 
     def on_activate(self, state: State) -> TransitionCallbackReturn:
-        from eddiebot.msgs.nav2_msgs import ComputePathThroughPoses, ComputePathToPose
+        from eddiebot.msgs.nav2_msgs import ComputePathThroughPoses, ComputePathToPose, IsPathValid
 
         assert self.host is not None
         self._listener = TransformListener(self.tf_buffer, self)
@@ -76,12 +78,17 @@ class PlannerServer(NavServer):
             ActionServer(self, ComputePathThroughPoses, "compute_path_through_poses",
                          self._through_poses, cancel_callback=accept),
         ]
+        self._is_path_valid = self.create_service(IsPathValid, "is_path_valid",
+                                                  self._on_is_path_valid)
         return TransitionCallbackReturn.SUCCESS
 
     def on_deactivate(self, state: State) -> TransitionCallbackReturn:
         for a in self._actions:
             a.destroy()
         self._actions = []
+        if self._is_path_valid is not None:
+            self.destroy_service(self._is_path_valid)
+            self._is_path_valid = None
         if self.host is not None:
             self.host.deactivate()
         if self._listener is not None:
@@ -101,6 +108,26 @@ class PlannerServer(NavServer):
     @staticmethod
     def _cancel_ok(_handle: ServerGoalHandle) -> CancelResponse:
         return CancelResponse.ACCEPT
+
+    # -- is_path_valid ------------------------------------------------------------------------
+    def _on_is_path_valid(self, request: Any, response: Any) -> Any:
+        """Nav2's ``PlannerServer::isPathValid``: from the pose closest to the robot on, the
+        path is invalid at the first pose whose cell is lethal or inscribed (a circular robot)
+        or whose footprint touches a lethal cell (a footprint), or that lies off the map."""
+        assert self.host is not None and self.costmap is not None
+        response.is_valid = True
+        poses = request.path.poses
+        if not poses:
+            return response
+        xy = np.array([(p.pose.position.x, p.pose.position.y) for p in poses], dtype=np.float64)
+        robot = self.host.robot_pose()
+        first = 0 if robot is None else int(np.argmin(np.sum((xy - robot[:2]) ** 2, axis=1)))
+        self.host.update()
+        invalid = is_path_invalid_from(self.costmap, poses, first)
+        if invalid is not None:
+            response.is_valid = False
+            response.invalid_pose_indices = np.array([invalid], dtype=np.int32)
+        return response
 
     # -- planning -----------------------------------------------------------------------------
     def _in_global(self, pose_stamped: Any, what: str = "goal") -> npt.NDArray[np.float64]:
@@ -188,6 +215,28 @@ class PlannerServer(NavServer):
         except NavError as err:
             return self._finish(handle, result, None, err, t0, 100)
         return self._finish(handle, result, path, None, t0)
+
+
+def is_path_invalid_from(costmap: LayeredCostmap, poses: Any, first: int) -> int | None:
+    """Index of the first pose from ``first`` on that makes a path invalid on ``costmap``
+    (Nav2's rule, see `PlannerServer._on_is_path_valid`), or None."""
+    from eddiebot.nav.cost_values import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE
+
+    grid = costmap.master
+    for i in range(first, len(poses)):
+        pose = poses[i].pose
+        x, y = pose.position.x, pose.position.y
+        if costmap.use_radius:
+            cell = grid.world_to_map(x, y)
+            cost = LETHAL_OBSTACLE if cell is None else grid.get_cost(*cell)
+            if cost in (LETHAL_OBSTACLE, INSCRIBED_INFLATED_OBSTACLE):
+                return i
+        else:
+            yaw = pose_from_msg(pose)[2]
+            cost = grid.footprint_cost(costmap.footprint_at((x, y, yaw)))
+            if cost < 0 or cost >= LETHAL_OBSTACLE:  # off the map counts as lethal
+                return i
+    return None
 
 
 def _pose_text(pose: Any) -> str:
