@@ -139,6 +139,26 @@ def test_transient_local_late_joiner_across_processes(hub: Any, local: Any) -> N
     assert got == ["the map"]
 
 
+def test_a_later_transient_local_subscription_in_the_process_gets_the_history(
+        hub: Any, local: Any) -> None:
+    # one Zenoh subscriber per topic and process fetches the publishers' history once: a
+    # second node's subscription (every node's /tf_static listener) must get it too
+    ctx, node, _t = local("first")
+    first: list[str] = []
+    second: list[str] = []
+    node.create_subscription(String, "/latched_map", lambda m: first.append(m.data),
+                             qos_profile_latched)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    assert _spin_until(ex, lambda: bool(first), 10.0)
+    later = Node("later", context=ctx)
+    later.create_subscription(String, "/latched_map", lambda m: second.append(m.data),
+                              qos_profile_latched)
+    ex.add_node(later)
+    assert _spin_until(ex, lambda: bool(second), 5.0)
+    assert first == ["the map"] and second == ["the map"]
+
+
 def test_type_mismatch_is_reported_with_both_types(hub: Any, local: Any) -> None:
     _ctx, node, _t = local("int_pub")
     pub = node.create_publisher(Int32, "/mixed", 10)
