@@ -8,7 +8,6 @@ from typing import Any
 
 import pytest
 
-from eddiebot.cli.main import main
 from eddiebot.explore.mission import run_exploration
 from eddiebot.explore.report import write_report
 
@@ -92,12 +91,6 @@ def test_ctrl_c_stops_the_robot_where_it_is(world_file: Path, tmp_path: Path) ->
     assert not result.returned_home
     assert result.sim_time_s <= seen["at"] + 0.5  # no drive home after the interrupt
     assert (tmp_path / "out" / "map.yaml").is_file()  # what was mapped is kept
-
-
-def test_without_a_world_it_says_attaching_is_not_supported(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["explore"]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "not supported yet" in err[0]
 
 
 def test_explore_resume_pauses_and_resumes(world_file: Path, tmp_path: Path) -> None:

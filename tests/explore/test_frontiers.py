@@ -18,6 +18,7 @@ from eddiebot.explore import (
     frontier_cells,
     frontier_cost,
     information_gain,
+    looked_mask,
     reachable_mask,
     search_frontiers,
 )
@@ -42,10 +43,13 @@ def room(width_cells: int = 90, height_cells: int = 60, open_east: bool = True) 
 
 
 def faded_cone(config: ExploreConfig, unknown_from: float) -> float:
-    """The gain of a cone whose unknown part starts ``unknown_from`` m ahead (m²)."""
+    """The gain of a cone whose unknown part starts ``unknown_from`` m ahead (m²): each
+    point weighted by the chance that no wall stands before it in the unknown and that one
+    stands behind it within range (else the beam is NaN and clears nothing)."""
     r = np.linspace(max(config.sensor_min_range, unknown_from), config.sensor_max_range, 2000)
     fade = np.exp(-UNKNOWN_BLOCKING * (r - unknown_from))
-    return float(config.sensor_fov * np.trapezoid(r * fade, r))
+    back = 1.0 - np.exp(-UNKNOWN_BLOCKING * (config.sensor_max_range - r))
+    return float(config.sensor_fov * np.trapezoid(r * fade * back, r))
 
 
 def test_frontier_cells_are_unknown_cells_beside_free_ones() -> None:
@@ -63,14 +67,16 @@ def test_one_frontier_with_its_size_centroid_viewpoint_and_gain() -> None:
     f = search.frontiers[0]
     assert f.size == pytest.approx(58 * RES)
     assert f.centroid == pytest.approx((5.025, 2.5), abs=1e-6)
-    # the viewpoint stands back by the standoff (0.9 m) and faces the frontier
-    assert 5.025 - f.viewpoint[0] == pytest.approx(config.standoff, abs=2 * RES)
-    assert abs(f.viewpoint[2]) < 0.05
-    # path length from x = 1.0 to the viewpoint, straight along the room
-    assert f.distance == pytest.approx(f.viewpoint[0] - 1.0, abs=0.1)
-    # the cone between the frontier (0.9 m ahead) and 4.5 m, clipped by the grid's east
-    # edge (10 m), each cell weighted by how far into the unknown it lies
-    assert f.gain == pytest.approx(faded_cone(config, 0.9), rel=0.1)
+    # the viewpoint stands back between the standoff (0.9 m) and half the range (2.25 m),
+    # in the room's middle, and faces the frontier
+    back = 5.025 - f.viewpoint[0]
+    assert config.standoff - RES <= back <= 0.5 * config.sensor_max_range + RES
+    assert abs(f.viewpoint[1] - 2.5) < 0.5 and abs(f.viewpoint[2]) < 0.05
+    # path length from x = 1.0 to the viewpoint
+    assert f.distance == pytest.approx(math.dist(f.viewpoint[:2], (1.0, 2.5)), abs=0.15)
+    # the cone beyond the frontier to 4.5 m, each point weighted by how far into the
+    # unknown it lies and by the chance its beam comes back
+    assert f.gain == pytest.approx(faded_cone(config, back), rel=0.1)
     assert f.cost == pytest.approx(frontier_cost(f.distance, f.turn, f.gain, config))
 
 
@@ -115,7 +121,7 @@ def test_gain_counts_only_what_the_camera_can_see() -> None:
     d2 = d.copy()
     d2[:, 120] = 100  # a wall 1 m ahead stops every ray
     walled = information_gain(OccupancyMap(d2, RES, (-5.0, -5.0, 0.0)), (0.0, 0.0, 0.0), config)
-    assert walled < 0.15 * full  # only the 0.5-1 m before the wall
+    assert walled < 0.25 * full  # only the 0.5-1 m before the wall
     # looking at known free space gains nothing
     assert information_gain(OccupancyMap(np.zeros((200, 200), np.int8), RES, (-5.0, -5.0, 0.0)),
                             (0.0, 0.0, 0.0), config) == 0.0
@@ -227,3 +233,67 @@ def test_ragged_frontier_pieces_are_one_frontier() -> None:
     assert labels[5, 0] == labels[5, 17] != labels[5, 25]
     assert (labels > 0).sum() == cells.sum()  # the joining cells are not frontier cells
     assert group_frontier_cells(cells, gap=0)[1] == 3
+
+
+def test_a_direction_already_looked_along_from_a_spot_gains_nothing_more() -> None:
+    config = ExploreConfig()
+    g = OccupancyMap(np.full((200, 200), -1, np.int8), RES, (-5.0, -5.0, 0.0))
+    fresh = information_gain(g, (0.0, 0.0, 0.0), config)
+    assert fresh > 1.0
+    looked = looked_mask(g, [(0.1, 0.0, 0.0)], config)
+    # from (nearly) the same spot, the same way: every ray was looked along already
+    assert information_gain(g, (0.0, 0.0, 0.0), config, looked) < 0.2 * fresh
+    # the other way, or 1 m aside, the camera has not looked yet
+    assert information_gain(g, (0.0, 0.0, math.pi), config, looked) == pytest.approx(fresh, rel=0.05)
+    assert information_gain(g, (0.0, 1.0, 0.0), config, looked) == pytest.approx(fresh, rel=0.05)
+
+
+def test_a_beam_ending_on_a_known_wall_clears_what_it_crosses() -> None:
+    config = ExploreConfig()
+    d = np.full((200, 200), -1, np.int8)
+    d[:, 150] = 100  # a known wall 2.5 m ahead
+    walled = information_gain(OccupancyMap(d, RES, (-5.0, -5.0, 0.0)), (0.0, 0.0, 0.0), config)
+    open_ = information_gain(OccupancyMap(np.full((200, 200), -1, np.int8), RES, (-5.0, -5.0, 0.0)),
+                             (0.0, 0.0, 0.0), config)
+    # the rays to the wall come back for sure: the 0.5-2.5 m before it is worth more than
+    # the same stretch of the open cone, where a beam may meet nothing within 4.5 m
+    r = np.linspace(config.sensor_min_range, 2.5, 1000)
+    expected = float(config.sensor_fov * np.trapezoid(r * np.exp(-UNKNOWN_BLOCKING * r), r))
+    assert walled == pytest.approx(expected, rel=0.1)
+    assert walled > 0.5 * open_
+
+
+def test_a_viewpoint_looks_across_a_corridor_middle_it_looked_down_before() -> None:
+    config = ExploreConfig(potential_scale=1.0, orientation_scale=0.5, gain_scale=0.3)
+    # a 2 m corridor, known but for its middle strip 1-4 m ahead of the robot, which looked
+    # down it from x = 0.5 (the middle beams met nothing within 4.5 m: NaN, nothing cleared)
+    d = np.zeros((60, 200), np.int8)
+    d[10, :] = d[50, :] = 100
+    d[27:34, 30:80] = -1
+    d[:, 0] = d[:, 199] = 100
+    g = OccupancyMap(d, RES)
+    robot = (0.5, 1.5, 0.0)
+    looks = [(0.5, 1.5, 0.0), (0.6, 1.5, 0.0)]
+    f = search_frontiers(g, robot, config, looked=looks).frontiers
+    assert len(f) == 1
+    x, y, yaw = f[0].viewpoint
+    # not from the corridor's middle line looking down it again: from aside, looking across
+    assert abs(y - 1.5) > 0.2 or abs(math.remainder(yaw, 2 * math.pi)) > 0.6
+    assert f[0].gain > 0.2
+
+
+def test_a_visit_is_unproductive_only_when_it_promised_area_and_showed_none() -> None:
+    from eddiebot.explore.tracking import Track
+
+    t = Track(0, (0.0, 0.0), known_at_goal=10.0, expected=3.0, arrived=True)
+    t.judge_visit(10.2)  # promised 3 m², showed 0.2 m²
+    assert t.visits == 1 and not t.arrived
+    t.judge_visit(10.2)  # no new arrival: nothing judged
+    assert t.visits == 1
+    t.arrived, t.known_at_goal = True, 10.2
+    t.judge_visit(12.0)  # showed 1.8 m²: productive again
+    assert t.visits == 0
+    # promised little, showed little: no verdict on the frontier
+    low = Track(1, (0.0, 0.0), known_at_goal=10.0, expected=0.3, arrived=True)
+    low.judge_visit(10.1)
+    assert low.visits == 0 and low.idle == 1

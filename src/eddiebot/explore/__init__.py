@@ -19,6 +19,7 @@ from eddiebot.explore.frontiers import (
     frontier_cost,
     group_frontier_cells,
     information_gain,
+    looked_mask,
     reachable_mask,
     search_frontiers,
 )
@@ -50,6 +51,7 @@ __all__ = [
     "frontier_cost",
     "group_frontier_cells",
     "information_gain",
+    "looked_mask",
     "reachable_mask",
     "search_frontiers",
 ]

@@ -48,6 +48,7 @@ __all__ = [
     "frontier_cost",
     "group_frontier_cells",
     "information_gain",
+    "looked_mask",
     "mark_swept",
     "reachable_mask",
     "search_frontiers",
@@ -56,12 +57,16 @@ __all__ = [
 #: Information gain: how fast the view through unknown space fades (per m): unknown cells
 #: 1 m into the unknown count 0.61, 2 m in 0.37, 4 m in 0.14.
 UNKNOWN_BLOCKING = 0.5
-#: Frontier pieces up to 2·this cells apart are one frontier; 0: plain 8-connected groups
-#: (joining pieces 2 cells apart explored the house less well in the one run it was tried:
-#: docs/benchmarks/explore.md).
-_MERGE_GAP_CELLS = 0
+#: Frontier pieces up to 2·this cells apart are one frontier (the edge of what a 57° scan
+#: saw is ragged); 0: plain 8-connected groups, as explore_lite.
+_MERGE_GAP_CELLS = 1
 #: Viewpoint choice: metres of path worth one metre nearer the standoff distance.
 _CLOSER_WEIGHT = 1.5
+#: Viewpoint choice: candidate spots per frontier, their spacing (m), and the rays a
+#: candidate's gain is computed over.
+_VIEW_CANDIDATES = 10
+_SPOT_SPACING = 0.5
+_COARSE_RAYS = 24
 _EIGHT = np.ones((3, 3), dtype=bool)
 _FOUR = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], dtype=bool)
 
@@ -223,41 +228,106 @@ def distance_field(passable: npt.NDArray[np.bool_], start: tuple[int, int],
     return dist * resolution
 
 
-def _ray_offsets(config: ExploreConfig, resolution: float) -> tuple[npt.NDArray[np.float64], ...]:
-    n_rays = max(3, math.ceil(config.sensor_fov * config.sensor_max_range / resolution) + 1)
+#: Heading bins of the look memory (`looked_mask`): 32 bins of 11.25°.
+_LOOK_BINS = 32
+#: A look from a pose covers candidate viewpoints this close to it (m).
+_LOOK_RADIUS = 0.3
+
+
+def looked_mask(grid: OccupancyMap, poses: npt.ArrayLike, config: ExploreConfig
+                ) -> npt.NDArray[np.uint32]:
+    """Per cell of ``grid``, the directions (bit i: heading bin i of 32) the camera has
+    already looked along from within ``_LOOK_RADIUS`` of it; ``poses`` (N, 3) are the
+    robot's poses (x, y, yaw, map frame) while it drove and turned.
+
+    The Kinect's no-return beams are NaN and clear nothing: space still unknown along a
+    direction already looked along from (nearly) the same spot is space this camera does
+    not see from there (a long corridor's middle, a room beyond 4.5 m), so a viewpoint
+    gains nothing along such rays."""
+    mask = np.zeros(grid.data.shape, dtype=np.uint32)
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if p.size == 0:
+        return mask
+    cells = world_to_map(grid, p[:, :2])
+    width = 2 * math.pi / _LOOK_BINS
+    # bins whose centre lies inside the field of view
+    centres = (np.arange(_LOOK_BINS) + 0.5) * width
+    off = np.abs((centres[None, :] - (p[:, 2:3] - grid.origin[2]) + math.pi) % (2 * math.pi)
+                 - math.pi)
+    inside = off <= config.sensor_fov / 2
+    bits = (inside.astype(np.uint64) << np.arange(_LOOK_BINS, dtype=np.uint64)).sum(axis=1)
+    bits = bits.astype(np.uint32)
+    r = max(0, int(_LOOK_RADIUS / grid.resolution))
+    h, w = grid.data.shape[0], grid.data.shape[1]
+    for dr in range(-r, r + 1):
+        for dc in range(-r, r + 1):
+            if dr * dr + dc * dc > r * r:
+                continue
+            rr, cc = cells[:, 1] + dr, cells[:, 0] + dc
+            ok = (rr >= 0) & (cc >= 0) & (rr < h) & (cc < w)
+            np.bitwise_or.at(mask, (rr[ok], cc[ok]), bits[ok])
+    return mask
+
+
+def _pose_gains(grid: OccupancyMap, poses: npt.NDArray[np.float64], config: ExploreConfig,
+                looked: npt.NDArray[np.uint32] | None = None, n_rays: int | None = None
+                ) -> npt.NDArray[np.float64]:
+    """`information_gain` of each of ``poses`` (P, 3) at once, over ``n_rays`` rays."""
+    res = grid.resolution
+    if n_rays is None:
+        n_rays = max(3, math.ceil(config.sensor_fov * config.sensor_max_range / res) + 1)
     angles = np.linspace(-config.sensor_fov / 2, config.sensor_fov / 2, n_rays)
-    ranges = np.arange(0.0, config.sensor_max_range, resolution / 2) + resolution / 2
-    return angles, ranges
-
-
-def information_gain(grid: OccupancyMap, pose: Sequence[float], config: ExploreConfig) -> float:
-    """Unknown floor area (m²) the camera at ``pose`` (x, y, yaw in the grid's frame) would
-    see: cells on rays across ``sensor_fov`` between ``sensor_min_range`` and
-    ``sensor_max_range``, each ray stopped at the first occupied cell and each unknown cell
-    weighted by the chance that the unknown cells before it on the ray are not walls."""
-    angles, ranges = _ray_offsets(config, grid.resolution)
-    x, y, yaw = (float(v) for v in pose)
-    a = yaw + angles[:, None]
-    pts = np.stack([x + ranges[None, :] * np.cos(a), y + ranges[None, :] * np.sin(a)], axis=-1)
-    cells = world_to_map(grid, pts)
+    step = res / 2 if n_rays > 40 else res
+    ranges = np.arange(0.0, config.sensor_max_range, step) + step / 2
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    a = poses[:, 2:3] + angles[None, :]  # (P, A)
+    xs = poses[:, 0, None, None] + ranges[None, None, :] * np.cos(a)[..., None]
+    ys = poses[:, 1, None, None] + ranges[None, None, :] * np.sin(a)[..., None]
+    cells = world_to_map(grid, np.stack([xs, ys], axis=-1))
     inside = is_inside(grid, cells)
     col = np.where(inside, cells[..., 0], 0)
     row = np.where(inside, cells[..., 1], 0)
-    values = np.where(inside, grid.data[row, col].astype(np.int16), 100)
-    blocked = np.maximum.accumulate(values >= config.occupied_threshold, axis=1)
-    in_range = ranges[None, :] >= config.sensor_min_range
+    values = np.where(inside, grid.data[row, col].astype(np.int16), -1)
+    occupied = values >= config.occupied_threshold
+    blocked = np.maximum.accumulate(occupied, axis=-1)
     unknown = values < 0
-    # an unknown cell may be a wall: the further a ray has run through unknown space, the
-    # less likely it still sees (exp(-UNKNOWN_BLOCKING · metres of unknown before it))
-    behind = (np.cumsum(unknown, axis=1) - unknown) * (grid.resolution / 2)
-    weight = np.exp(-UNKNOWN_BLOCKING * behind)
-    seen_unknown = inside & ~blocked & in_range & unknown
-    if not seen_unknown.any():
-        return 0.0
-    flat = row[seen_unknown] * grid.width + col[seen_unknown]
-    best = np.zeros(grid.width * grid.height)
-    np.maximum.at(best, flat, weight[seen_unknown])
-    return float(best.sum() * grid.resolution**2)
+    in_range = ranges >= config.sensor_min_range
+    # the beam must get there: an unknown cell may be a wall (exp(-UNKNOWN_BLOCKING · the
+    # metres of unknown before it)) ...
+    run = np.cumsum(unknown, axis=-1)
+    before = (run - unknown) * step
+    # ... and must come back: a beam that meets nothing within range is NaN and clears
+    # nothing, so a cell counts when a known wall ends its ray in range, or else as the
+    # chance that the unknown beyond it holds one
+    hits = blocked[..., -1:]
+    after = (run[..., -1:] - run) * step
+    back = np.where(hits, 1.0, 1.0 - np.exp(-UNKNOWN_BLOCKING * after))
+    weight = np.exp(-UNKNOWN_BLOCKING * before) * back
+    seen = ~blocked & in_range & unknown
+    if looked is not None:
+        c0 = world_to_map(grid, poses[:, :2])
+        ok0 = is_inside(grid, c0)
+        bits = np.zeros(len(poses), dtype=np.uint32)
+        bits[ok0] = looked[c0[ok0, 1], c0[ok0, 0]]
+        rel = (a - grid.origin[2]) % (2 * math.pi)
+        ray_bin = np.minimum((rel / (2 * math.pi / _LOOK_BINS)).astype(np.int64), _LOOK_BINS - 1)
+        done = ((bits[:, None].astype(np.uint64) >> ray_bin.astype(np.uint64)) & 1).astype(bool)
+        seen &= ~done[..., None]
+    dtheta = config.sensor_fov / max(1, n_rays - 1)
+    area = np.where(seen, weight, 0.0) * (ranges * dtheta * step)
+    return np.asarray(area.sum(axis=(1, 2)), dtype=np.float64)
+
+
+def information_gain(grid: OccupancyMap, pose: Sequence[float], config: ExploreConfig,
+                     looked: npt.NDArray[np.uint32] | None = None) -> float:
+    """Unknown floor area (m²) the camera at ``pose`` (x, y, yaw in the grid's frame) would
+    clear: points on rays across ``sensor_fov`` between ``sensor_min_range`` and
+    ``sensor_max_range``, each ray stopped at the first occupied cell, each unknown point
+    weighted by the chance that the unknown before it is not a wall and that the beam comes
+    back (a known wall ends the ray in range, or the unknown beyond holds one: the Kinect's
+    no-return beams clear nothing). Rays along directions ``looked`` (`looked_mask`)
+    already from there count nothing."""
+    return float(_pose_gains(grid, np.asarray(pose, dtype=np.float64), config, looked)[0])
 
 
 def frontier_cost(distance: float, turn: float, gain: float, config: ExploreConfig) -> float:
@@ -269,6 +339,20 @@ def frontier_cost(distance: float, turn: float, gain: float, config: ExploreConf
 
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def _spread(flat: npt.NDArray[np.int64], score: npt.NDArray[np.float64], width: int,
+            spacing: float, limit: int) -> list[tuple[int, int]]:
+    """Up to ``limit`` of the cells ``flat`` (flat indices into a grid ``width`` wide), the
+    best ``score`` first, each at least ``spacing`` cells from those taken: (row, col)."""
+    taken: list[tuple[int, int]] = []
+    for i in np.argsort(score, kind="stable"):
+        r, c = divmod(int(flat[i]), width)
+        if all((r - r0) ** 2 + (c - c0) ** 2 >= spacing**2 for r0, c0 in taken):
+            taken.append((r, c))
+            if len(taken) >= limit:
+                break
+    return taken
 
 
 def _walk_back(dist: npt.NDArray[np.float64], start: tuple[int, int], cells: npt.NDArray[np.int64],
@@ -346,13 +430,16 @@ def _padded(grid: OccupancyMap, passable: npt.NDArray[np.bool_] | None, pad: int
 
 def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: ExploreConfig,
                      passable: npt.NDArray[np.bool_] | None = None,
-                     avoid: Sequence[Sequence[float]] = ()) -> FrontierSearch:
+                     avoid: Sequence[Sequence[float]] = (),
+                     looked: Sequence[Sequence[float]] | npt.NDArray[np.float64] | None = None
+                     ) -> FrontierSearch:
     """Every reachable frontier of ``grid`` seen from the robot at ``robot`` (x, y, yaw),
     cheapest first.
 
     ``passable``: where the robot's centre may go (default `reachable_mask`); a caller with
     a costmap passes its non-lethal, non-inscribed cells here. ``avoid``: spots (x, y) the
     robot could not get to; no goal (viewpoint, entry) lies within ``avoid_radius`` of one.
+    ``looked``: the robot's poses (N, 3) so far; see `looked_mask`.
     The ``distance`` field refers to the grid padded with 2 unknown cells on every side.
     """
     res = grid.resolution
@@ -419,19 +506,11 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
                            fc.astype(np.int64), np.zeros(fr.size), labels[fr, fc].astype(np.int64))
     edt = edt * res
     candidate = goal_ok & (edt >= standoff) & (edt <= view_max)
-    view_d = np.full(count + 1, np.inf)
-    view_flat = np.full(count + 1, -1, dtype=np.int64)
     cand_flat = np.flatnonzero(candidate)
-    if cand_flat.size:
-        c_lab = owner.ravel()[cand_flat]
-        # nearer the standoff is better: a step closer costs a step but shows more beyond
-        c_d = dist.ravel()[cand_flat] + _CLOSER_WEIGHT * (edt.ravel()[cand_flat] - standoff)
-        order = np.lexsort((c_d, c_lab))
-        lab_sorted = c_lab[order]
-        first = np.ones(lab_sorted.size, dtype=bool)
-        first[1:] = lab_sorted[1:] != lab_sorted[:-1]
-        view_d[lab_sorted[first]] = c_d[order][first]
-        view_flat[lab_sorted[first]] = cand_flat[order][first]
+    cand_owner = owner.ravel()[cand_flat]
+    # nearer the standoff is better: a step closer costs a step but shows more beyond
+    cand_score = dist.ravel()[cand_flat] + _CLOSER_WEIGHT * (edt.ravel()[cand_flat] - standoff)
+    looked_cells = looked_mask(grid, looked, config) if looked is not None and len(looked) else None
     objects = ndimage.find_objects(labels)
     too_small = unreachable = 0
     found: list[Frontier] = []
@@ -452,30 +531,37 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
         centroid = pts.mean(axis=0)
         er, ec = divmod(int(best_flat[k]), grid.width)
         entry = map_to_world(grid, np.array([[ec, er]]))[0]
-        if view_flat[k] >= 0:
-            vr, vc = divmod(int(view_flat[k]), grid.width)
-        else:
-            vr, vc = _walk_back(dist, (er, ec), cells, standoff / res)
-        view = map_to_world(grid, np.array([[vc, vr]]))[0]
-        # face where the camera sees the most of the unknown: towards the centroid, or
-        # one of eight headings
-        to_centroid = math.atan2(centroid[1] - view[1], centroid[0] - view[0])
-        best_gain, yaw = -1.0, to_centroid
-        for heading in (to_centroid, *(k * math.pi / 4 for k in range(-3, 5))):
-            g = information_gain(grid, (view[0], view[1], heading), config)
-            if g > best_gain + 1e-9:
-                best_gain, yaw = g, heading
-        gain = best_gain
-        travel = float(dist[vr, vc])
-        bearing = math.atan2(view[1] - ry, view[0] - rx)
-        turn = abs(_wrap(yaw - ryaw)) if travel < 0.3 else (
-            abs(_wrap(bearing - ryaw)) + abs(_wrap(yaw - bearing)))
+        # where to stand and which way to face: a few reachable cells at the standoff
+        # band, spread out (nearest by path first), each with nine headings, scored by
+        # the frontier cost; a spot the camera has looked from along a heading gains
+        # nothing more that way (`looked_mask`)
+        stands = _spread(cand_flat[cand_owner == k], cand_score[cand_owner == k], grid.width,
+                         _SPOT_SPACING / res, _VIEW_CANDIDATES)
+        if not stands:
+            stands = [_walk_back(dist, (er, ec), cells, standoff / res)]
+        views = map_to_world(grid, np.array([[c, r] for r, c in stands]))
+        heads = []
+        for view in views:
+            to_centroid = math.atan2(centroid[1] - view[1], centroid[0] - view[0])
+            for heading in (to_centroid, *(j * math.pi / 4 for j in range(-3, 5))):
+                heads.append((view[0], view[1], heading))
+        poses = np.array(heads)
+        gains = _pose_gains(grid, poses, config, looked_cells, n_rays=_COARSE_RAYS)
+        travels = np.repeat([float(dist[r, c]) for r, c in stands], 9)
+        bearings = np.arctan2(poses[:, 1] - ry, poses[:, 0] - rx)
+        wrap = lambda v: np.abs((v + math.pi) % (2 * math.pi) - math.pi)  # noqa: E731
+        turns = np.where(travels < 0.3, wrap(poses[:, 2] - ryaw),
+                         wrap(bearings - ryaw) + wrap(poses[:, 2] - bearings))
+        costs = (config.potential_scale * travels + config.orientation_scale * turns
+                 - config.gain_scale * gains)
+        # a pose that shows nothing is no viewpoint, however near
+        j = int(np.argmin(np.where(gains >= config.min_gain, costs, costs + 1e6)))
         found.append(Frontier(
             points=pts, size=float(sizes[k - 1]),
             centroid=(float(centroid[0]), float(centroid[1])),
             entry=(float(entry[0]), float(entry[1])),
-            viewpoint=(float(view[0]), float(view[1]), yaw),
-            distance=travel, gain=gain, turn=turn,
-            cost=frontier_cost(travel, turn, gain, config)))
+            viewpoint=(float(poses[j, 0]), float(poses[j, 1]), float(poses[j, 2])),
+            distance=float(travels[j]), gain=float(gains[j]), turn=float(turns[j]),
+            cost=float(costs[j])))
     found.sort(key=lambda f: f.cost)
     return FrontierSearch(tuple(found), too_small, unreachable, dist)

@@ -34,7 +34,7 @@ from eddiebot.core.launch import (
 )
 from eddiebot.core.node import Node
 from eddiebot.explore.config import EDDIE_EXPLORE_PARAMS
-from eddiebot.maps import OccupancyMap, save_map
+from eddiebot.maps import OccupancyMap
 from eddiebot.registry import NODES
 
 __all__ = ["ExploreResult", "coverage", "explore_description", "reachable_free_area", "run_exploration"]
@@ -66,6 +66,8 @@ class ExploreResult:
     collisions: int = 0
     returned_home: bool = False
     home_error_m: float = math.nan
+    home_failure: str = ""
+    """Why the robot is not home: the last goal home's failure, or where it ended."""
     turning_share: float = math.nan
     frontiers_visited: int = 0
     frontiers_abandoned: int = 0
@@ -83,7 +85,7 @@ class ExploreResult:
         """The figures report.json holds (JSON-ready)."""
         keys = ("world", "seed", "reason", "coverage", "map_agreement", "map_agreement_tolerant",
                 "ate_m", "distance_m", "sim_time_s", "explore_time_s", "wall_time_s", "collisions",
-                "returned_home", "home_error_m", "turning_share", "frontiers_visited",
+                "returned_home", "home_error_m", "home_failure", "turning_share", "frontiers_visited",
                 "frontiers_abandoned", "goals_sent", "reachable_area_m2", "mapped_free_m2",
                 "interrupted")
         out: dict[str, Any] = {}
@@ -264,19 +266,9 @@ def run_exploration(out_dir: Path, *, world: str = "office", seed: int = 0,
         except KeyboardInterrupt:
             pass
     result.wall_time_s = time.perf_counter() - t0
+    _fill_from_node(result, explore)
     result.sim_time_s = context.sim_clock.now_ns() / 1e9
-    result.reason = "interrupted" if result.interrupted else (explore.finish_reason or "stopped")
     result.collisions = int(sim.collisions)
-    if explore._started_s is not None:
-        finished = [g.sent_s for g in explore.goals] or [explore._started_s]
-        result.explore_time_s = max(finished) - explore._started_s
-    result.goals_sent = len(explore.goals)
-    result.goals = [{"frontier": g.frontier_id, "viewpoint": [round(v, 3) for v in g.viewpoint],
-                     "centroid": [round(v, 3) for v in g.centroid], "sent_s": round(g.sent_s, 2),
-                     "outcome": g.outcome} for g in explore.goals]
-    result.frontiers_visited = sum(g.outcome == "reached" for g in explore.goals)
-    result.frontiers_abandoned = len(explore.blacklist)
-    result.abandoned = [{"point": list(e.point), "reason": e.reason} for e in explore.blacklist.entries]
     tr = np.array(truth) if truth else np.zeros((0, 4))
     result.truth = tr[:, 1:] if len(tr) else np.zeros((0, 3))
     if len(tr) > 1:
@@ -284,6 +276,10 @@ def run_exploration(out_dir: Path, *, world: str = "office", seed: int = 0,
         result.turning_share = turning_share(tr[:, 0], tr[:, 1:])
         result.home_error_m = float(math.hypot(tr[-1, 1] - start[0], tr[-1, 2] - start[1]))
         result.returned_home = bool(explore.returned_home) and result.home_error_m <= HOME_TOLERANCE
+        if explore.config.return_to_init and not result.interrupted and not result.returned_home:
+            result.home_failure = explore.home_failure or (
+                f"ended {result.home_error_m:.2f} m from the start" if explore.returned_home
+                else "the run's time cap came before the robot was home")
     core = slam.core
     poses = core.node_poses()
     if len(poses) > 1 and len(tr):
@@ -296,7 +292,7 @@ def run_exploration(out_dir: Path, *, world: str = "office", seed: int = 0,
     grid = core.occupancy_map()
     result.grid = grid
     out_dir.mkdir(parents=True, exist_ok=True)
-    save_map(grid, out_dir / "map")
+    slam.save_outputs(out_dir)  # the session, and the map as nav2 map_server files
     gt = cached_ground_truth(sim.world)
     area = reachable_free_area(gt.footprint, (start[0], start[1]), ROBOT_RADIUS)
     result.reachable_area_m2 = float(area.sum() * gt.footprint.resolution**2)
@@ -307,3 +303,129 @@ def run_exploration(out_dir: Path, *, world: str = "office", seed: int = 0,
         n.destroy_node()
     context.shutdown()
     return result
+
+
+def attached_description(nav_params: Path, *, simulated: bool, with_cloud: bool,
+                         slam_params: Path | None = None,
+                         explore_params: dict[str, Any] | None = None) -> LaunchDescription:
+    """The launch description of an exploration attached to a running simulator or robot:
+    ``mapping`` (SLAM alone, on the robot's ``/scan`` and odometry), ``nav``'s servers
+    without a localization (SLAM owns map → odom), the depth cloud when the robot
+    publishes none (``with_cloud``) and the explore node."""
+    sim_time = "true" if simulated else "false"
+    args = {"use_sim_time": sim_time}
+    if slam_params is not None:
+        args["slam_params"] = str(slam_params)
+    desc = parse_launch_file(find_launch_file("mapping"), args)
+    for spec in desc.nodes:
+        if spec.type == "eddiebot.slam.slam_toolbox":
+            spec.params.update(SLAM_OVERRIDES)
+    nav = parse_launch_file(find_launch_file("nav"), {
+        "params_file": str(nav_params), "localization": "slam", "use_sim_time": sim_time})
+    servers = [s for s in nav.nodes if s.type != "eddiebot.slam.slam_toolbox"]
+    extra = [NodeSpec("eddiebot.perception.depth_to_cloud", params={"use_sim_time": simulated})
+             ] if with_cloud else []
+    params = {**EDDIE_EXPLORE_PARAMS, **(explore_params or {}), "use_sim_time": simulated}
+    return LaunchDescription(
+        nodes=[*desc.nodes, *extra, *servers,
+               NodeSpec("eddiebot.explore.explore", params=params, where="explore")],
+        args=desc.args)
+
+
+def run_attached(out_dir: Path, context: Context, *, simulated: bool, with_cloud: bool,
+                 time_limit: float | None = None, explore_params: dict[str, Any] | None = None,
+                 progress: Any = None) -> ExploreResult:
+    """Explore with a robot already running on ``context``'s graph (the simulator of
+    another process, or the real robot's bring-up): SLAM, navigation and the explore node
+    run here, following ``/clock`` when ``simulated``. Stops when exploring and the way
+    home are over, or on Ctrl-C / SIGTERM / SIGHUP (the goal is cancelled, a zero velocity
+    goes to the teleop input, the robot is not sent home). Writes the SLAM session and
+    map under ``out_dir``; the result has no ground-truth figures."""
+    import signal
+    import threading
+
+    from eddiebot.core.clock_node import ClockFollower
+    from eddiebot.core.launch import TERMINATING_SIGNALS
+    from eddiebot.explore.node import ExploreNode, ExploreState
+    from eddiebot.msgs.geometry_msgs import Twist
+
+    result = ExploreResult("attached")
+    params = dict(explore_params or {})
+    if time_limit:
+        params["time_limit"] = float(time_limit)
+    desc = attached_description(_nav_params(out_dir), simulated=simulated,
+                                with_cloud=with_cloud, explore_params=params)
+    nodes: list[Node] = build_nodes(desc, context, NODES)
+    explore: ExploreNode = next(n for n in nodes if isinstance(n, ExploreNode))
+    slam: Any = next(n for n in nodes if n.get_name() == "slam_toolbox")
+    probe = Node("explore_stop", context=context)
+    stop_pub = probe.create_publisher(Twist, "/cmd_vel_teleop", 1)
+    nodes.append(probe)
+    if simulated:
+        clock = Node("clock_follower", context=context)
+        ClockFollower(clock)
+        nodes.append(clock)
+    executor = SingleThreadedExecutor(context=context, drive_sim_time=False)
+    for n in nodes:
+        executor.add_node(n)
+    stop = threading.Event()
+
+    def on_signal(signum: int, _frame: Any) -> None:
+        stop.set()
+
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for sig in TERMINATING_SIGNALS:
+            old[sig] = signal.signal(sig, on_signal)
+    t0 = time.perf_counter()
+    try:
+        while explore.state is not ExploreState.DONE and not stop.is_set():
+            executor.spin_for(0.5)
+            if progress is not None:
+                progress(explore, explore.get_clock().now_ns() / 1e9)
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+    if stop.is_set():
+        result.interrupted = True
+        explore.stop("interrupted")
+        stop_pub.publish(Twist())
+        executor.spin_for(0.3)
+    result.wall_time_s = time.perf_counter() - t0
+    _fill_from_node(result, explore)
+    if explore.config.return_to_init and not result.interrupted:
+        result.returned_home = bool(explore.returned_home)
+        if not result.returned_home:
+            result.home_failure = explore.home_failure or "exploring had not ended"
+    try:
+        slam.save_outputs(out_dir)
+    finally:
+        if slam.core.nodes:
+            slam.core.update_map()
+            result.grid = slam.core.occupancy_map()
+            result.mapped_free_m2 = float(np.sum((result.grid.data >= 0) & (result.grid.data <= 19))
+                                          * result.grid.resolution**2)
+        for n in reversed(nodes):
+            n.destroy_node()
+    return result
+
+
+def _fill_from_node(result: ExploreResult, explore: Any) -> None:
+    """The figures the explore node itself knows: reason, goals, abandoned frontiers,
+    times, and the distance along the path it recorded (map frame)."""
+    result.reason = "interrupted" if result.interrupted else (explore.finish_reason or "stopped")
+    if explore._started_s is not None:
+        finished = [g.sent_s for g in explore.goals] or [explore._started_s]
+        result.explore_time_s = max(finished) - explore._started_s
+        result.sim_time_s = explore.get_clock().now_ns() / 1e9 - explore._started_s
+    result.goals_sent = len(explore.goals)
+    result.goals = [{"frontier": g.frontier_id, "viewpoint": [round(v, 3) for v in g.viewpoint],
+                     "centroid": [round(v, 3) for v in g.centroid], "sent_s": round(g.sent_s, 2),
+                     "outcome": g.outcome} for g in explore.goals]
+    result.frontiers_visited = sum(g.outcome == "reached" for g in explore.goals)
+    result.frontiers_abandoned = len(explore.blacklist)
+    result.abandoned = [{"point": list(e.point), "reason": e.reason}
+                        for e in explore.blacklist.entries]
+    if len(explore.path) > 1:
+        p = np.array([(x, y) for x, y, _ in explore.path])
+        result.distance_m = float(np.sum(np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))))

@@ -7,8 +7,16 @@ and cancels the goal, true resumes); reads the robot's pose from TF ``map`` →
 recoveries, velocity smoother and collision monitor stay in charge of the motion; the
 look-around at the start is the behaviour server's ``spin`` (one full turn: the Kinect
 sees 57°). With no frontier left, or after ``time_limit``, the robot is sent back to where
-it started when ``return_to_init``. `stop` cancels everything at once and never sends the
+it started when ``return_to_init``, through ``navigate_to_pose`` (via a pose facing the start
+when the map does not know the start's floor as free); a failed goal home is tried again,
+up to three attempts, each after a recovery (both costmaps cleared through
+``clear_entirely_*``, the behaviour server's ``backup``, a 5 s wait), and the last failure's
+reason is kept (`home_failure`). `stop` cancels everything at once and never sends the
 robot home (Ctrl-C).
+
+Where the camera has looked from, and which way, is remembered (`looks`): the Kinect's
+no-return beams are NaN and clear nothing, so a viewpoint gains nothing along a direction
+already looked along from the same spot (`eddiebot.explore.frontiers.looked_mask`).
 """
 
 from __future__ import annotations
@@ -26,7 +34,14 @@ from eddiebot.core.node import Node
 from eddiebot.core.qos import qos_profile_latched
 from eddiebot.core.tf import Buffer, TransformException, TransformListener
 from eddiebot.explore.config import ExploreConfig
-from eddiebot.explore.frontiers import Frontier, FrontierSearch, mark_swept, search_frontiers
+from eddiebot.explore.frontiers import (
+    Frontier,
+    FrontierSearch,
+    information_gain,
+    looked_mask,
+    mark_swept,
+    search_frontiers,
+)
 from eddiebot.explore.tracking import Blacklist, FrontierTracker, ProgressMonitor, choose_frontier
 from eddiebot.geometry import yaw_to_quaternion
 from eddiebot.maps import OccupancyMap, map_from_msg
@@ -36,12 +51,26 @@ __all__ = ["ExploreNode", "ExploreState", "GoalRecord"]
 _SUCCEEDED, _CANCELED, _ABORTED = 4, 5, 6
 #: A kept target's goal is re-sent when its viewpoint moved this far (the frontier changed), m.
 _RESEND_DISTANCE = 0.5
+#: A frontier whose arrivals promised little is abandoned after this many times
+#: ``max_visits`` arrivals in a row that showed nothing.
+_IDLE_VISITS = 3
+#: The look memory keeps a pose every this many metres or radians.
+_LOOK_STEP = 0.1
+_LOOK_TURN = 0.15
+#: A goal whose frontier's viewpoint moved is kept while it shows this share of the new one's gain.
+_KEEP_SHARE = 0.5
 #: After an arrival the next plan waits for a map made since, at most this long (s).
 _MAP_WAIT_S = 10.0
-#: Goals sent to get home before giving up.
+#: Attempts at getting home (each after a recovery but the first) before giving up.
 _HOME_ATTEMPTS = 3
-#: Spacing of the points of the driven path the robot retraces when it cannot plan home, m.
-_BREADCRUMB_SPACING = 1.5
+#: The recovery between attempts backs up this far (m) at this speed (m/s), as the
+#: recovery subtree of Nav2's navigate_to_pose tree.
+_BACKUP_DISTANCE = 0.30
+_BACKUP_SPEED = 0.15
+#: ... and then waits this long (s, node clock) before the next attempt.
+_RECOVERY_WAIT_S = 5.0
+#: A start whose floor the map does not know as free is approached from this far, facing it.
+_STAGING_DISTANCE = 1.2
 
 
 class ExploreState(enum.Enum):
@@ -71,7 +100,7 @@ class ExploreNode(Node):
         values = {f.name: self.declare_parameter(f.name, f.default).value
                   for f in dataclasses.fields(ExploreConfig)}
         self.config = ExploreConfig.from_mapping(values)
-        from eddiebot.msgs.nav2_msgs import NavigateToPose, Spin
+        from eddiebot.msgs.nav2_msgs import BackUp, ClearEntireCostmap, NavigateToPose, Spin
         from eddiebot.msgs.nav_msgs import OccupancyGrid
         from eddiebot.msgs.std_msgs import Bool
         from eddiebot.msgs.visualization_msgs import MarkerArray
@@ -84,6 +113,10 @@ class ExploreNode(Node):
                             if self.config.visualize else None)
         self._nav = ActionClient(self, NavigateToPose, "navigate_to_pose")
         self._spin = ActionClient(self, Spin, "spin")
+        self._backup = ActionClient(self, BackUp, "backup")
+        self._clear_clients = [
+            self.create_client(ClearEntireCostmap, f"/{name}/clear_entirely_{name}")
+            for name in ("global_costmap", "local_costmap")]
         self.grid: OccupancyMap | None = None
         self.state = ExploreState.WAITING
         self.paused = False
@@ -105,9 +138,16 @@ class ExploreNode(Node):
         self._last_marker_count = 0
         self._map_stamp_s = -math.inf
         self._fresh_map_after: float | None = None
+        self.looks: list[tuple[float, float, float]] = []
+        """The robot's poses (map frame, m, rad) every ``_LOOK_STEP`` m or ``_LOOK_TURN`` rad
+        since the look-around began: where the camera has looked from."""
         self.path: list[tuple[float, float, float]] = []
         """The robot's positions (map frame, m) and times (s), every 0.1 m."""
         self._home_attempts = 0
+        self.home_failure = ""
+        """Why the last goal home failed ("" once home)."""
+        self.recoveries = 0
+        self._resume_at: tuple[float, Any] | None = None
         self.avoid: list[tuple[float, float]] = []
         """Goal spots given up for no progress; later goals keep ``avoid_radius`` from them."""
         self.retries = 0
@@ -147,9 +187,18 @@ class ExploreNode(Node):
         if self.state is ExploreState.DONE or self.paused:
             return
         now = self._now_s()
+        pose = self.robot_pose()
+        if pose is not None and self.state is not ExploreState.WAITING:
+            self._record_look(pose)
+        if self._resume_at is not None:
+            if now < self._resume_at[0]:
+                return
+            then = self._resume_at[1]
+            self._resume_at = None
+            then()
+            return
         if not self._replan and now - self._last_plan_s < 1.0 / self.config.planner_frequency:
             return
-        pose = self.robot_pose()
         if pose is None or self.grid is None:
             return
         self._replan = False
@@ -180,6 +229,16 @@ class ExploreNode(Node):
                 self._fresh_map_after = None
             self._explore(pose, now)
 
+    def _record_look(self, pose: tuple[float, float, float]) -> None:
+        """Keep the pose when the robot moved ``_LOOK_STEP`` m or turned ``_LOOK_TURN`` rad
+        since the last one kept: where the camera has looked from, and which way."""
+        if self.looks:
+            x, y, yaw = self.looks[-1]
+            if (math.hypot(pose[0] - x, pose[1] - y) < _LOOK_STEP
+                    and abs(math.remainder(pose[2] - yaw, 2 * math.pi)) < _LOOK_TURN):
+                return
+        self.looks.append(pose)
+
     def _look_around(self) -> None:
         from eddiebot.msgs.builtin_interfaces import Duration
         from eddiebot.msgs.nav2_msgs import Spin
@@ -200,7 +259,7 @@ class ExploreNode(Node):
     def _explore(self, pose: tuple[float, float, float], now: float) -> None:
         assert self.grid is not None
         swept = mark_swept(self.grid, [(x, y) for x, y, _ in self.path], self.config.robot_radius)
-        search = search_frontiers(swept, pose, self.config, avoid=self.avoid)
+        search = search_frontiers(swept, pose, self.config, avoid=self.avoid, looked=self.looks)
         self.last_search = search
         self.searches += 1
         known = float(np.count_nonzero(self.grid.data >= 0)) * self.grid.resolution**2
@@ -209,8 +268,10 @@ class ExploreNode(Node):
         for f, tid in zip(search.frontiers, ids, strict=True):
             track = self.tracker.tracks[tid]
             track.judge_visit(known)
-            if track.visits >= self.config.max_visits and not self.blacklist.contains(f.centroid):
-                self._abandon(f.centroid, f"unproductive: reached {track.visits} times, "
+            if ((track.visits >= self.config.max_visits
+                 or track.idle >= _IDLE_VISITS * self.config.max_visits)
+                    and not self.blacklist.contains(f.centroid)):
+                self._abandon(f.centroid, f"unproductive: reached {track.idle} times, "
                                           "nothing new seen")
         if self._target is not None and self._goal_handle is not None:
             goal = self.goals[-1].viewpoint
@@ -258,6 +319,12 @@ class ExploreNode(Node):
             old, new = self.goals[-1].viewpoint, self._goal_for(frontier, tid)
             if math.hypot(old[0] - new[0], old[1] - new[1]) < _RESEND_DISTANCE:
                 return
+            # the viewpoint moved: keep driving to the old one while it still shows a fair
+            # share of what the new one would (the robot does not dither between spots)
+            kept = information_gain(swept, old, self.config, looked_mask(
+                swept, np.asarray(self.looks, dtype=np.float64), self.config))
+            if kept >= max(self.config.min_gain, _KEEP_SHARE * frontier.gain):
+                return
         self._go_to(frontier, tid, now)
 
     def _goal_for(self, frontier: Frontier, tid: int) -> tuple[float, float, float]:
@@ -281,6 +348,7 @@ class ExploreNode(Node):
             if track is not None and self.grid is not None:
                 track.known_at_goal = float(np.count_nonzero(self.grid.data >= 0)) \
                     * self.grid.resolution**2
+                track.expected = frontier.gain
         self._target = tid
         x, y, yaw = self._goal_for(frontier, tid)
         record = GoalRecord(tid, (x, y, yaw), frontier.centroid, now)
@@ -302,6 +370,9 @@ class ExploreNode(Node):
             self._goal_handle = None
             if status == _SUCCEEDED:
                 record.outcome = "reached"
+                # the robot stands within the goal checker's tolerance of the viewpoint:
+                # count the view from the viewpoint itself as taken
+                self.looks.append((x, y, yaw))
                 self._fresh_map_after = self._now_s()
                 track = self.tracker.tracks.get(tid)
                 if track is not None:
@@ -329,23 +400,30 @@ class ExploreNode(Node):
         self.state = ExploreState.RETURNING
         self._go_home()
 
-    def _go_home(self, via: list[tuple[float, float]] | None = None) -> None:
-        """Send the robot to its start; when that fails, retrace its own path (breadcrumbs
-        every ``_BREADCRUMB_SPACING`` m, newest first), where it has driven before."""
+    def _go_home(self) -> None:
+        """Send the robot to its start through ``navigate_to_pose``. When the floor at the
+        start is not known free (the Kinect sees nothing nearer than 0.5 m, so the spot the
+        robot started on may never have been seen), the first goal is a *staging* pose
+        facing it, where the camera sees the start, then the start itself. A failed goal
+        is tried again (``_HOME_ATTEMPTS`` in all) after a recovery: both costmaps cleared
+        and a short back-up, as Nav2's recovery subtree does."""
+        assert self.initial_pose is not None
+        self._home_attempts += 1
+        goals: list[tuple[float, float, float]] = []
+        staging = self._staging_pose()
+        if staging is not None:
+            goals.append(staging)
+        goals.append(self.initial_pose)
+        x, y, _ = self.initial_pose
+        self.get_logger().info(f"returning to the start ({x:.2f}, {y:.2f}), attempt "
+                               f"{self._home_attempts} of {_HOME_ATTEMPTS}"
+                               + (" via a pose facing it" if staging is not None else ""))
+        self._home_leg(goals)
+
+    def _home_leg(self, goals: list[tuple[float, float, float]]) -> None:
         from eddiebot.msgs.nav2_msgs import NavigateToPose
 
-        assert self.initial_pose is not None
-        if via:
-            x, y = via[0]
-            yaw = 0.0
-            if len(via) > 1:
-                yaw = math.atan2(via[1][1] - y, via[1][0] - x)
-            self.get_logger().info(f"retracing the path home: via ({x:.2f}, {y:.2f})")
-        else:
-            x, y, yaw = self.initial_pose
-            self._home_attempts += 1
-            self.get_logger().info(f"returning to the start ({x:.2f}, {y:.2f}), "
-                                   f"attempt {self._home_attempts}")
+        x, y, yaw = goals[0]
         self._generation += 1
         generation = self._generation
 
@@ -353,28 +431,93 @@ class ExploreNode(Node):
             if generation != self._generation:
                 return
             self._goal_handle = None
-            ok = result is not None and int(getattr(result, "status", 0)) == _SUCCEEDED
-            if via:
-                self._go_home(via[1:])
+            status = int(getattr(result, "status", 0)) if result is not None else 0
+            if status == _SUCCEEDED:
+                if len(goals) > 1:
+                    self._home_leg(goals[1:])
+                    return
+                self.returned_home = True
+                self.home_failure = ""
+                self.get_logger().info("back at the start")
+                self.state = ExploreState.DONE
                 return
-            self.returned_home = ok
-            if not ok and self._home_attempts < _HOME_ATTEMPTS:
-                self._go_home(self._breadcrumbs())
+            inner = getattr(result, "result", None) if result is not None else None
+            msg = str(getattr(inner, "error_msg", "") or "")
+            why = ("goal rejected" if result is None else
+                   f"status {status}, code {int(getattr(inner, 'error_code', 0))}"
+                   + (f": {msg}" if msg else ""))
+            self.home_failure = (f"attempt {self._home_attempts}: goal ({x:.2f}, {y:.2f}) "
+                                 f"failed ({why})")
+            self.get_logger().warning(f"going home: {self.home_failure}")
+            self.returned_home = False
+            if self._home_attempts >= _HOME_ATTEMPTS:
+                self.get_logger().error(f"could not get home after {_HOME_ATTEMPTS} attempts; "
+                                        f"last: {self.home_failure}")
+                self.state = ExploreState.DONE
                 return
-            self.state = ExploreState.DONE
+            self._recover(self._go_home)
 
         self._send(self._nav, NavigateToPose.Goal(pose=self._pose_stamped(x, y, yaw)), done)
 
-    def _breadcrumbs(self) -> list[tuple[float, float]]:
-        """Points of the driven path back towards the start, newest first."""
-        crumbs: list[tuple[float, float]] = []
-        travelled = 0.0
-        for (x0, y0, _), (x1, y1, _) in zip(self.path[::-1], self.path[-2::-1], strict=False):
-            travelled += math.hypot(x1 - x0, y1 - y0)
-            if travelled >= _BREADCRUMB_SPACING:
-                crumbs.append((x1, y1))
-                travelled = 0.0
-        return crumbs
+    def _recover(self, then: Any) -> None:
+        """Clear both costmaps (stale obstacles, a person who walked on), back up
+        ``_BACKUP_DISTANCE`` m, then call ``then``, whatever the back-up's outcome."""
+        from eddiebot.msgs.builtin_interfaces import Duration
+        from eddiebot.msgs.geometry_msgs import Point
+        from eddiebot.msgs.nav2_msgs import BackUp, ClearEntireCostmap
+
+        self.recoveries += 1
+        for client in self._clear_clients:
+            if client.service_is_ready():
+                client.call_async(ClearEntireCostmap.Request())
+        goal = BackUp.Goal(target=Point(x=-_BACKUP_DISTANCE, y=0.0, z=0.0),
+                           speed=_BACKUP_SPEED, time_allowance=Duration(sec=10, nanosec=0))
+        self.get_logger().info(f"recovery: costmaps cleared, backing up {_BACKUP_DISTANCE:.2f} m")
+        self._generation += 1
+        generation = self._generation
+
+        def done(_result: Any) -> None:
+            if generation != self._generation:
+                return
+            self._goal_handle = None
+            # then wait, as Nav2's recovery subtree: a person in the way walks on
+            self._resume_at = (self._now_s() + _RECOVERY_WAIT_S, then)
+
+        if self._backup.server_is_ready():
+            self._send(self._backup, goal, done)
+        else:
+            done(None)
+
+    def _staging_pose(self) -> tuple[float, float, float] | None:
+        """A reachable pose ``_STAGING_DISTANCE`` m from the start facing it, when the map
+        does not know the start's floor as free; else None."""
+        if self.grid is None or self.initial_pose is None:
+            return None
+        from eddiebot.explore.frontiers import reachable_mask
+        from eddiebot.maps import is_inside, map_to_world, world_to_map
+
+        grid = self.grid
+        sx, sy, _ = self.initial_pose
+        cell = world_to_map(grid, np.array([sx, sy]))
+        free = (grid.data >= 0) & (grid.data <= self.config.free_threshold)
+        r = max(1, round(self.config.robot_radius / grid.resolution))
+        if is_inside(grid, cell):
+            c, rr = int(cell[0]), int(cell[1])
+            patch = free[max(0, rr - r):rr + r + 1, max(0, c - r):c + r + 1]
+            if patch.size and patch.all():
+                return None
+        ok = reachable_mask(grid, self.config)
+        rows, cols = np.nonzero(ok)
+        if rows.size == 0:
+            return None
+        pts = map_to_world(grid, np.stack([cols, rows], axis=1))
+        d = np.hypot(pts[:, 0] - sx, pts[:, 1] - sy)
+        band = np.abs(d - _STAGING_DISTANCE)
+        k = int(np.argmin(band))
+        if band[k] > 0.5:
+            return None
+        x, y = float(pts[k, 0]), float(pts[k, 1])
+        return x, y, math.atan2(sy - y, sx - x)
 
     def stop(self, reason: str = "stopped") -> None:
         """Cancel the running goal and explore no more; the robot is not sent home."""

@@ -84,7 +84,8 @@ def write_report(result: ExploreResult, out: Path) -> tuple[Path, Path]:
         ("wall time", f"{result.wall_time_s:.0f} s"),
         ("share of the time turning in place", _fmt(result.turning_share, pct=True)),
         ("collisions", str(result.collisions)),
-        ("returned home", f"{result.returned_home} ({_fmt(result.home_error_m, ' m')} from the start)"),
+        ("returned home", f"{result.returned_home} ({_fmt(result.home_error_m, ' m')} from the start)"
+         + (f": {result.home_failure}" if result.home_failure else "")),
         ("frontier goals sent / reached / abandoned",
          f"{result.goals_sent} / {result.frontiers_visited} / {result.frontiers_abandoned}"),
         ("reachable free floor (ground truth)", f"{result.reachable_area_m2:.1f} m²"),

@@ -38,14 +38,26 @@ class Track:
     stuck: int = 0
     """Goals towards this frontier given up for no progress."""
 
+    expected: float = 0.0
+    """The gain (m²) the viewpoint of the last trip promised."""
+    idle: int = 0
+    """Arrivals in a row that revealed (almost) nothing, whatever they promised."""
+
     def judge_visit(self, known_now: float, min_revealed: float = 0.5) -> None:
-        """After an arrival, on a map made since: a trip that added less than
-        ``min_revealed`` m² of known map counts as unproductive; one that added more clears
-        the count."""
+        """After an arrival, on a map made since: a trip that promised at least twice
+        ``min_revealed`` m² and added less than ``min_revealed`` m² of known map counts as
+        unproductive; one that added more clears the count. A trip that promised little
+        and showed little counts only in ``idle``."""
         if not self.arrived:
             return
         self.arrived = False
-        self.visits = self.visits + 1 if known_now - self.known_at_goal < min_revealed else 0
+        revealed = known_now - self.known_at_goal
+        if revealed >= min_revealed:
+            self.visits = self.idle = 0
+            return
+        self.idle += 1
+        if self.expected >= 2 * min_revealed:
+            self.visits += 1
 
 
 class FrontierTracker:
