@@ -4,8 +4,9 @@ Velocity samples inside the dynamic window (current velocity ± acceleration · 
 within the kinematic limits) are rolled out at constant velocity for ``sim_time`` and scored
 by weighted critics; the lowest total wins. Critics: BaseObstacle, GoalAlign, PathAlign,
 PathDist, GoalDist, RotateToGoal, Oscillation, with Nav2's names, scales and the rule that a
-critic may declare a trajectory illegal. Rollouts are vectorised with numpy; the map-grid
-critics measure distances (in cells) to the pruned plan and its end directly.
+critic may declare a trajectory illegal, plus ObstacleFootprint, PreferForward and Twirling.
+Rollouts run in a numba kernel; the critics are in :mod:`.dwb_critics` (the map-grid critics
+score by upstream's wavefront over the costmap).
 """
 
 from __future__ import annotations
@@ -17,14 +18,17 @@ import numpy as np
 import numpy.typing as npt
 from numba import njit
 
+from eddiebot.nav.controllers import dwb_critics as critics
 from eddiebot.nav.controllers._plan import PlanHandler
+from eddiebot.nav.controllers.dwb_critics import AGGREGATION_TYPES
 from eddiebot.nav.costmap.layered import LayeredCostmap
 from eddiebot.nav.errors import NoValidControl, ParameterError
 from eddiebot.nav.params import require
 from eddiebot.nav.types import Twist2D, as_path, as_pose, wrap_angle
 
-KNOWN_CRITICS = ("BaseObstacle", "GoalAlign", "PathAlign", "PathDist", "GoalDist",
-                 "RotateToGoal", "Oscillation")
+KNOWN_CRITICS = ("BaseObstacle", "ObstacleFootprint", "GoalAlign", "PathAlign", "PathDist",
+                 "GoalDist", "RotateToGoal", "Oscillation", "PreferForward", "Twirling")
+_MAP_GRID = ("PathDist", "GoalDist", "PathAlign", "GoalAlign")
 
 
 @dataclass(frozen=True)
@@ -65,12 +69,24 @@ class DWBConfig:
     # Critic parameters, flattened "<Critic>.<param>" upstream.
     BaseObstacle_scale: float = 1.0
     BaseObstacle_sum_scores: bool = False
+    ObstacleFootprint_scale: float = 1.0
+    ObstacleFootprint_sum_scores: bool = False
     GoalAlign_scale: float = 1.0
     GoalAlign_forward_point_distance: float = 0.325
+    GoalAlign_aggregation_type: str = "last"
     PathAlign_scale: float = 1.0
     PathAlign_forward_point_distance: float = 0.325
+    PathAlign_aggregation_type: str = "last"
     PathDist_scale: float = 1.0
+    PathDist_aggregation_type: str = "last"
     GoalDist_scale: float = 1.0
+    GoalDist_aggregation_type: str = "last"
+    PreferForward_scale: float = 1.0
+    PreferForward_penalty: float = 1.0
+    PreferForward_strafe_x: float = 0.1
+    PreferForward_strafe_theta: float = 0.2
+    PreferForward_theta_scale: float = 10.0
+    Twirling_scale: float = 1.0
     RotateToGoal_scale: float = 1.0
     RotateToGoal_slowing_factor: float = 5.0
     RotateToGoal_lookahead_time: float = -1.0
@@ -83,6 +99,11 @@ class DWBConfig:
             name = c.removesuffix("Critic").split("::")[-1]
             require(name in KNOWN_CRITICS, server, "critics", list(self.critics),
                     f"unknown critic {c!r}; known: {list(KNOWN_CRITICS)}")
+        for g in _MAP_GRID:
+            key = f"{g}_aggregation_type"
+            value = str(getattr(self, key))
+            require(value.lower() in AGGREGATION_TYPES, server, key.replace("_", ".", 1), value,
+                    f"must be one of {list(AGGREGATION_TYPES)}")
         require(self.sim_time > 0.0, server, "sim_time", self.sim_time, "must be > 0")
         require(self.vx_samples > 0 and self.vtheta_samples > 0, server, "vx_samples",
                 self.vx_samples, "sample counts must be > 0")
@@ -158,57 +179,6 @@ def _rollout_kernel(x0: float, y0: float, th0: float, vx: np.ndarray, vy: np.nda
     return out
 
 
-@njit(cache=True)
-def _obstacle_kernel(traj: np.ndarray, grid: np.ndarray, ox: float, oy: float, res: float,
-                     track_unknown: bool, sum_scores: bool) -> tuple[np.ndarray, np.ndarray]:
-    """BaseObstacle per trajectory: score (max or sum of costs) and legality."""
-    n, steps, _ = traj.shape
-    h, w = grid.shape
-    score = np.zeros(n)
-    ok = np.ones(n, dtype=np.bool_)
-    for i in range(n):
-        acc = 0.0
-        for k in range(steps):
-            mx = math.floor((traj[i, k, 0] - ox) / res)
-            my = math.floor((traj[i, k, 1] - oy) / res)
-            if mx < 0 or my < 0 or mx >= w or my >= h:
-                ok[i] = False
-                break
-            c = grid[my, mx]
-            if c == 254 or c == 253 or (track_unknown and c == 255):
-                ok[i] = False
-                break
-            if sum_scores:
-                acc += c
-            elif c > acc:
-                acc = c
-        score[i] = acc
-    return score, ok
-
-
-@njit(cache=True)
-def _nearest_kernel(q: np.ndarray, pts: np.ndarray) -> np.ndarray:
-    n = q.shape[0]
-    out = np.empty(n)
-    for i in range(n):
-        best = 1e300
-        for j in range(pts.shape[0]):
-            d = (q[i, 0] - pts[j, 0]) ** 2 + (q[i, 1] - pts[j, 1]) ** 2
-            if d < best:
-                best = d
-        out[i] = math.sqrt(best)
-    return out
-
-
-def _densify(pts: npt.NDArray[np.float64], step: float) -> npt.NDArray[np.float64]:
-    if pts.shape[0] < 2:
-        return pts
-    seg = np.hypot(np.diff(pts[:, 0]), np.diff(pts[:, 1]))
-    s = np.concatenate([[0.0], np.cumsum(seg)])
-    t = np.arange(0.0, s[-1] + 1e-9, step)
-    return np.stack([np.interp(t, s, pts[:, 0]), np.interp(t, s, pts[:, 1])], axis=-1)
-
-
 class DWBController:
     """Sampling controller with critics; the plugin shape of :class:`RegulatedPurePursuitController`."""
 
@@ -230,6 +200,8 @@ class DWBController:
         self._osc_flipped_x = False
         self._osc_flipped_w = False
         self.last_scores: dict[str, float] = {}
+        # Map-grid critics' cell values of the last cycle ([y, x], cells), for inspection.
+        self.grid_values: dict[str, npt.NDArray[np.float64]] = {}
 
     def set_plan(self, path: npt.ArrayLike) -> None:
         self._plan.set_plan(as_path(path))
@@ -277,12 +249,14 @@ class DWBController:
         gpath[:, 0] = p[0] + c * tpath[:, 0] - s * tpath[:, 1]
         gpath[:, 1] = p[1] + s * tpath[:, 0] + c * tpath[:, 1]
         gpath[:, 2] = tpath[:, 2] + p[2]
+        # transformation_end: the plan ends before its first pose farther (Euclidean) from the
+        # robot than min(half the costmap, forward_prune_distance).
+        end_threshold = max_extent
         if cfg.shorten_transformed_plan:
-            d = np.hypot(tpath[:, 0], tpath[:, 1])
-            far = np.nonzero(np.cumsum(np.r_[0, np.hypot(np.diff(tpath[:, 0]), np.diff(tpath[:, 1]))])
-                             > cfg.forward_prune_distance)[0]
-            if far.size and far[0] > 0 and d[-1] > cfg.forward_prune_distance:
-                gpath = gpath[:far[0]]
+            end_threshold = min(max_extent, cfg.forward_prune_distance)
+        far = np.nonzero(np.hypot(tpath[:, 0], tpath[:, 1]) > end_threshold)[0]
+        if far.size and far[0] > 0:
+            gpath = gpath[:far[0]]
         goal = self._plan.plan[-1]
 
         dt_c = self.sim_period
@@ -310,32 +284,31 @@ class DWBController:
         scores: dict[str, npt.NDArray[np.float64]] = {}
         dist_to_goal = math.hypot(goal[0] - p[0], goal[1] - p[1])
         in_goal_window = dist_to_goal <= self.xy_goal_tolerance
-        # Path densified to one point per cell, as the grid critics see it.
-        path_pts = _densify(gpath[:, :2], costmap.master.resolution)
-        goal_pts = gpath[-1:, :2]
         for name in self._critics:
             scale = float(getattr(cfg, f"{name}_scale"))
             if name == "BaseObstacle":
-                sc, ok = self._base_obstacle(traj, costmap)
-            elif name in ("PathDist", "PathAlign"):
-                if name == "PathAlign" and in_goal_window:
-                    sc, ok = np.zeros(VX.shape[0]), np.ones(VX.shape[0], bool)
-                else:
-                    fwd = cfg.PathAlign_forward_point_distance if name == "PathAlign" else 0.0
-                    sc, ok = self._grid_score(traj, path_pts, costmap, fwd)
-            elif name in ("GoalDist", "GoalAlign"):
-                if name == "GoalAlign" and in_goal_window:
-                    sc, ok = np.zeros(VX.shape[0]), np.ones(VX.shape[0], bool)
-                else:
-                    fwd = cfg.GoalAlign_forward_point_distance if name == "GoalAlign" else 0.0
-                    sc, ok = self._grid_score(traj, goal_pts, costmap, fwd)
+                sc, ok = critics.score_base_obstacle(traj, cm.data, cm.origin_x, cm.origin_y,
+                                                     cm.resolution, cfg.BaseObstacle_sum_scores)
+            elif name == "ObstacleFootprint":
+                sc, ok = critics.score_obstacle_footprint(
+                    traj, np.ascontiguousarray(costmap.footprint), cm.data, cm.origin_x,
+                    cm.origin_y, cm.resolution, cfg.ObstacleFootprint_sum_scores)
+            elif name in _MAP_GRID:
+                sc, ok, scale = self._map_grid(name, traj, p, goal, gpath, costmap, scale)
             elif name == "RotateToGoal":
                 sc, ok = self._rotate_to_goal(traj, VX, VY, velocity, goal, in_goal_window)
+            elif name == "PreferForward":
+                sc, ok = critics.score_prefer_forward(
+                    VX, WZ, cfg.PreferForward_penalty, cfg.PreferForward_strafe_x,
+                    cfg.PreferForward_strafe_theta, cfg.PreferForward_theta_scale)
+            elif name == "Twirling":
+                sc, ok = critics.score_twirling(WZ)
             else:
                 sc, ok = self._oscillation(VX, WZ, p)
             scores[name] = sc
             legal &= ok
-            total += scale * sc
+            if scale != 0.0:
+                total += scale * sc
         if not np.any(legal):
             raise NoValidControl(f"no valid trajectories out of {VX.shape[0]}")
         total[~legal] = np.inf
@@ -365,37 +338,42 @@ class DWBController:
         return out
 
     # --- critics ------------------------------------------------------------------------------
-    def _cells(self, xy: npt.NDArray[np.float64], costmap: LayeredCostmap
-               ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.bool_]]:
+    def _map_grid(self, name: str, traj: npt.NDArray[np.float64], pose: npt.NDArray[np.float64],
+                  goal: npt.NDArray[np.float64], plan: npt.NDArray[np.float64],
+                  costmap: LayeredCostmap, scale: float
+                  ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], float]:
+        """One map-grid critic: ``prepare`` (wavefront from the transformed plan) and
+        ``scoreTrajectory``; returns scores, legality and the effective scale (PathAlign's is
+        ``resolution / 2 · scale``, and 0 within ``forward_point_distance`` of the goal)."""
+        cfg = self.config
         cm = costmap.master
-        mx = np.floor((xy[..., 0] - cm.origin_x) / cm.resolution).astype(np.int64)
-        my = np.floor((xy[..., 1] - cm.origin_y) / cm.resolution).astype(np.int64)
-        ok = (mx >= 0) & (my >= 0) & (mx < cm.size_x) & (my < cm.size_y)
-        return np.clip(mx, 0, cm.size_x - 1), np.clip(my, 0, cm.size_y - 1), ok
-
-    def _base_obstacle(self, traj: npt.NDArray[np.float64], costmap: LayeredCostmap
-                       ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
-        cm = costmap.master
-        return _obstacle_kernel(traj, cm.data, cm.origin_x, cm.origin_y, cm.resolution,
-                                costmap.track_unknown_space, self.config.BaseObstacle_sum_scores)
-
-    @staticmethod
-    def _distance_to_points(q: npt.NDArray[np.float64], pts: npt.NDArray[np.float64],
-                            resolution: float) -> npt.NDArray[np.float64]:
-        """Distance (cells) from each query point to the nearest of ``pts`` (the map-grid
-        critics' value, computed directly instead of by wavefront)."""
-        if pts.shape[0] == 0:
-            return np.zeros(q.shape[0])
-        return _nearest_kernel(np.ascontiguousarray(q), np.ascontiguousarray(pts)) / resolution
-
-    def _grid_score(self, traj: npt.NDArray[np.float64], pts: npt.NDArray[np.float64],
-                    costmap: LayeredCostmap, forward: float
-                    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
-        last = traj[:, -1, :]
-        q = np.stack([last[:, 0] + forward * np.cos(last[:, 2]),
-                      last[:, 1] + forward * np.sin(last[:, 2])], axis=-1)
-        sc = self._distance_to_points(q, pts, costmap.master.resolution)
-        return sc, np.ones(q.shape[0], dtype=bool)
+        n = traj.shape[0]
+        origin = (cm.origin_x, cm.origin_y)
+        fwd = 0.0
+        if name == "PathAlign":
+            fwd = cfg.PathAlign_forward_point_distance
+            if math.hypot(pose[0] - goal[0], pose[1] - goal[1]) <= fwd:
+                return np.zeros(n), np.ones(n, dtype=bool), 0.0
+            scale *= cm.resolution * 0.5
+        elif name == "GoalAlign":
+            fwd = cfg.GoalAlign_forward_point_distance
+            # The nose is drawn to the goal position seen from the robot, not to the goal
+            # heading, so a final 180° turn does not pull the robot past the goal.
+            ang = math.atan2(goal[1] - pose[1], goal[0] - pose[0])
+            plan = plan.copy()
+            plan[-1, 0] += fwd * math.cos(ang)
+            plan[-1, 1] += fwd * math.sin(ang)
+        if name in ("PathDist", "PathAlign"):
+            vals = critics.path_dist_values(plan, cm.data, origin, cm.resolution)
+        else:
+            vals = critics.goal_dist_values(plan, cm.data, origin, cm.resolution)
+        if vals is None:  # upstream logs the failed prepare and scores nothing
+            return np.zeros(n), np.ones(n, dtype=bool), scale
+        self.grid_values[name] = vals
+        sc, ok = critics.score_map_grid(traj, vals, origin, cm.resolution,
+                                        str(getattr(cfg, f"{name}_aggregation_type")),
+                                        name in ("PathDist", "GoalDist"), fwd)
+        return sc, ok, scale
 
     def _rotate_to_goal(self, traj: npt.NDArray[np.float64], vx: npt.NDArray[np.float64],
                         vy: npt.NDArray[np.float64], velocity: Twist2D,
