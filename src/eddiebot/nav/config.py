@@ -21,10 +21,9 @@ from eddiebot.nav.behaviors import BehaviorServerConfig, build_behaviors
 from eddiebot.nav.collision_monitor import CollisionMonitor, build_collision_monitor
 from eddiebot.nav.controllers import ControllerServer, build_controller_server
 from eddiebot.nav.costmap.layered import LayeredCostmap, build_costmap
-from eddiebot.nav.errors import UnsupportedPlugin
 from eddiebot.nav.params import from_params
-from eddiebot.nav.planners import GlobalPlanner, build_planners, plugin_key
-from eddiebot.nav.smoother import SimpleSmoother, SimpleSmootherConfig
+from eddiebot.nav.planners import GlobalPlanner, build_planners
+from eddiebot.nav.smoother import Smoother, build_smoother
 from eddiebot.nav.velocity_smoother import VelocitySmootherConfig, timing_warnings
 
 #: Parallax Eddie's no-load top speed (m/s), reference/eddie_hardware.md.
@@ -38,7 +37,7 @@ class Nav2Config:
     local_costmap: LayeredCostmap | None = None
     planners: dict[str, GlobalPlanner] = field(default_factory=dict)
     controller_server: ControllerServer | None = None
-    smoothers: dict[str, SimpleSmoother] = field(default_factory=dict)
+    smoothers: dict[str, Smoother] = field(default_factory=dict)
     behavior_server: BehaviorServerConfig | None = None
     behaviors: dict[str, Any] = field(default_factory=dict)
     velocity_smoother: VelocitySmootherConfig | None = None
@@ -97,13 +96,7 @@ def load_nav2_config(
     if (p := _params(doc, "smoother_server")) is not None:
         names = p.get("smoother_plugins", ["simple_smoother"])
         for name in names:
-            sub = dict(p.get(name, {}) or {})
-            plugin = plugin_key(str(sub.pop("plugin", "nav2_smoother::SimpleSmoother")))
-            if plugin != "nav2_smoother::SimpleSmoother":
-                raise UnsupportedPlugin("smoother_server", f"{name}.plugin", plugin,
-                                     "only nav2_smoother::SimpleSmoother is implemented")
-            out.smoothers[name] = SimpleSmoother(
-                from_params(SimpleSmootherConfig, sub, server=f"smoother_server.{name}"), name)
+            out.smoothers[name] = build_smoother(name, dict(p.get(name, {}) or {}))
     if (p := _params(doc, "behavior_server")) is not None:
         out.behavior_server, out.behaviors = build_behaviors(p)
     if (p := _params(doc, "velocity_smoother")) is not None:

@@ -50,7 +50,7 @@ from eddiebot.nav.costmap.layers import (
 )
 from eddiebot.nav.errors import UnsupportedPlugin
 from eddiebot.nav.planners import PLANNER_PLUGINS, PlannerServerConfig, plugin_key
-from eddiebot.nav.smoother import SimpleSmootherConfig
+from eddiebot.nav.smoother import SMOOTHERS
 from eddiebot.nav.velocity_smoother import VelocitySmootherConfig
 
 __all__ = ["ParamsAudit", "audit_nav2_params"]
@@ -232,8 +232,8 @@ def _audit_planner_server(a: _Audit, params: dict[str, Any]) -> None:
 
 def _audit_smoother_server(a: _Audit, params: dict[str, Any]) -> None:
     server = "smoother_server"
-    kinds = {"nav2_smoother::SimpleSmoother":
-             lambda w, d: a.keys(w, d, _fields(SimpleSmootherConfig) | {"plugin"})}
+    kinds = {plugin: (lambda keys: lambda w, d: a.keys(w, d, keys))(_fields(cfg) | {"plugin"})
+             for plugin, (_cls, cfg) in SMOOTHERS.items()}
     names = _names(params.get("smoother_plugins", ["simple_smoother"]))
     nested = a.plugins(server, params, names, kinds,
                        dict.fromkeys(names, "nav2_smoother::SimpleSmoother"), kinds, server)

@@ -1,6 +1,7 @@
 """nav2_smoother: ``smooth_path`` (nav2_msgs/SmoothPath) with ``smoother_plugins``.
 
-Only ``nav2_smoother::SimpleSmoother`` exists in the core. Collision checks use the latest
+Plugins: ``nav2_smoother::SimpleSmoother`` and ``nav2_smoother::SavitzkyGolaySmoother``.
+Collision checks (SimpleSmoother) use the latest
 ``/global_costmap/costmap_raw`` when ``check_for_collisions`` is set.
 """
 
@@ -20,12 +21,9 @@ from eddiebot.nav.errors import (
     NavError,
     SmootherError,
     SmootherTimedOut,
-    UnsupportedPlugin,
 )
 from eddiebot.nav.nodes._common import NavServer, path_from_msg, path_to_msg
-from eddiebot.nav.params import from_params
-from eddiebot.nav.planners import plugin_key
-from eddiebot.nav.smoother import SimpleSmoother, SimpleSmootherConfig
+from eddiebot.nav.smoother import Smoother, build_smoother
 
 __all__ = ["SmootherServer", "costmap_from_raw"]
 
@@ -47,7 +45,7 @@ class SmootherServer(NavServer):
 
     def __init__(self, node_name: str = "smoother_server", **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self.smoothers: dict[str, SimpleSmoother] = {}
+        self.smoothers: dict[str, Smoother] = {}
         self._costmap: Costmap2D | None = None
         self._action: ActionServer | None = None
         self._sub: Any = None
@@ -60,13 +58,8 @@ class SmootherServer(NavServer):
             tree = self.params_tree()
             self.smoothers = {}
             for name in [n for n in tree.get("smoother_plugins", []) if n]:
-                sub = dict(tree.get(name) or {})
-                plugin = plugin_key(str(sub.pop("plugin", "nav2_smoother::SimpleSmoother")))
-                if plugin != "nav2_smoother::SimpleSmoother":
-                    raise UnsupportedPlugin(self.get_name(), f"{name}.plugin", plugin,
-                                         "only nav2_smoother::SimpleSmoother is implemented")
-                self.smoothers[name] = SimpleSmoother(
-                    from_params(SimpleSmootherConfig, sub, server=f"{self.get_name()}.{name}"), name)
+                self.smoothers[name] = build_smoother(name, dict(tree.get(name) or {}),
+                                                      self.get_name())
             self._plan_pub = self.create_lifecycle_publisher(Path, "plan_smoothed", 1)
         return self.configure_with(build)
 
