@@ -6,8 +6,10 @@ to publish. Modes are strategies composed into the core, not subclasses:
 
 * ``mapping``: each accepted scan becomes a node, matched against the running buffer of
   recent nodes, linked to the previous node, checked for loop closures, optimised;
-* ``localization``: scans are matched against a loaded graph's scans near the prior; the
-  graph is never extended;
+* ``localization``: scans are matched against a loaded graph's scans near the prior and a
+  rolling buffer of the last localised scans; the graph is never extended; without a pose,
+  or when the map stops supporting it, the scan is searched for over the whole map
+  (`eddiebot.slam.mapper.localization`);
 * ``lifelong``: mapping on top of a loaded session; an older node whose scan is covered by a
   new node's (overlap >= ``lifelong_node_overlap``) is retired: it stays in the pose graph as
   a constraint but no longer renders into the map or serves as a match reference.

@@ -28,8 +28,11 @@ best pose. It is accepted as a loop closure is (Karto's two-stage check): the co
 reaches ``loop_match_minimum_response_coarse`` with x and y variances below
 ``loop_match_maximum_variance_coarse`` (a scan that fits several places of the map spreads its
 candidates: refused as ambiguous), and the fine response reaches
-``loop_match_minimum_response_fine``. Otherwise it is refused: status ``LOST`` without a pose
-to keep, else the tracked pose is kept. ``relocalizations`` records each attempt.
+``loop_match_minimum_response_fine``. When tracking was lost (rather than never had), the
+search uses the view of the buffered scans together (their poses relative to the newest hold
+even when the map frame went wrong), and the result must also fit that view better than the
+tracked pose does (the loop closer's fine match there). Otherwise it is refused: status
+``LOST`` without a pose to keep, else the tracked pose is kept. ``relocalizations`` records each attempt.
 """
 
 from __future__ import annotations
@@ -254,8 +257,24 @@ class Localization(Mapping):
         fallback: FloatArray | None = None,
         covariance: FloatArray | None = None,
     ) -> ProcessResult:
-        found = self.relocalize(points, stamp_ns=stamp)
         cfg = self.config
+        tracked = 0.0
+        if fallback is None:
+            found = self.relocalize(points, stamp_ns=stamp)
+        else:
+            # lost while tracking: search with the view of the recent scans (their poses
+            # relative to this one hold even when the map frame went wrong): a wider view
+            # fits fewer wrong places; and it must fit the map better than where the robot
+            # is tracked now
+            view = self._recent_view(points, fallback)
+            found = self.relocalize(view, stamp_ns=stamp)
+            sensor = _compose1(fallback, self.sensor_offset)
+            near = self._nodes_near(sensor[:2])
+            if near:
+                tracked = self._match_against(near, view, sensor, self._loop_fine).response
+            if found.accepted and found.response <= tracked:
+                found = dataclasses.replace(found, accepted=False)
+                self.relocalizations[-1] = found
         if found.accepted:
             self._warn(
                 warnings,
@@ -274,12 +293,32 @@ class Localization(Mapping):
             f"{found.coarse_response:.2f}, variance {found.coarse_variance:.3g} m², fine "
             f"response {found.response:.2f}; needs >= {cfg.loop_match_minimum_response_coarse}, "
             f"< {cfg.loop_match_maximum_variance_coarse} m², >= "
-            f"{cfg.loop_match_minimum_response_fine})",
+            f"{cfg.loop_match_minimum_response_fine}, and above the tracked pose's {tracked:.2f})",
             stamp,
         )
         if fallback is None:
             return ProcessResult(ProcessStatus.LOST, self.map_to_odom, warnings=tuple(warnings))
         return self._localized(fallback, odom, found.response, covariance, warnings)
+
+    def _recent_view(self, points: FloatArray, pose: FloatArray) -> FloatArray:
+        """The buffer's scans and ``points`` (taken at robot pose ``pose``), all in this
+        scan's sensor frame."""
+        here = _compose1(pose, self.sensor_offset)
+        c, s = math.cos(here[2]), math.sin(here[2])
+        parts = [points]
+        for b in self._loc_buffer:
+            if np.array_equal(b.pose, pose) and b.points is points:
+                continue
+            sensor = _compose1(b.pose, self.sensor_offset)
+            rel_x = c * (sensor[0] - here[0]) + s * (sensor[1] - here[1])
+            rel_y = -s * (sensor[0] - here[0]) + c * (sensor[1] - here[1])
+            th = sensor[2] - here[2]
+            cb, sb = math.cos(th), math.sin(th)
+            moved = np.empty_like(b.points)
+            moved[:, 0] = rel_x + cb * b.points[:, 0] - sb * b.points[:, 1]
+            moved[:, 1] = rel_y + sb * b.points[:, 0] + cb * b.points[:, 1]
+            parts.append(moved)
+        return np.ascontiguousarray(np.concatenate(parts))
 
     def _global_grid(self) -> tuple[CorrelationGrid, FloatArray, float]:
         """The correlation grid of every active node's scan (cached: the loaded graph does
