@@ -129,11 +129,39 @@ class Spin(_Timed):
         return BehaviorStep(cmd, Status.RUNNING)
 
 
+@dataclass(frozen=True)
+class DriveOnHeadingConfig:
+    """Per-instance ``<name>.acceleration_limit`` (m/s², > 0), ``<name>.deceleration_limit``
+    (m/s², < 0) and ``<name>.minimum_speed`` (m/s) of DriveOnHeading and BackUp (Kilted's
+    parameters and defaults; a limit given with the wrong sign is taken by magnitude, as
+    upstream does)."""
+
+    acceleration_limit: float = 2.5
+    deceleration_limit: float = -2.5
+    minimum_speed: float = 0.10
+
+    def validate(self, server: str = "behavior_server") -> None:
+        require(self.minimum_speed >= 0.0, server, "minimum_speed", self.minimum_speed,
+                "must be >= 0")
+
+
 class DriveOnHeading(_Timed):
     """Drive straight ``distance`` m at ``speed`` m/s (both signed alike); :class:`BackUp`
-    forces both negative."""
+    forces both negative.
+
+    Each cycle the command moves from the last one by at most ``acceleration_limit`` (or
+    ``deceleration_limit``) / ``cycle_frequency``, is capped at ``sqrt(-2·deceleration_limit·
+    remaining distance)`` so it stops on the target, and is at least ``minimum_speed``.
+    """
 
     reverse = False
+
+    def __init__(self, config: BehaviorServerConfig | None = None,
+                 drive: DriveOnHeadingConfig | None = None) -> None:
+        super().__init__(config)
+        self.drive = drive or DriveOnHeadingConfig()
+        self.drive.validate()
+        self._last_vel = 0.0
 
     def start(self, pose: npt.ArrayLike, distance: float, speed: float, now_ns: int,
               time_allowance: float = 10.0) -> None:
@@ -144,6 +172,7 @@ class DriveOnHeading(_Timed):
         self._initial = as_pose(pose)
         self._distance = float(distance)
         self._speed = float(speed)
+        self._last_vel = 0.0
         self._begin(now_ns, time_allowance)
 
     def update(self, pose: npt.ArrayLike, now_ns: int, costmap: LayeredCostmap) -> BehaviorStep:
@@ -154,7 +183,7 @@ class DriveOnHeading(_Timed):
         travelled = math.hypot(p[0] - self._initial[0], p[1] - self._initial[1])
         if travelled >= abs(self._distance):
             return BehaviorStep(Twist2D(), Status.SUCCEEDED)
-        cmd = Twist2D(self._speed, 0.0, 0.0)
+        cmd = Twist2D(self._ramped_speed(abs(self._distance) - travelled), 0.0, 0.0)
         cycles = int(cfg.simulate_ahead_time * cfg.cycle_frequency)
         for i in range(cycles):
             change = cmd.vx * (i / cfg.cycle_frequency)
@@ -163,7 +192,23 @@ class DriveOnHeading(_Timed):
             q = (p[0] + change * math.cos(p[2]), p[1] + change * math.sin(p[2]), p[2])
             if not collision_free(q, costmap):
                 return self._fail(CollisionAhead("collision ahead while driving"))
+        self._last_vel = cmd.vx
         return BehaviorStep(cmd, Status.RUNNING)
+
+    def _ramped_speed(self, remaining: float) -> float:
+        acc = abs(self.drive.acceleration_limit) / self.config.cycle_frequency
+        dec = -abs(self.drive.deceleration_limit)
+        v0 = self._last_vel
+        forward = self._speed > 0.0
+        lo, hi = (v0 + dec / self.config.cycle_frequency, v0 + acc) if forward else \
+            (v0 - acc, v0 - dec / self.config.cycle_frequency)
+        v = min(max(self._speed, lo), hi)
+        v_stop = math.sqrt(-2.0 * dec * max(remaining, 0.0))
+        if v_stop < abs(v):
+            v = v_stop if forward else -v_stop
+        if abs(v) < self.drive.minimum_speed:
+            v = self.drive.minimum_speed if forward else -self.drive.minimum_speed
+        return v
 
 
 class BackUp(DriveOnHeading):
@@ -247,7 +292,11 @@ def build_behaviors(params: dict[str, object], server: str = "behavior_server"
         if cls is None:
             raise UnsupportedPlugin(server, f"{name}.plugin", plugin or None,
                                  f"unknown behaviour plugin; known: {sorted(BEHAVIOR_PLUGINS)}")
-        out[name] = cls(cfg)
+        if issubclass(cls, DriveOnHeading):
+            keys = {k: v for k, v in sub.items() if k != "plugin"} if isinstance(sub, dict) else {}
+            out[name] = cls(cfg, from_params(DriveOnHeadingConfig, keys, server=f"{server}.{name}"))
+        else:
+            out[name] = cls(cfg)
     return cfg, out
 
 
@@ -258,6 +307,7 @@ __all__ = [
     "BehaviorServerConfig",
     "BehaviorStep",
     "DriveOnHeading",
+    "DriveOnHeadingConfig",
     "Spin",
     "Status",
     "Wait",

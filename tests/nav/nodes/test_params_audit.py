@@ -67,13 +67,15 @@ def test_jazzy_warnings_name_each_entry_once() -> None:
 
 def test_kilted_warnings() -> None:
     w = audit_nav2_params(upstream("kilted", "dwb_core::DWBLocalPlanner")).warnings
-    assert len(w) == len(set(w)) == 34
+    assert len(w) == len(set(w)) == 28
     assert "ignored: bt_navigator.error_code_name_prefixes" not in w
     for section in ("route_server", "docking_server", "loopback_simulator"):
         assert f"not supported: {section} (whole section)" in w
     # the costmap filters and their servers are honoured (tests/nav/test_costmap_filters.py)
     assert not [x for x in w if "filter" in x]
-    assert "ignored: behavior_server.backup.acceleration_limit" in w
+    for beh in ("backup", "drive_on_heading"):  # Kilted's ramp limits are honoured
+        for key in ("acceleration_limit", "deceleration_limit", "minimum_speed"):
+            assert f"ignored: behavior_server.{beh}.{key}" not in w
 
 
 def test_unknown_key_in_a_plugin_is_named() -> None:
