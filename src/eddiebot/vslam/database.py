@@ -284,6 +284,7 @@ class SessionDatabase:
             return
         if rtabmap is not None and rtabmap.params.mem_incremental_memory:
             self.save_optimized(rtabmap.optimized_poses, rtabmap.occupancy_grid())
+            self.save_weights({i: n.weight for i, n in rtabmap.memory.nodes.items()})
         self._conn.close()
         self._conn = None  # type: ignore[assignment]
 
@@ -437,9 +438,17 @@ class SessionDatabase:
                 [(lk.from_id, lk.to_id, int(lk.type),
                   np.asarray(lk.information, "<f8").tobytes(), pose_to_blob(lk.transform))
                  for lk in record.links])
+            c.executemany("UPDATE Node SET weight=? WHERE id=?",
+                          [(w, i) for i, w in record.weights])
             stats = ";".join(f"{k}:{v:g}" for k, v in record.statistics.items())
             c.execute("INSERT INTO Statistics (id, stamp, data) VALUES (?, ?, ?)",
                       (node.id, node.stamp_ns * 1e-9, zlib.compress(stats.encode())))
+
+    def save_weights(self, weights: dict[int, int]) -> None:
+        """Node weights (rehearsal and loop closures change them after a node is written)."""
+        with self._transaction() as c:
+            c.executemany("UPDATE Node SET weight=? WHERE id=?",
+                          [(int(w), int(i)) for i, w in weights.items()])
 
     def save_optimized(self, poses: dict[int, NDArray[np.float64]], grid: GlobalGrid | None) -> None:
         """Admin.opt_ids/opt_poses and the assembled grid (opt_map)."""

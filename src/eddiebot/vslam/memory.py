@@ -19,7 +19,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from eddiebot.vslam.features import FrameFeatures
-from eddiebot.vslam.occupancy import LocalGrid
+from eddiebot.vslam.occupancy import CloudImages, LocalGrid
 from eddiebot.vslam.vocabulary import Vocabulary
 
 __all__ = ["Link", "LinkType", "Memory", "Node", "NodeData", "NodeStore"]
@@ -67,12 +67,13 @@ class Link:
 
 @dataclass
 class NodeData:
-    """The heavy part of a node: features, their word ids, local grid and cloud."""
+    """The heavy part of a node: features, their word ids, local grid, and the decimated,
+    compressed images its cloud is rebuilt from on demand."""
 
     features: FrameFeatures
     words: NDArray[np.int64]  # word id per feature, -1 = not quantised
     grid: LocalGrid | None = None
-    cloud: tuple[F64, NDArray[np.uint8]] | None = None
+    cloud: CloudImages | None = None
     scan_points: F64 | None = None  # (N, 2) base frame, for neighbour-link refinement
 
     def word_counts(self) -> dict[int, int]:
@@ -268,6 +269,8 @@ class Memory:
         self.stm: list[int] = []
         self.wm: dict[int, int] = {}  # id → insertion counter
         self.ltm: set[int] = set()
+        #: upstream's `_lastGlobalLoopClosureId`: the newer node of the last accepted closure
+        self.last_loop_closure_id = 0
         self._wm_counter = 0
         self.inverted: dict[int, dict[int, int]] = {}
         self.word_totals: dict[int, int] = {}
@@ -569,17 +572,101 @@ class Memory:
             if a in nodes and b in nodes:
                 self._uf_union(a, b)
 
+    # -- weights (rehearsal, loop closures) -------------------------------------------------
+    def similarity(self, a: Node, b: Node) -> float:
+        """Upstream's `Signature::compareTo` on words: word pairs (a word seen n times in one
+        and m in the other makes min(n, m) pairs) over the larger count of valid words."""
+        na, nb = sum(a.word_counts.values()), sum(b.word_counts.values())
+        if na == 0 or nb == 0:
+            return 0.0
+        small, large = ((a.word_counts, b.word_counts) if len(a.word_counts) <= len(b.word_counts)
+                        else (b.word_counts, a.word_counts))
+        pairs = sum(min(c, large.get(w, 0)) for w, c in small.items())
+        return pairs / max(na, nb)
+
+    def rehearsal(self, node: Node, threshold: float, moving: bool | None,
+                  ignored_while_moving: bool = False) -> tuple[int, float, bool]:
+        """Upstream's `Memory::rehearsal` (`Mem/RehearsalIdUpdatedToNewOne` false): compare a
+        new STM node with the previous one in STM; at `threshold` similarity or more, the
+        previous node takes the new one's weight plus one. `moving`: whether the odometry
+        link between them exceeds `RGBD/LinearUpdate|AngularUpdate` (None: no such link).
+        Returns (the previous node's id if its weight rose, similarity, merged): merged (not
+        moving, linked) means the new node is the same place and is to be removed; otherwise
+        the new node's weight is reset to 0."""
+        if not node.word_counts:
+            return 0, 0.0, False
+        prev = next((self.nodes[i] for i in reversed(self.stm)
+                     if i != node.id and self.nodes[i].weight >= 0), None)
+        if prev is None:
+            return 0, 0.0, False
+        sim = self.similarity(node, prev)
+        if sim < threshold:
+            return 0, sim, False
+        if moving and ignored_while_moving:
+            return 0, sim, False
+        prev.weight += max(node.weight, 0) + 1
+        merged = moving is False
+        node.weight = 0
+        return prev.id, sim, merged
+
+    def closure_weights(self, link: Link) -> None:
+        """An accepted loop closure (not virtual): as upstream's `Memory::addLink`, the newer
+        node takes the older one's weight (which drops to 0) and becomes the last loop
+        closure id (the start of the recent part of WM)."""
+        a, b = self.nodes.get(link.from_id), self.nodes.get(link.to_id)
+        if a is None or b is None or link.type == LinkType.VIRTUAL_CLOSURE:
+            return
+        new, old = (a, b) if a.id > b.id else (b, a)
+        new.weight += max(old.weight, 0)
+        old.weight = 0
+        self.last_loop_closure_id = new.id
+
     # -- transfer / retrieval ---------------------------------------------------------------
-    def transfer_candidates(self, protected: set[int], recent_ratio: float) -> list[int]:
-        """WM ids in transfer order (weight ↑, insertion ↑, id ↑), protected ones removed."""
-        wm = list(self.wm.items())
-        n_recent = int(len(wm) * recent_ratio)
-        recent = {i for i, _ in sorted(wm, key=lambda kv: kv[1])[len(wm) - n_recent:]} if n_recent else set()
+    def transfer_candidates(self, ignored: set[int], recent_ratio: float, count: int,
+                            sort_by_weight_id: bool = False) -> list[int]:
+        """Up to `count` WM ids to transfer to LTM, as upstream's
+        `Memory::getRemovableSignatures`: lowest weight first, then earliest entry into WM
+        (or lowest id with `sort_by_weight_id`), then lowest id. Never transferred: `ignored`
+        ids, nodes linked to a node in STM (or to the oldest one in STM), the last loop
+        closure's node, and, while the nodes entered after it hold less than `recent_ratio`
+        of WM, those nodes (`Mem/RecentWmRatio`)."""
+        if not self.wm or count <= 0:
+            return []
+        wm_ids = sorted(self.wm)
+        recent_max = int(recent_ratio * len(wm_ids))
+        last = self.last_loop_closure_id
+        immunized = False
+        current_recent = 0
         stm = set(self.stm)
-        linked_to_stm = {i for i, _ in wm if any(m in stm for m in self.links.get(i, ()))}
-        blocked = protected | recent | linked_to_stm
-        order = sorted((self.nodes[i].weight, ins, i) for i, ins in wm if i not in blocked)
-        return [i for _, _, i in order]
+        if last > 0 and last not in stm and last in self.wm:
+            current_recent = len(wm_ids) - wm_ids.index(last)
+            immunized = 1 < current_recent < recent_max
+        oldest_stm = min(stm) if stm else None
+        linked_oldest = set(self.links.get(oldest_stm, ())) if oldest_stm is not None else set()
+        keys = []
+        for i in wm_ids:
+            if (immunized and i > last) or i == last or i in ignored or i in linked_oldest:
+                continue
+            if any(m in stm for m in self.links.get(i, ())):
+                continue
+            w = self.nodes[i].weight
+            if w >= 0:
+                keys.append((w, 0 if sort_by_weight_id else self.wm[i], i))
+        keys.sort()
+        out: list[int] = []
+        recent_count = 0
+        for _, _, i in keys:
+            if not immunized:
+                out.append(i)
+                if last and i > last:
+                    recent_count += 1
+                    if current_recent - recent_count < recent_max:
+                        immunized = True
+            elif last == 0 or i < last:
+                out.append(i)
+            if len(out) >= count:
+                break
+        return out
 
     def transfer_to_ltm(self, node_id: int) -> None:
         """Move a WM node to LTM; its data leaves RAM when a store holds it."""

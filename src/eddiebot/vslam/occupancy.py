@@ -10,6 +10,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -18,6 +19,7 @@ from eddiebot.vslam.camera import CameraIntrinsics, depth_to_meters
 from eddiebot.vslam.parameters import RtabmapParameters
 
 __all__ = [
+    "CloudImages",
     "GlobalGrid",
     "LocalGrid",
     "Scan2D",
@@ -113,6 +115,69 @@ def voxel_first_indices(pts: NDArray[np.floating], size: float) -> NDArray[np.in
     return first.astype(np.intp)
 
 
+@dataclass(frozen=True)
+class CloudImages:
+    """What a node keeps of its frame to rebuild its cloud on demand: the depth (16-bit PNG,
+    mm) and colour (JPEG) images decimated by `Grid/DepthDecimation` (a few kB each instead of
+    the cloud's few hundred); `camera` is the decimated images' (same points as the full
+    image's every `decimation`-th pixel)."""
+
+    depth_png: bytes
+    rgb_jpeg: bytes
+    camera: CameraIntrinsics
+    range_min: float = 0.0
+    range_max: float = 0.0
+
+    @classmethod
+    def from_frame(cls, depth: NDArray[np.generic], rgb: NDArray[np.uint8] | None,
+                   camera: CameraIntrinsics, decimation: int, range_min: float = 0.0,
+                   range_max: float = 0.0) -> CloudImages:
+        """Decimate and compress one registered frame (depth in any `depth_to_meters` unit)."""
+        step = max(1, decimation)
+        d = np.asarray(depth)[::step, ::step]
+        mm = d if d.dtype == np.uint16 else np.clip(
+            np.rint(depth_to_meters(d) * 1000.0), 0, 65535).astype(np.uint16)
+        ok, dbuf = cv2.imencode(".png", np.ascontiguousarray(mm))
+        if rgb is None:
+            small = np.full((*mm.shape, 3), 255, np.uint8)
+        else:
+            small = np.asarray(rgb)[::step, ::step]
+            if small.ndim == 2:
+                small = np.repeat(small[..., None], 3, axis=2)
+        ok2, cbuf = cv2.imencode(".jpg", np.ascontiguousarray(small[..., ::-1]))
+        if not (ok and ok2):
+            raise ValueError("cannot compress the node's cloud images")
+        small_camera = CameraIntrinsics(camera.fx / step, camera.fy / step, camera.cx / step,
+                                        camera.cy / step, int(mm.shape[1]), int(mm.shape[0]),
+                                        camera.local_transform)
+        return cls(bytes(dbuf), bytes(cbuf), small_camera, range_min, range_max)
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held."""
+        return len(self.depth_png) + len(self.rgb_jpeg)
+
+    def depth(self) -> NDArray[np.uint16]:
+        """The decimated depth (mm), in `camera`'s pixels."""
+        depth = cv2.imdecode(np.frombuffer(self.depth_png, np.uint8), cv2.IMREAD_UNCHANGED)
+        if depth is None:
+            raise ValueError("undecodable cloud depth")
+        return np.asarray(depth, dtype=np.uint16)
+
+    def cloud(self, voxel: float = 0.0) -> tuple[F64, NDArray[np.uint8]]:
+        """The coloured cloud (base frame), voxel-filtered (first point per voxel) if > 0."""
+        depth = self.depth()
+        bgr = cv2.imdecode(np.frombuffer(self.rgb_jpeg, np.uint8), cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise ValueError("undecodable cloud colours")
+        xyz, colors = depth_cloud(depth, self.camera, 1, self.range_min,
+                                  self.range_max, np.ascontiguousarray(bgr[..., ::-1]))
+        if voxel > 0:
+            first = voxel_first_indices(xyz, voxel)
+            xyz, colors = xyz[first], colors[first]
+        return xyz, colors
+
+
 def _unique_cells(xy: NDArray[np.floating], cell: float) -> F32:
     if xy.shape[0] == 0:
         return np.zeros((0, 2), np.float32)
@@ -173,9 +238,11 @@ def depth_cloud(
     cam = cam[ok]
     lt = camera.local_transform
     xyz = cam @ lt[:3, :3].T + lt[:3, 3]
-    if rgb is not None:
-        rr = np.clip(np.rint(vv[ok]).astype(np.intp), 0, rgb.shape[0] - 1)
-        cc = np.clip(np.rint(uu[ok]).astype(np.intp), 0, rgb.shape[1] - 1)
+    if rgb is not None:  # (the colour image may be smaller than the camera's: decimated)
+        rr = np.clip(np.rint(vv[ok] * (rgb.shape[0] / camera.height)).astype(np.intp), 0,
+                     rgb.shape[0] - 1)
+        cc = np.clip(np.rint(uu[ok] * (rgb.shape[1] / camera.width)).astype(np.intp), 0,
+                     rgb.shape[1] - 1)
         colors = rgb[rr, cc] if rgb.ndim == 3 else np.repeat(rgb[rr, cc][:, None], 3, axis=1)
     else:
         colors = np.full((xyz.shape[0], 3), 255, np.uint8)

@@ -155,7 +155,23 @@ class RtabmapParameters:
     mem_stm_size: int = _p("Mem/STMSize", 10, "")
     mem_incremental_memory: bool = _p("Mem/IncrementalMemory", True, "false = localization")
     mem_init_wm_with_all_nodes: bool = _p("Mem/InitWMWithAllNodes", False, "")
-    mem_recent_wm_ratio: float = _p("Mem/RecentWmRatio", 0.2, "")
+    mem_recent_wm_ratio: float = _p(
+        "Mem/RecentWmRatio", 0.2,
+        "share of WM after the last loop closure that cannot be transferred")
+    mem_rehearsal_similarity: float = _p(
+        "Mem/RehearsalSimilarity", 0.6,
+        "a new node this similar (shared words / larger word count) to the previous one in STM "
+        "is merged into it (not moving) or raises its weight (moving); 1 = off")
+    mem_rehearsal_weight_ignored_while_moving: bool = _p(
+        "Mem/RehearsalWeightIgnoredWhileMoving", False,
+        "no weight update by rehearsal while moving more than RGBD/LinearUpdate|AngularUpdate")
+    mem_transfer_sorting_by_weight_id: bool = _p(
+        "Mem/TransferSortingByWeightId", False,
+        "transfer order weight, then id (false: weight, then time of entry into WM, then id)")
+    mem_use_odom_features: bool = _p(
+        "Mem/UseOdomFeatures", True,
+        "words from the odometry's features when it has some (none with Reg/Strategy 1: the "
+        "node's Kp/ features are extracted from the image then)")
     mem_image_compression_format: str = _p("Mem/ImageCompressionFormat", ".jpg", ".jpg or .png")
     mem_depth_compression_format: str = _p(
         "Mem/DepthCompressionFormat", ".png", ".png only (upstream default .rvl)"
@@ -268,6 +284,10 @@ class RtabmapParameters:
             raise ParameterError("RGBD/OdomHeadingSigma must be >= 0")
         if self.rgbd_loop_closure_hypotheses < 1:
             raise ParameterError("RGBD/LoopClosureHypotheses must be >= 1")
+        if not 0.0 <= self.mem_rehearsal_similarity <= 1.0:
+            raise ParameterError("Mem/RehearsalSimilarity must be within [0, 1]")
+        if not 0.0 <= self.mem_recent_wm_ratio <= 1.0:
+            raise ParameterError("Mem/RecentWmRatio must be within [0, 1]")
         if self.mem_stm_size < 0:
             raise ParameterError("Mem/STMSize must be >= 0")
         if self.vis_min_inliers < 4:

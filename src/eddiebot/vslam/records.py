@@ -71,6 +71,8 @@ class FrameRecord:
     word_ids: NDArray[np.int64]  # unique word ids the node uses
     word_descriptors: NDArray[np.uint8]  # their descriptors (N, 32)
     statistics: dict[str, float]
+    #: (id, weight) of earlier nodes whose weight changed since the last record
+    weights: tuple[tuple[int, int], ...] = ()
 
 
 

@@ -192,6 +192,7 @@ def replay_tum(
             merges += bool(result.maps_merged)
         poses, _ = slam.graph()
         db.save_optimized(poses, slam.occupancy_grid())
+        db.save_weights({i: n.weight for i, n in slam.memory.nodes.items()})
     ids = sorted(i for i in poses if i in node_stamps)
     key_stamps = [node_stamps[i] for i in ids]
     key_poses = [poses[i] @ lt for i in ids]

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from eddiebot.vslam.bayes import BayesFilter, adjust_likelihood, tfidf_scores
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.closure_check import closure_mahalanobis, path_covariance
+from eddiebot.vslam.depth_icp import IcpResult, IcpSettings, icp_register, make_scan
 from eddiebot.vslam.features import FeatureExtractor, FrameFeatures
 from eddiebot.vslam.graph import (
     GraphLink,
@@ -30,6 +31,7 @@ from eddiebot.vslam.icp import icp_2d
 from eddiebot.vslam.localization import OdometryCache
 from eddiebot.vslam.memory import Link, LinkType, Memory, Node, NodeData
 from eddiebot.vslam.occupancy import (
+    CloudImages,
     GlobalGrid,
     LocalGrid,
     Scan2D,
@@ -39,7 +41,6 @@ from eddiebot.vslam.occupancy import (
     local_grid_from_points,
     local_grid_from_scan,
     merge_local_grids,
-    voxel_first_indices,
 )
 from eddiebot.vslam.odometry_frames import (
     ODOM_FRAME_ID_OFFSET,
@@ -59,6 +60,7 @@ __all__ = ["ODOM_FRAME_ID_OFFSET", "FrameRecord", "OdometryFrames", "ProcessResu
 F64 = NDArray[np.float64]
 _DEFAULT_ODOM_VARIANCE = 0.001
 _CLOUD_VOXEL = 0.02
+_REG_ICP, _REG_VIS_ICP = 1, 2  # Reg/Strategy
 #: `RGBD/LoopClosureHypotheses`: a further hypothesis is not within this many links of one
 #: already verified (the span where `Bayes/PredictionLC` gives a place's neighbours ≥ 1 %)
 _HYPOTHESIS_MARGIN = 4
@@ -88,6 +90,7 @@ class Rtabmap:
         self._extractor = FeatureExtractor(
             params, max_features=params.vis_max_features, strategy=params.kp_detector_strategy
         )
+        self._icp = IcpSettings.from_parameters(params)
         self.optimizer: PoseGraphOptimizer = optimizer or GtsamPoseGraph(
             params.reg_force_3dof, params.optimizer_epsilon
         )
@@ -100,7 +103,7 @@ class Rtabmap:
         self._map_frames: dict[int, int] = {0: 0}
         self.maps_started = 0  # new maps started within this session (odometry resets)
         self._last_node_id = 0
-        self._last_loop_id = 0
+        self._weights_changed: set[int] = set()  # node ids whose weight the database lacks
         self._last_had_loop = False
         self._last_hypothesis = (0, 0.0)
         self._prev_hyp_value = 0.0
@@ -268,7 +271,9 @@ class Rtabmap:
         new_map = self._odometry_reset(odom, odom_covariance)
         if new_map:
             self._start_new_map()
-        if features is None:
+        if features is None or len(features) == 0 or not p.mem_use_odom_features:
+            # the memory's words do not depend on the odometry: an odometry without features
+            # (ICP, Reg/Strategy 1) leaves the node's Kp/ features to extract here
             features = self._extractor.extract(rgb, depth, camera)
         n_words = len(features) if p.kp_max_features <= 0 else min(len(features), p.kp_max_features)
         words = np.full(len(features), -1, np.int64)
@@ -276,11 +281,13 @@ class Rtabmap:
             features.descriptors[:n_words], add_new=not self.localization_mode
         )
         stats["Keypoint/Current_frame/words"] = float(n_words)
-        xyz, colors = depth_cloud(depth, camera, p.grid_depth_decimation, p.grid_range_min,
-                                  p.grid_range_max, rgb)
-        grid = self._local_grid(xyz, camera, scan) if p.rgbd_create_occupancy_grid else None
-        first = voxel_first_indices(xyz, _CLOUD_VOXEL)
-        cloud = (xyz[first], colors[first])
+        grid = None
+        if p.rgbd_create_occupancy_grid:
+            xyz, _ = depth_cloud(depth, camera, p.grid_depth_decimation, p.grid_range_min,
+                                 p.grid_range_max)
+            grid = self._local_grid(xyz, camera, scan)
+        cloud = CloudImages.from_frame(depth, rgb, camera, p.grid_depth_decimation,
+                                       p.grid_range_min, p.grid_range_max)
         scan_points = scan.points_in_base() if scan is not None else None
         data = NodeData(features, words, grid, cloud, scan_points)
         node = Node(self._next_id, self._map_id, stamp_ns, odom, data=data,
@@ -308,6 +315,18 @@ class Rtabmap:
         moved = self.memory.add_to_stm(node)
         for link in new_links:
             self.memory.add_link(link)
+        merged_into = 0  # rehearsal: the previous node this one repeats (not kept)
+        if not self.localization_mode and p.mem_rehearsal_similarity < 1.0:
+            moving = self._moving(new_links[0].transform) if new_links else None
+            rehearsed, sim, full = self.memory.rehearsal(
+                node, p.mem_rehearsal_similarity, moving,
+                p.mem_rehearsal_weight_ignored_while_moving)
+            merged_into = rehearsed if full else 0
+            stats["Memory/Rehearsal_sim/"] = sim
+            stats["Memory/Rehearsal_id/"] = float(rehearsed)
+            stats["Memory/Rehearsal_merged/"] = float(merged_into)
+            if rehearsed:
+                self._weights_changed.add(rehearsed)
         for m in moved:
             self.bayes.node_entered(m, self._bayes_neighbours(m, self.bayes.max_depth))
 
@@ -419,15 +438,16 @@ class Rtabmap:
                     loop_id = proximity_id = 0
                     closure_links = []
                     self.optimized_poses[node.id] = self.map_to_odom @ odom
-            if loop_id or proximity_id:
-                self._last_loop_id = loop_id or proximity_id
+            for link in closure_links:  # weights follow accepted closures (upstream addLink)
+                self.memory.closure_weights(link)
+                self._weights_changed.update((link.from_id, link.to_id))
             pose = self.optimized_poses[node.id]
             self.map_to_odom = pose @ se3_inverse(odom)
         self._last_had_loop = bool(loop_id or proximity_id)
         stats["Timing/Optimization/ms"] = (self._timer() - t_verify) * 1e3
 
         # --- keep or delete the node ---
-        keep = not self.localization_mode and (not small or bool(closure_links))
+        keep = not self.localization_mode and (not (small or merged_into) or bool(closure_links))
         if prev is None and not self.localization_mode:
             keep = True
         if keep:
@@ -448,9 +468,13 @@ class Rtabmap:
         if keep and self._db is not None:
             all_new = tuple(new_links) + tuple(closure_links)
             used = np.array(sorted(node.word_counts), np.int64)
+            self._weights_changed.discard(node.id)
+            weights = tuple((i, self.memory.nodes[i].weight) for i in sorted(self._weights_changed)
+                            if i in self.memory.nodes)
+            self._weights_changed.clear()
             self._db.write_frame(FrameRecord(
                 node, rgb, depth, camera, scan, all_new, used,
-                self.vocabulary.descriptors(used), stats))
+                self.vocabulary.descriptors(used), stats, weights))
         return ProcessResult(
             node.id if keep else 0, keep, self.map_to_odom.copy(), pose,
             loop_closure_id=loop_id, proximity_id=proximity_id, hypothesis_id=hyp_id,
@@ -473,8 +497,9 @@ class Rtabmap:
     def point_cloud(self, voxel_size: float = 0.05) -> tuple[F64, NDArray[np.uint8]]:
         """Assembled coloured cloud (map frame) of the current map's nodes in RAM."""
         frame = self.current_frame
-        clouds = {i: n.data.cloud for i, n in self.memory.nodes.items()
-                  if n.data is not None and n.data.cloud is not None and self.frame_of(i) == frame}
+        clouds = {i: n.data.cloud.cloud(_CLOUD_VOXEL) for i, n in self.memory.nodes.items()
+                  if n.data is not None and n.data.cloud is not None and self.frame_of(i) == frame
+                  and i in self.optimized_poses}
         return assemble_cloud(clouds, self.optimized_poses, voxel_size)
 
     def graph(self) -> tuple[dict[int, F64], list[Link]]:
@@ -492,6 +517,14 @@ class Rtabmap:
         if sensor == 2 and scan is not None:
             return merge_local_grids(depth_grid, local_grid_from_scan(scan, p))
         return depth_grid
+
+    def _moving(self, delta: F64) -> bool:
+        """Upstream rehearsal's test: a translation beyond `RGBD/LinearUpdate` or a rotation
+        beyond `RGBD/AngularUpdate` on any axis (0 = any motion)."""
+        x, y, z, roll, pitch, yaw = xyz_rpy(delta)
+        p = self.params
+        return bool(max(abs(x), abs(y), abs(z)) > p.rgbd_linear_update
+                    or max(abs(roll), abs(pitch), abs(yaw)) > p.rgbd_angular_update)
 
     def _small_displacement(self, delta: F64) -> bool:
         p = self.params
@@ -563,16 +596,23 @@ class Rtabmap:
         reg = register(old.data.features, new.data.features, camera, self.params)
         if reg.transform is None:
             return _Verification(None, f"registration failed: {reg.reason} ({reg.inliers} inliers)")
+        transform, covariance = reg.transform, reg.covariance
+        if self.params.reg_strategy in (_REG_ICP, _REG_VIS_ICP):
+            # as upstream's Memory::computeTransform: the visual result is ICP's guess
+            icp = self._icp_refine(old, new, transform)
+            if icp.transform is None:
+                return _Verification(None, f"ICP failed: {icp.reason or 'no transform'}")
+            transform, covariance = icp.transform, icp.covariance
         limit = self.params.rgbd_max_loop_closure_distance
-        if limit > 0 and float(np.linalg.norm(reg.transform[:3, 3])) > limit:
+        if limit > 0 and float(np.linalg.norm(transform[:3, 3])) > limit:
             return _Verification(None, "RGBD/MaxLoopClosureDistance exceeded")
-        info = np.asarray(np.linalg.inv(reg.covariance), dtype=np.float64)
+        info = np.asarray(np.linalg.inv(covariance), dtype=np.float64)
         if self.params.rgbd_loop_cov_limited and self._odom_max_info is not None:
             # RGBD/LoopCovLimited: no axis more certain than the best odometry link
             cap = self._odom_max_info
             idx = np.flatnonzero((np.diag(info) > cap) & (cap > 0))
             info[idx, idx] = cap[idx]
-        link = Link(new.id, old.id, link_type, se3_inverse(reg.transform), info)
+        link = Link(new.id, old.id, link_type, se3_inverse(transform), info)
         gate = self.params.rgbd_loop_closure_max_mahalanobis
         if gate > 0 and not self.localization_mode and self.frame_of(old.id) == self.frame_of(new.id):
             old_pose = self.optimized_poses.get(old.id)
@@ -586,6 +626,17 @@ class Rtabmap:
                 if d is not None:
                     return _Verification(link, "", link, d)
         return _Verification(link, "", link)
+
+    def _icp_refine(self, old: Node, new: Node, guess: F64) -> IcpResult:
+        """ICP of the new node's depth cloud against the old one's from `guess` (new node in
+        the old one's frame); clouds rebuilt from the nodes' decimated depth."""
+        a = None if old.data is None else old.data.cloud
+        b = None if new.data is None else new.data.cloud
+        if a is None or b is None:
+            return IcpResult(None, reason="no depth")
+        target = make_scan(a.depth(), a.camera, self._icp)
+        source = make_scan(b.depth(), b.camera, self._icp)
+        return icp_register(target, source, guess, self._icp)
 
     def _refine_with_scan(self, link: Link, prev: Node, scan: Scan2D) -> Link:
         """`RGBD/NeighborLinkRefining`: 2D ICP of this scan against the previous node's scan."""
@@ -898,8 +949,8 @@ class Rtabmap:
             n = max(n, 2)
         if n <= 0:
             return 0
-        protected = protected | {self._last_loop_id}
-        cands = mem.transfer_candidates(protected, p.mem_recent_wm_ratio)[:n]
+        cands = mem.transfer_candidates(protected, p.mem_recent_wm_ratio, n,
+                                        p.mem_transfer_sorting_by_weight_id)
         for i in cands:
             neighbourhood = self._bayes_neighbours(i, self.bayes.max_depth)
             mem.transfer_to_ltm(i)
