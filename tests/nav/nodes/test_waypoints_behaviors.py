@@ -43,6 +43,47 @@ def test_follows_waypoints_and_saves_photos(make_stack, nav_stub_params, tmp_pat
     assert math.hypot(stack.robot.pose[0] - 2.0, stack.robot.pose[1] - 2.0) < 0.3
 
 
+def test_input_at_waypoint_waits_and_proceeds_on_input(make_stack, nav_stub_params):
+    from eddiebot.msgs.std_msgs import Empty
+
+    doc = nav_stub_params()
+    doc["waypoint_follower"] = {"ros__parameters": {
+        "stop_on_failure": False, "waypoint_task_executor_plugin": "input",
+        "input": {"plugin": "nav2_waypoint_follower/InputAtWaypoint", "timeout": 3.7,
+                  "input_topic": "/operator/ok"}}}
+    stack = make_stack(params=doc)
+    follower = stack.nodes["waypoint_follower"]
+    ok = stack.probe.create_publisher(Empty, "/operator/ok", 1)
+    client = ActionClient(stack.probe, FollowWaypoints, "/follow_waypoints")
+    goal = FollowWaypoints.Goal(poses=[pose_stamped(1.6, 1.0, 0.0, "map"),
+                                       pose_stamped(1.6, 1.6, math.pi / 2, "map")])
+    handle = wait_for(stack, client.send_goal_async(goal))
+    t = 0.0
+    while follower.waiting_at is None and t < 60.0:
+        stack.spin(0.1)
+        t += 0.1
+    assert follower.waiting_at == 0
+    stack.spin(2.5)  # no input yet: still holding at waypoint 0, not moving on
+    assert follower.waiting_at == 0
+    ok.publish(Empty())
+    stack.spin(0.3)
+    assert follower.waiting_at is None
+    # Waypoint 1 gets no input: after timeout (3 s: whole seconds, as upstream) it is missed
+    # with TASK_EXECUTOR_FAILED and the run, not stopping on failure, succeeds.
+    while follower.waiting_at is None and t < 120.0:
+        stack.spin(0.1)
+        t += 0.1
+    assert follower.waiting_at == 1
+    start = stack.nodes["waypoint_follower"].now().nanoseconds
+    res = wait_for(stack, handle.get_result_async(), 30.0)
+    waited = (stack.nodes["waypoint_follower"].now().nanoseconds - start) * 1e-9
+    assert 2.8 <= waited <= 3.5
+    assert res.status == GoalStatus.STATUS_SUCCEEDED
+    assert [(m.index, m.error_code) for m in res.result.missed_waypoints] == \
+        [(1, FollowWaypoints.Result.TASK_EXECUTOR_FAILED)]
+    assert math.hypot(stack.robot.pose[0] - 1.6, stack.robot.pose[1] - 1.6) < 0.3
+
+
 def test_spin_and_backup_behaviours(make_stack):
     stack = make_stack(servers=("controller_server", "behavior_server", "velocity_smoother",
                                 "collision_monitor"), start=(3.0, 1.0, 0.0))

@@ -4,8 +4,11 @@ Each waypoint is sent to ``navigate_to_pose`` in turn; on arrival the task execu
 (``waypoint_task_executor_plugin``) runs: ``nav2_waypoint_follower::WaitAtWaypoint``
 (``waypoint_pause_duration`` ms) or ``nav2_waypoint_follower::PhotoAtWaypoint``, which saves
 the latest image of ``camera_image_topic_name`` as ``<save_images_dir>/<index>_<stamp>.png``
-(written to a temporary file, then renamed). ``stop_on_failure`` (true) ends the run at the
-first missed waypoint; otherwise missed ones are listed in the result.
+(written to a temporary file, then renamed), or ``nav2_waypoint_follower::InputAtWaypoint``,
+which waits for a ``std_msgs/Empty`` on ``input_topic`` (``input_at_waypoint/input``) for up to
+``timeout`` whole seconds (10; upstream builds the duration from the integer part) and fails
+the waypoint's task when none comes. ``stop_on_failure`` (true) ends the run at the first
+missed waypoint; otherwise missed ones are listed in the result.
 """
 
 from __future__ import annotations
@@ -30,7 +33,7 @@ TASK_EXECUTOR_KEYS: dict[str, frozenset[str]] = {
     "nav2_waypoint_follower::WaitAtWaypoint": frozenset({"waypoint_pause_duration"}),
     "nav2_waypoint_follower::PhotoAtWaypoint": frozenset(
         {"camera_image_topic_name", "save_images_dir", "image_format"}),
-    "nav2_waypoint_follower::InputAtWaypoint": frozenset(),
+    "nav2_waypoint_follower::InputAtWaypoint": frozenset({"timeout", "input_topic"}),
 }
 _TASKS = tuple(TASK_EXECUTOR_KEYS)
 #: FollowWaypoints' NO_VALID_WAYPOINTS (Kilted's code; Jazzy's message ends at 601)
@@ -93,6 +96,10 @@ class WaypointFollower(NavServer):
         self._image_sub: Any = None
         self._image: Any = None
         self.saved: list[Path] = []
+        self._input_sub: Any = None
+        self._input_received = False
+        #: index of the waypoint whose InputAtWaypoint task is waiting for input, else None
+        self.waiting_at: int | None = None
 
     def on_configure(self, state: State) -> TransitionCallbackReturn:
         def build() -> None:
@@ -114,6 +121,14 @@ class WaypointFollower(NavServer):
                 if fmt != "png":
                     raise ParameterError(self.get_name(), f"{name}.image_format", fmt,
                                          "only png is written")
+            elif plugin.endswith("InputAtWaypoint"):
+                task["input_topic"] = str(sub.get("input_topic", "input_at_waypoint/input"))
+                try:
+                    timeout = float(sub.get("timeout", 10.0))
+                except (TypeError, ValueError):
+                    raise ParameterError(self.get_name(), f"{name}.timeout", sub.get("timeout"),
+                                         "must be a number of seconds") from None
+                task["timeout_ns"] = int(timeout) * 1_000_000_000
             self._task = task
         return self.configure_with(build)
 
@@ -125,6 +140,11 @@ class WaypointFollower(NavServer):
         if "topic" in self._task:
             self._image_sub = self.create_subscription(Image, self._task["topic"], self._on_image,
                                                        qos_profile_sensor_data)
+        if "input_topic" in self._task:
+            from eddiebot.msgs.std_msgs import Empty
+
+            self._input_sub = self.create_subscription(Empty, self._task["input_topic"],
+                                                       self._on_input, 1)
         self._action = ActionServer(self, FollowWaypoints, "follow_waypoints", self._follow,
                                     cancel_callback=lambda _h: CancelResponse.ACCEPT)
         return TransitionCallbackReturn.SUCCESS
@@ -134,13 +154,32 @@ class WaypointFollower(NavServer):
             self._action.destroy()
         if self._nav is not None:
             self._nav.destroy()
-        if self._image_sub is not None:
-            self.destroy_subscription(self._image_sub)
-        self._action = self._nav = self._image_sub = None
+        for sub in (self._image_sub, self._input_sub):
+            if sub is not None:
+                self.destroy_subscription(sub)
+        self._action = self._nav = self._image_sub = self._input_sub = None
         return TransitionCallbackReturn.SUCCESS
 
     def _on_image(self, msg: Any) -> None:
         self._image = msg
+
+    def _on_input(self, _msg: Any) -> None:
+        self._input_received = True
+
+    async def _await_input(self, index: int) -> bool:
+        """InputAtWaypoint: True once an input arrives after arrival, False at ``timeout``."""
+        self._input_received = False
+        self.waiting_at = index
+        start = self.now().nanoseconds
+        try:
+            while self.now().nanoseconds - start < self._task["timeout_ns"]:
+                if self._input_received:
+                    return True
+                await sleep(self, 0.02)  # upstream polls at 50 Hz
+        finally:
+            self.waiting_at = None
+        self.get_logger().warning(f"Unable to get external input at wp {index}. Moving on.")
+        return False
 
     async def _run_task(self, index: int) -> bool:
         task = self._task
@@ -149,6 +188,8 @@ class WaypointFollower(NavServer):
         if "pause_s" in task:
             await sleep(self, task["pause_s"])
             return True
+        if "input_topic" in task:
+            return await self._await_input(index)
         if "dir" in task:
             if self._image is None:
                 self.get_logger().error(f"waypoint {index}: no image on {task['topic']} to save")
