@@ -197,11 +197,9 @@ def _tour(run: _Run) -> None:
                           "eddiebot_msgs/srv/ResetEncoder \"{}\"", expect="response"),
         lambda: run.check("eddie topic pub --once /chatter std_msgs/msg/String \"{data: hi}\""),
     )]
-    record = run.start("eddie record -o run1 -a", ready="")
-    deadline = time.monotonic() + 60
-    while not any((run.cwd / "run1").glob("*.mcap")) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    time.sleep(3.0)  # a few seconds of everything, a few scans of SLAM
+    # topics are taken in name order: /tf_static comes last of the simulator's
+    record = run.start("eddie record -o run1 -a", ready="recording /tf_static")
+    time.sleep(2.0)  # everything for a while (the Kinect's images: 46 MB/s), SLAM's first scans
     assert "recorded" in run.stop(record)
     run.check("eddie map save office", expect="map saved to")
     doc = yaml.safe_load((run.cwd / "office.yaml").read_text())
