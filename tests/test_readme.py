@@ -8,6 +8,9 @@ a README command was not run (`EXEMPT` names the exceptions and why). Everything
 private folder on a private Zenoh router; the firmware emulator on a pseudo-terminal stands
 in for ``/dev/ttyUSB0`` and fakenect, replaying a dump written here, for the Kinect.
 
+Root-only steps (``sudo apt-get``, the udev rule and ``udevadm``, ``usermod``) are written
+outside ```sh blocks on purpose: they change the machine, not the stack.
+
 The commands share what a user would share: one ``eddie sim`` for the tour, with SLAM, the
 map, navigation and the ROS 2-style tools attached to it; the offline commands (dataset
 replays, exploration in its own process) and the real-robot steps run beside it.
