@@ -1,10 +1,13 @@
 """Theta* any-angle global planner (after ``nav2_theta_star_planner``).
 
-A* over the 8-connected grid in which a node may take its grandparent as parent when the
-straight line between them is traversable, so paths are chains of straight segments
-instead of grid zig-zags (the lazy variant: one line check per expansion). Edge cost = ``w_euc_cost`` · length + ``w_traversal_cost`` ·
-∫ (cost/252)² along the line (cells), heuristic ``w_heuristic_cost`` · Euclidean distance.
-The result is interpolated at the costmap resolution.
+A* over the 8-connected grid in which a node, when expanded, takes its grandparent as parent
+if the straight line between them is traversable and cheaper, so paths are chains of
+straight segments instead of grid zig-zags. Upstream's cost model: every cell entered costs
+``w_euc_cost`` · step length + ``w_traversal_cost`` · ``(26 + 0.9·cost)² / 252²``, so free
+space is cheap (0.011 per cell) and unknown space (``allow_unknown``) costs about as much as
+the most expensive known cell (1.03 per grid step, 1.008 on a line) — it is crossed only when
+going round is dearer. Heuristic ``w_heuristic_cost`` · Euclidean distance (cells). The result
+is interpolated at the costmap resolution.
 """
 
 from __future__ import annotations
@@ -53,54 +56,102 @@ class ThetaStarConfig:
 
 @njit(cache=True)
 def _cell_ok(c: int, allow_unknown: bool) -> bool:
-    return c < 253 or (allow_unknown and c == 255)
+    """Upstream's ``isSafe(cx, cy)``: cost <= MAX_NON_OBSTACLE (252), or unknown if allowed."""
+    return c <= 252 or (allow_unknown and c == 255)
 
 
 @njit(cache=True)
-def _trav_grid(grid: np.ndarray, allow_unknown: bool) -> np.ndarray:
-    """Per-cell (cost/252)² (unknown: 0), or -1 where the cell cannot be crossed."""
+def _cost_grids(grid: np.ndarray, allow_unknown: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Per-cell traversal factors ``(26 + 0.9·cost)² / 252²`` (upstream's ``getCost``):
+    for grid steps (unknown at its raw 255, so ≈1.03 — dearer than any known cell) and for
+    line-of-sight checks (unknown at 253, known cells above 251 blocked: the shifted cost must
+    stay <= 252). -1 marks a cell that cannot be entered."""
     h, w = grid.shape
-    out = np.empty((h, w), dtype=np.float32)
+    step = np.empty((h, w))
+    los = np.empty((h, w))
     for y in range(h):
         for x in range(w):
             c = grid[y, x]
-            if not _cell_ok(c, allow_unknown):
-                out[y, x] = -1.0
-            elif c == 255:
-                out[y, x] = 0.0
+            shifted = 26.0 + 0.9 * c
+            step[y, x] = shifted * shifted / (252.0 * 252.0) if _cell_ok(c, allow_unknown) \
+                else -1.0
+            if c == 255 and allow_unknown:
+                los[y, x] = 253.0 * 253.0 / (252.0 * 252.0)
+            elif c != 255 and shifted <= 252.0:
+                los[y, x] = shifted * shifted / (252.0 * 252.0)
             else:
-                v = c / 252.0
-                out[y, x] = v * v
-    return out
+                los[y, x] = -1.0
+    return step, los
 
 
 @njit(cache=True)
-def _line_cost(trav: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> float:
-    """Integral of (cost/252)² along the line (cells), or -1 when a cell is not traversable."""
-    dx = abs(x1 - x0)
+def _los_add(los: np.ndarray, x: int, y: int) -> float:
+    h, w = los.shape
+    if x < 0 or y < 0 or x >= w or y >= h:
+        return -1.0
+    return los[y, x]
+
+
+@njit(cache=True)
+def _line_of_sight(los: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> float:
+    """Upstream's ``losCheck``: the summed factors of the cells it visits, -1 if blocked."""
+    cost = 0.0
     dy = abs(y1 - y0)
+    dx = abs(x1 - x0)
+    f = 0
     sx = 1 if x1 > x0 else -1
     sy = 1 if y1 > y0 else -1
-    n = max(dx, dy)
-    if n == 0:
-        return 0.0
-    total = np.float32(0.0)
-    err = dx - dy
-    x = x0
-    y = y0
-    for _ in range(n):
-        e2 = 2 * err
-        if e2 > -dy:
-            err -= dy
-            x += sx
-        if e2 < dx:
-            err += dx
-            y += sy
-        c = trav[y, x]
-        if c < 0.0:
-            return -1.0
-        total += c
-    return float(total) * math.hypot(dx, dy) / n
+    ux = (sx - 1) // 2
+    uy = (sy - 1) // 2
+    cx = x0
+    cy = y0
+    if dx >= dy:
+        while cx != x1:
+            f += dy
+            if f >= dx:
+                v = _los_add(los, cx + ux, cy + uy)
+                if v < 0.0:
+                    return -1.0
+                cost += v
+                cy += sy
+                f -= dx
+            if f != 0:
+                v = _los_add(los, cx + ux, cy + uy)
+                if v < 0.0:
+                    return -1.0
+                cost += v
+            if dy == 0:
+                v = _los_add(los, cx + ux, cy)
+                if v < 0.0:
+                    v = _los_add(los, cx + ux, cy - 1)
+                    if v < 0.0:
+                        return -1.0
+                cost += v
+            cx += sx
+    else:
+        while cy != y1:
+            f += dx
+            if f >= dy:
+                v = _los_add(los, cx + ux, cy + uy)
+                if v < 0.0:
+                    return -1.0
+                cost += v
+                cx += sx
+                f -= dy
+            if f != 0:
+                v = _los_add(los, cx + ux, cy + uy)
+                if v < 0.0:
+                    return -1.0
+                cost += v
+            if dx == 0:
+                v = _los_add(los, cx, cy + uy)
+                if v < 0.0:
+                    v = _los_add(los, cx - 1, cy + uy)
+                    if v < 0.0:
+                        return -1.0
+                cost += v
+            cy += sy
+    return cost
 
 
 @njit(cache=True)
@@ -119,7 +170,8 @@ def _heap_push(hk: np.ndarray, hv: np.ndarray, size: int, key: float, val: int) 
 
 
 @njit(cache=True)
-def _heap_pop(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[int, int]:
+def _heap_pop(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[float, int, int]:
+    key = hk[0]
     top = hv[0]
     size -= 1
     hk[0] = hk[size]
@@ -138,12 +190,11 @@ def _heap_pop(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[int, int]:
         hk[m], hk[i] = hk[i], hk[m]
         hv[m], hv[i] = hv[i], hv[m]
         i = m
-    return top, size
+    return key, top, size
 
 
-@njit(cache=True)
-def _step_cost(trav: np.ndarray, x: int, y: int, dist: float, w_euc: float, w_trav: float) -> float:
-    return w_euc * dist + w_trav * trav[y, x] * dist
+_MOVES_X = np.array([0, 0, 1, -1, 1, -1, 1, -1])
+_MOVES_Y = np.array([1, -1, 0, 0, -1, 1, 1, -1])
 
 
 @njit(cache=True)
@@ -153,91 +204,69 @@ def theta_star_search(
 ) -> np.ndarray:
     """Cells (K, 2) of the path start -> goal; (0, 2) if none; [[-1, -1]] on timeout.
 
-    Lazy Theta*: a generated node optimistically takes its grandparent as parent (cost
-    estimated from the end cell); the line is checked once, when the node is expanded,
-    and on failure the node falls back to its best expanded grid neighbour.
+    ``ThetaStar::generatePath``: a node is expanded in order of ``f = g + h``; on expansion it
+    takes its grandparent as parent when the line between them is free and cheaper
+    (``resetParent``), then offers each neighbour ``g + w_euc_cost·step + w_traversal_cost·
+    factor(neighbour)`` (``setNeighbors``). A line costs ``w_euc_cost·length +
+    w_traversal_cost·Σ factor`` over the cells ``losCheck`` visits. Nodes improved after
+    expansion are expanded again, as upstream's queue allows.
     """
     h, w = grid.shape
     ns = h * w
-    trav = _trav_grid(grid, allow_unknown)
+    step, los = _cost_grids(grid, allow_unknown)
     g = np.full(ns, np.inf)
+    f = np.full(ns, np.inf)
     parent = np.full(ns, -1, dtype=np.int64)
-    closed = np.zeros(ns, dtype=np.bool_)
-    cap = ns * 8 + 16
+    cap = 4 * ns + 16
     hk = np.empty(cap)
     hv = np.empty(cap, dtype=np.int64)
     size = 0
     s = sy * w + sx
     goal = gy * w + gx
-    g[s] = 0.0
+    g[s] = w_trav * step[sy, sx]
+    f[s] = g[s] + w_heur * math.hypot(gx - sx, gy - sy)
     parent[s] = s
-    size = _heap_push(hk, hv, size, w_heur * math.hypot(gx - sx, gy - sy), s)
-    ddx = np.array([1, -1, 0, 0, 1, 1, -1, -1])
-    ddy = np.array([0, 0, 1, -1, 1, -1, 1, -1])
+    size = _heap_push(hk, hv, size, f[s], s)
     expansions = 0
     found = False
-    # Break f ties toward the goal (deeper nodes first); 0.1 % keeps paths near-optimal.
-    tie = w_heur * 1.001
     while size > 0:
-        n, size = _heap_pop(hk, hv, size)
-        if closed[n]:
-            continue
-        closed[n] = True
-        nx_ = n % w
-        ny_ = n // w
-        p = parent[n]
-        if p != n:
-            px = p % w
-            py = p // w
-            lc = _line_cost(trav, px, py, nx_, ny_)
-            if lc >= 0.0:
-                g[n] = g[p] + w_euc * math.hypot(nx_ - px, ny_ - py) + w_trav * lc
-            else:
-                best = np.inf
-                bp = -1
-                for k in range(corners):
-                    qx = nx_ + ddx[k]
-                    qy = ny_ + ddy[k]
-                    if qx < 0 or qy < 0 or qx >= w or qy >= h:
-                        continue
-                    q = qy * w + qx
-                    if not closed[q] or q == n:
-                        continue
-                    c = g[q] + _step_cost(trav, nx_, ny_, math.hypot(ddx[k], ddy[k]), w_euc, w_trav)
-                    if c < best:
-                        best = c
-                        bp = q
-                if bp < 0:
-                    continue
-                g[n] = best
-                parent[n] = bp
+        key, n, size = _heap_pop(hk, hv, size)
+        if key > f[n]:
+            continue  # superseded by a cheaper entry
         if n == goal:
             found = True
             break
         expansions += 1
         if expansions > max_expansions:
             return np.full((1, 2), -1, dtype=np.int64)
-        p = parent[n]
-        px = p % w
-        py = p // w
+        nx_ = n % w
+        ny_ = n // w
+        gp = parent[parent[n]]
+        gpx = gp % w
+        gpy = gp // w
+        lc = _line_of_sight(los, nx_, ny_, gpx, gpy)
+        if lc >= 0.0:
+            cand = g[gp] + w_euc * math.hypot(nx_ - gpx, ny_ - gpy) + w_trav * lc
+            if cand < g[n]:
+                parent[n] = gp
+                f[n] = cand + (f[n] - g[n])
+                g[n] = cand
         for k in range(corners):
-            mx = nx_ + ddx[k]
-            my = ny_ + ddy[k]
-            if mx < 0 or my < 0 or mx >= w or my >= h:
+            mx = nx_ + _MOVES_X[k]
+            my = ny_ + _MOVES_Y[k]
+            if mx < 0 or my < 0 or mx >= w or my >= h or step[my, mx] < 0.0:
                 continue
             m = my * w + mx
-            if closed[m] or trav[my, mx] < 0.0:
-                continue
-            if p != n:
-                cand = g[p] + _step_cost(trav, mx, my, math.hypot(mx - px, my - py), w_euc, w_trav)
-                cpar = p
-            else:
-                cand = g[n] + _step_cost(trav, mx, my, math.hypot(ddx[k], ddy[k]), w_euc, w_trav)
-                cpar = n
-            if cand < g[m]:
-                g[m] = cand
-                parent[m] = cpar
-                size = _heap_push(hk, hv, size, cand + tie * math.hypot(gx - mx, gy - my), m)
+            gc = g[n] + w_euc * math.hypot(_MOVES_X[k], _MOVES_Y[k]) + w_trav * step[my, mx]
+            cal = gc + w_heur * math.hypot(mx - gx, my - gy)
+            if f[m] > cal:
+                g[m] = gc
+                f[m] = cal
+                parent[m] = n
+                if size == hk.shape[0]:
+                    hk = np.concatenate((hk, np.empty(hk.shape[0])))
+                    hv = np.concatenate((hv, np.empty(hv.shape[0], dtype=np.int64)))
+                size = _heap_push(hk, hv, size, cal, m)
     if not found:
         return np.zeros((0, 2), dtype=np.int64)
     count = 1
