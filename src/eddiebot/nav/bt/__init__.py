@@ -1,10 +1,11 @@
 """Behaviour trees for the BT navigator: BehaviorTree.CPP v3/v4 XML with Nav2's nodes.
 
 :mod:`~eddiebot.nav.bt.core` has the tree model (statuses, ports, blackboards, node base
-classes), :mod:`~eddiebot.nav.bt.controls` BT.CPP's and Nav2's control and decorator nodes,
-:mod:`~eddiebot.nav.bt.nodes` Nav2's action and condition nodes, and
-:mod:`~eddiebot.nav.bt.factory` loads XML files into trees, refusing unknown nodes and
-ports with file and line. :mod:`~eddiebot.nav.bt.trees` ships Nav2's default trees.
+classes), :mod:`~eddiebot.nav.bt.controls` registers BT.CPP's and Nav2's control and
+decorator nodes, :mod:`~eddiebot.nav.bt.nodes` Nav2's action, service, selector and
+condition nodes (one module each), and :mod:`~eddiebot.nav.bt.factory` loads XML files into
+trees, refusing unknown nodes and ports with file and line. :mod:`~eddiebot.nav.bt.trees`
+ships Nav2's default trees.
 """
 
 from eddiebot.nav.bt.context import TreeContext
