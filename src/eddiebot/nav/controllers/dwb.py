@@ -202,6 +202,7 @@ class DWBController:
         self.last_scores: dict[str, float] = {}
         # Map-grid critics' cell values of the last cycle ([y, x], cells), for inspection.
         self.grid_values: dict[str, npt.NDArray[np.float64]] = {}
+        self._cycle_values: dict[str, npt.NDArray[np.float64] | None] = {}
 
     def set_plan(self, path: npt.ArrayLike) -> None:
         self._plan.set_plan(as_path(path))
@@ -284,6 +285,7 @@ class DWBController:
         scores: dict[str, npt.NDArray[np.float64]] = {}
         dist_to_goal = math.hypot(goal[0] - p[0], goal[1] - p[1])
         in_goal_window = dist_to_goal <= self.xy_goal_tolerance
+        self._cycle_values.clear()
         for name in self._critics:
             scale = float(getattr(cfg, f"{name}_scale"))
             if name == "BaseObstacle":
@@ -364,7 +366,11 @@ class DWBController:
             plan[-1, 0] += fwd * math.cos(ang)
             plan[-1, 1] += fwd * math.sin(ang)
         if name in ("PathDist", "PathAlign"):
-            vals = critics.path_dist_values(plan, cm.data, origin, cm.resolution)
+            # Both seed from the same plan: one wavefront per cycle serves the two.
+            if "path" not in self._cycle_values:
+                self._cycle_values["path"] = critics.path_dist_values(plan, cm.data, origin,
+                                                                      cm.resolution)
+            vals = self._cycle_values["path"]
         else:
             vals = critics.goal_dist_values(plan, cm.data, origin, cm.resolution)
         if vals is None:  # upstream logs the failed prepare and scores nothing

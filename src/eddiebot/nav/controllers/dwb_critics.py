@@ -97,22 +97,28 @@ def adjust_plan_resolution(plan: npt.NDArray[np.float64], resolution: float
                            ) -> npt.NDArray[np.float64]:
     """``nav_2d_utils::adjustPlanResolution``: fill gaps over two cells with points (its exact
     step count, which leaves gaps of up to about two cells)."""
-    if plan.shape[0] == 0:
+    if plan.shape[0] < 2:
         return plan
-    out = [plan[0]]
-    lx, ly = float(plan[0, 0]), float(plan[0, 1])
-    min_sq = resolution * resolution * 4.0
-    for i in range(1, plan.shape[0]):
-        px, py = float(plan[i, 0]), float(plan[i, 1])
-        sq = (px - lx) ** 2 + (py - ly) ** 2
-        if sq > min_sq:
-            steps = int((math.sqrt(sq) - math.sqrt(min_sq)) / resolution) - 1
-            for j in range(1, steps):
-                out.append(np.array([lx + j * (px - lx) / steps, ly + j * (py - ly) / steps]
-                                    + ([0.0] * (plan.shape[1] - 2))))
-        out.append(plan[i])
-        lx, ly = px, py
-    return np.asarray(out, dtype=np.float64)
+    a, b = plan[:-1], plan[1:]
+    seg = np.hypot(b[:, 0] - a[:, 0], b[:, 1] - a[:, 1])
+    steps = np.where(seg > 2.0 * resolution,
+                     ((seg - 2.0 * resolution) / resolution).astype(np.int64) - 1, 0)
+    extra = np.maximum(steps - 1, 0)  # points j = 1 .. steps-1 between a and b
+    if not extra.any():
+        return plan
+    seg_idx = np.repeat(np.arange(a.shape[0]), extra)
+    j = np.arange(seg_idx.size) - np.repeat(np.cumsum(extra) - extra, extra) + 1
+    frac = j / steps[seg_idx]
+    out = np.zeros((plan.shape[0] + seg_idx.size, plan.shape[1]))
+    ends = np.arange(1, plan.shape[0]) + np.cumsum(extra)  # where plan[1:] land in out
+    out[0] = plan[0]
+    out[ends] = plan[1:]
+    fill = np.ones(out.shape[0], dtype=bool)
+    fill[0] = False
+    fill[ends] = False
+    out[fill, 0] = a[seg_idx, 0] + frac * (b[seg_idx, 0] - a[seg_idx, 0])
+    out[fill, 1] = a[seg_idx, 1] + frac * (b[seg_idx, 1] - a[seg_idx, 1])
+    return out
 
 
 def _plan_cells_on_costmap(plan: npt.NDArray[np.float64], grid: npt.NDArray[np.uint8],
@@ -121,15 +127,17 @@ def _plan_cells_on_costmap(plan: npt.NDArray[np.float64], grid: npt.NDArray[np.u
     """The leading run of plan cells on the costmap and not unknown (``PathDistCritic``):
     points before the run are skipped, the first point after it ends it."""
     h, w = grid.shape
-    cells: list[tuple[int, int]] = []
-    for x, y in plan[:, :2]:
-        mx = math.floor((x - origin[0]) / resolution)
-        my = math.floor((y - origin[1]) / resolution)
-        if 0 <= mx < w and 0 <= my < h and grid[my, mx] != NO_INFORMATION:
-            cells.append((mx, my))
-        elif cells:
-            break
-    return np.asarray(cells, dtype=np.int64).reshape(-1, 2)
+    mx = np.floor((plan[:, 0] - origin[0]) / resolution).astype(np.int64)
+    my = np.floor((plan[:, 1] - origin[1]) / resolution).astype(np.int64)
+    on = (mx >= 0) & (my >= 0) & (mx < w) & (my < h)
+    on[on] = grid[my[on], mx[on]] != NO_INFORMATION
+    idx = np.nonzero(on)[0]
+    if idx.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    first = idx[0]
+    off_after = np.nonzero(~on[first:])[0]
+    last = first + off_after[0] if off_after.size else on.size
+    return np.stack([mx[first:last], my[first:last]], axis=1)
 
 
 def path_dist_values(plan: npt.NDArray[np.float64], grid: npt.NDArray[np.uint8],
@@ -193,6 +201,8 @@ def score_map_grid(traj: npt.NDArray[np.float64], vals: npt.NDArray[np.float64],
     ahead along their heading for the Align critics). ``last`` scores the final pose (every
     pose is still checked when ``stop_on_failure``), ``sum`` adds, ``product`` multiplies the
     scores while the running product is positive."""
+    if aggregation_type.lower() == "last" and not stop_on_failure:
+        traj = traj[:, -1:]  # only the final pose is scored
     th = traj[..., 2]
     xy = np.stack([traj[..., 0] + forward_point_distance * np.cos(th),
                    traj[..., 1] + forward_point_distance * np.sin(th)], axis=-1)

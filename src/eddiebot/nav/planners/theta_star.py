@@ -3,10 +3,10 @@
 A* over the 8-connected grid in which a node, when expanded, takes its grandparent as parent
 if the straight line between them is traversable and cheaper, so paths are chains of
 straight segments instead of grid zig-zags. Upstream's cost model: every cell entered costs
-``w_euc_cost`` · step length + ``w_traversal_cost`` · ``(26 + 0.9·cost)² / 252²``, so free
-space is cheap (0.011 per cell) and unknown space (``allow_unknown``) costs about as much as
-the most expensive known cell (1.03 per grid step, 1.008 on a line) — it is crossed only when
-going round is dearer. Heuristic ``w_heuristic_cost`` · Euclidean distance (cells). The result
+``w_euc_cost`` · step length + ``w_traversal_cost`` · ``(26 + 0.9·cost)² / 252²``; that
+factor is 0.011 for free space, and unknown space (``allow_unknown``) costs about as much as
+the most expensive known cell (1.03 per grid step, 1.008 on a line), so it is crossed only
+when going round is dearer. Heuristic ``w_heuristic_cost`` · Euclidean distance (cells). The result
 is interpolated at the costmap resolution.
 """
 
