@@ -177,6 +177,42 @@ def test_qos_maps_both_ways() -> None:
     assert q[Policy.IgnoreLocal] == Policy.IgnoreLocal.Participant
 
 
+def test_deadline_lifespan_and_liveliness_map_both_ways() -> None:
+    from eddiebot.core.qos import LivelinessPolicy
+    from eddiebot.core.time import Duration
+    from eddiebot.transport.dds.types import merge_publisher_qos
+
+    timed = QoSProfile(depth=3, deadline=Duration(250_000_000), lifespan=Duration(2_000_000_000),
+                       liveliness=LivelinessPolicy.MANUAL_BY_TOPIC,
+                       liveliness_lease_duration=Duration(1_500_000_000))
+    q = dds_qos(timed)
+    assert q[Policy.Deadline] == Policy.Deadline(250_000_000)
+    assert q[Policy.Lifespan] == Policy.Lifespan(2_000_000_000)
+    assert q[Policy.Liveliness] == Policy.Liveliness.ManualByTopic(1_500_000_000)
+    assert qos_from_dds(q) == timed
+    # a reader requests none of them (every writer meets it); lifespan is a writer's
+    r = dds_qos(timed, reader=True)
+    assert (r[Policy.Deadline], r[Policy.Lifespan], r[Policy.Liveliness]) == (None, None, None)
+    # DDS's infinity (what Cyclone reports for an unset policy) reads as "not set"
+    infinite = Qos(Policy.Deadline((1 << 63) - 1), Policy.Lifespan((1 << 63) - 1),
+                   Policy.Liveliness.Automatic((1 << 63) - 1))
+    back = qos_from_dds(infinite)
+    assert (back.deadline, back.lifespan, back.liveliness_lease_duration) == (Duration(),) * 3
+    assert back.liveliness == LivelinessPolicy.AUTOMATIC
+    # one writer for several publishers: the shortest deadline and lease, the longest lifespan
+    other = QoSProfile(depth=3, deadline=Duration(100_000_000), lifespan=Duration(500_000_000),
+                       liveliness=LivelinessPolicy.MANUAL_BY_TOPIC,
+                       liveliness_lease_duration=Duration(3_000_000_000))
+    merged = merge_publisher_qos([timed, other])
+    assert merged.deadline == Duration(100_000_000)
+    assert merged.lifespan == Duration(2_000_000_000)
+    assert merged.liveliness == LivelinessPolicy.MANUAL_BY_TOPIC
+    assert merged.liveliness_lease_duration == Duration(1_500_000_000)
+    plain = merge_publisher_qos([timed, QoSProfile(depth=3)])
+    assert plain.lifespan == Duration() and plain.deadline == Duration(250_000_000)
+    assert plain.liveliness == LivelinessPolicy.AUTOMATIC
+
+
 def test_topic_filters() -> None:
     config = DdsBridgeConfig(allow="^/(odom|cmd_vel|eddie/)", deny="ping")
     assert config.admits("/odom")
@@ -387,6 +423,44 @@ def test_routes_follow_publishers_away(ours: Any, ros_peer: RosPeer, bridge: Pro
     assert _wait(lambda: bool(transport.cache.publishers(f"{PREFIX}/gone"))), bridge.stderr
     writer.__del__()
     assert _wait(lambda: not transport.cache.publishers(f"{PREFIX}/gone")), bridge.stderr
+
+
+def test_deadline_lifespan_and_liveliness_cross_the_bridge(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    """A DDS writer's deadline, lifespan and liveliness show on its endpoint in our graph;
+    our publisher's on the bridge's DDS writer."""
+    from eddiebot.core.qos import LivelinessPolicy
+    from eddiebot.core.time import Duration
+
+    _ctx, node, transport = ours
+    # DDS → ours
+    in_topic = f"{PREFIX}/timed_in"
+    qos = Qos(Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+              Policy.History.KeepLast(4), Policy.Deadline(300_000_000),
+              Policy.Lifespan(1_200_000_000), Policy.Liveliness.ManualByTopic(2_000_000_000),
+              Policy.DataRepresentation(use_cdrv0_representation=True),
+              Policy.Userdata(f"typehash={type_hash('std_msgs/msg/String')};".encode()))
+    writer = DataWriter(ros_peer.participant, ros_peer._topic("rt" + in_topic, _String), qos=qos)
+    assert _wait(lambda: bool(transport.cache.publishers(in_topic))), bridge.stderr
+    [theirs] = transport.cache.publishers(in_topic)
+    profile = theirs.qos_profile
+    assert profile.depth == 4
+    assert profile.deadline == Duration(300_000_000)
+    assert profile.lifespan == Duration(1_200_000_000)
+    assert profile.liveliness == LivelinessPolicy.MANUAL_BY_TOPIC
+    assert profile.liveliness_lease_duration == Duration(2_000_000_000)
+    # ours → DDS
+    out_topic = f"{PREFIX}/timed_out"
+    node.create_publisher(String, out_topic, QoSProfile(
+        depth=2, deadline=Duration(400_000_000), lifespan=Duration(900_000_000),
+        liveliness=LivelinessPolicy.AUTOMATIC, liveliness_lease_duration=Duration(5_000_000_000)))
+    assert _wait(lambda: bool(ros_peer.publications_on("rt" + out_topic))), bridge.stderr
+    [ep] = ros_peer.publications_on("rt" + out_topic)
+    assert ep.qos[Policy.Deadline] == Policy.Deadline(400_000_000)
+    assert ep.qos[Policy.Lifespan] == Policy.Lifespan(900_000_000)
+    assert ep.qos[Policy.Liveliness] == Policy.Liveliness.Automatic(5_000_000_000)
+    assert ep.qos[Policy.History] == Policy.History.KeepLast(2)
+    del writer
 
 
 def test_ros2_client_on_dds_calls_a_service_of_our_graph(

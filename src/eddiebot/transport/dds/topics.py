@@ -83,7 +83,7 @@ def open_from_dds(bridge: DdsBridge, route: Route) -> Live:
                 return
 
     reader = DataReader(bridge.dds_subscriber, bridge.topic(route.topic, route.type_name),
-                        qos=dds_qos(route.qos, bridge.user_data(route.type_name)),
+                        qos=dds_qos(route.qos, bridge.user_data(route.type_name), reader=True),
                         listener=Listener(on_data_available=pump))
     live.readers.append(reader.guid.bytes)
     state["ref"] = reader._ref

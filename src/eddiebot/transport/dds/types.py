@@ -11,7 +11,15 @@ from __future__ import annotations
 import functools
 from typing import Any
 
-from eddiebot.core.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from eddiebot.core.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    LivelinessPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    duration_ns,
+)
+from eddiebot.core.time import Duration
 from eddiebot.msgs import TYPESTORE, normalize_type_name
 from eddiebot.transport.keys import dds_type_name
 
@@ -44,6 +52,8 @@ TOPIC_PREFIX = "rt"
 _MAX_BLOCKING_NS = 1_000_000_000
 #: Samples taken per call from a DDS reader.
 TAKE_BATCH = 64
+#: DDS's infinite duration (``DDS_INFINITY``, also rmw's ``RMW_DURATION_INFINITE``).
+_DDS_INFINITY = (1 << 63) - 1
 #: ``{uint64 guid; int64 seq}``: rmw_cyclonedds's request correlation, after the CDR
 #: encapsulation header of every request and reply.
 REQUEST_HEADER_SIZE = 16
@@ -127,9 +137,16 @@ def cyclone_config(network: str = "loopback") -> str:
 
 
 # -- QoS ----------------------------------------------------------------------------------
-def dds_qos(qos: QoSProfile, user_data: bytes | None = None) -> Any:
+def dds_qos(qos: QoSProfile, user_data: bytes | None = None, *, reader: bool = False) -> Any:
     """A ``cyclonedds.qos.Qos`` for an endpoint with ROS QoS ``qos`` (XCDR1 data, as ROS 2;
-    local endpoints of the same participant ignored, so the bridge never hears itself)."""
+    local endpoints of the same participant ignored, so the bridge never hears itself).
+
+    Deadline, lifespan and liveliness map as rmw_cyclonedds maps them (an unset duration is
+    DDS's infinity, ``SYSTEM_DEFAULT`` liveliness is left to Cyclone, i.e. automatic). A
+    ``reader`` requests neither deadline nor liveliness (the weakest request, which every
+    writer meets: the bridge passes on whatever its writers offer) and has no lifespan,
+    a writer-only policy.
+    """
     from cyclonedds.qos import Policy, Qos
 
     policies: list[Any] = [
@@ -141,20 +158,44 @@ def dds_qos(qos: QoSProfile, user_data: bytes | None = None) -> Any:
         Policy.DataRepresentation(use_cdrv0_representation=True),
         Policy.IgnoreLocal.Participant,
     ]
+    if not reader:
+        deadline, lifespan = duration_ns(qos.deadline), duration_ns(qos.lifespan)
+        lease = duration_ns(qos.liveliness_lease_duration) or _DDS_INFINITY
+        if deadline is not None:
+            policies.append(Policy.Deadline(deadline))
+        if lifespan is not None:
+            policies.append(Policy.Lifespan(lifespan))
+        if qos.liveliness == LivelinessPolicy.MANUAL_BY_TOPIC:
+            policies.append(Policy.Liveliness.ManualByTopic(lease))
+        elif qos.liveliness == LivelinessPolicy.AUTOMATIC or lease != _DDS_INFINITY:
+            policies.append(Policy.Liveliness.Automatic(lease))
     if user_data:
         policies.append(Policy.Userdata(user_data))
     return Qos(*policies)
 
 
+def _duration_from_dds(ns: Any) -> Duration:
+    """A DDS duration (ns; DDS's infinity or a negative value: not set) as a QoS duration."""
+    value = int(ns or 0)
+    return Duration(nanoseconds=value) if 0 < value < _DDS_INFINITY else Duration()
+
+
 def qos_from_dds(qos: Any) -> QoSProfile:
-    """The ROS QoS of a discovered DDS endpoint (its ``Qos``); DDS defaults where unset."""
+    """The ROS QoS of a discovered DDS endpoint (its ``Qos``); DDS defaults where unset.
+    Liveliness ``MANUAL_BY_PARTICIPANT``, which ROS 2 does not offer, reads as automatic."""
     from cyclonedds.qos import Policy
 
-    rel = qos[Policy.Reliability] if qos is not None else None
-    dur = qos[Policy.Durability] if qos is not None else None
-    hist = qos[Policy.History] if qos is not None else None
+    def get(policy: Any) -> Any:
+        return qos[policy] if qos is not None else None
+
+    rel, dur, hist = get(Policy.Reliability), get(Policy.Durability), get(Policy.History)
+    deadline, lifespan, live = get(Policy.Deadline), get(Policy.Lifespan), get(Policy.Liveliness)
     keep_all = hist == Policy.History.KeepAll
     depth = int(getattr(hist, "depth", 1) or 1)
+    liveliness = LivelinessPolicy.SYSTEM_DEFAULT
+    if live is not None:
+        liveliness = LivelinessPolicy.MANUAL_BY_TOPIC \
+            if isinstance(live, Policy.Liveliness.ManualByTopic) else LivelinessPolicy.AUTOMATIC
     return QoSProfile(
         depth=depth if not keep_all else max(depth, 1),
         reliability=ReliabilityPolicy.BEST_EFFORT if rel == Policy.Reliability.BestEffort
@@ -162,6 +203,10 @@ def qos_from_dds(qos: Any) -> QoSProfile:
         durability=DurabilityPolicy.TRANSIENT_LOCAL
         if dur == Policy.Durability.TransientLocal else DurabilityPolicy.VOLATILE,
         history=HistoryPolicy.KEEP_ALL if keep_all else HistoryPolicy.KEEP_LAST,
+        deadline=_duration_from_dds(getattr(deadline, "deadline", 0)),
+        lifespan=_duration_from_dds(getattr(lifespan, "lifespan", 0)),
+        liveliness=liveliness,
+        liveliness_lease_duration=_duration_from_dds(getattr(live, "lease_duration", 0)),
     )
 
 
@@ -170,9 +215,24 @@ def merge_publisher_qos(profiles: list[QoSProfile]) -> QoSProfile:
     if any is, best-effort if any is (a reliable writer fed by a best-effort source would
     still block), the deepest history, keep-all if any is (a keep-all reliable writer
     waits for its readers, which slows the publisher down through Zenoh instead of
-    overwriting samples no reader has yet)."""
+    overwriting samples no reader has yet).
+
+    Deadline: the shortest one set (their union publishes at least that often); lifespan:
+    the longest, and none if any publisher has none (no sample is dropped earlier than its
+    publisher says); liveliness: manual by topic only if every publisher is, with the
+    shortest lease set. One publisher's QoS is passed on as it is."""
     if not profiles:
         return QoSProfile()
+    if len(set(profiles)) == 1:
+        return profiles[0]
+
+    def shortest(values: list[int | None]) -> Duration:
+        set_ = [v for v in values if v is not None]
+        return Duration(nanoseconds=min(set_)) if set_ else Duration()
+
+    lifespans = [duration_ns(p.lifespan) for p in profiles]
+    manual = all(p.liveliness == LivelinessPolicy.MANUAL_BY_TOPIC for p in profiles)
+    any_live = any(p.liveliness != LivelinessPolicy.SYSTEM_DEFAULT for p in profiles)
     return QoSProfile(
         history=HistoryPolicy.KEEP_ALL
         if any(p.history == HistoryPolicy.KEEP_ALL for p in profiles) else HistoryPolicy.KEEP_LAST,
@@ -182,6 +242,13 @@ def merge_publisher_qos(profiles: list[QoSProfile]) -> QoSProfile:
         else ReliabilityPolicy.RELIABLE,
         durability=DurabilityPolicy.TRANSIENT_LOCAL
         if any(p.transient_local for p in profiles) else DurabilityPolicy.VOLATILE,
+        deadline=shortest([duration_ns(p.deadline) for p in profiles]),
+        lifespan=Duration() if None in lifespans
+        else Duration(nanoseconds=max(v for v in lifespans if v is not None)),
+        liveliness=LivelinessPolicy.MANUAL_BY_TOPIC if manual
+        else LivelinessPolicy.AUTOMATIC if any_live else LivelinessPolicy.SYSTEM_DEFAULT,
+        liveliness_lease_duration=shortest(
+            [duration_ns(p.liveliness_lease_duration) for p in profiles]),
     )
 
 
