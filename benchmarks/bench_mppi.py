@@ -11,11 +11,13 @@ and each stage of the cycle.
 Goals (``goals``): the office world's ground-truth footprint map (0.05 m) as a static
 costmap with Eddie's local inflation (config/nav2.yaml: robot_radius 0.23,
 inflation_radius 0.9, cost_scaling_factor 3.0); seeded goals as bench_nav_worlds.py draws
-them, each from where the robot stopped; NavFn plans each goal; the controller drives a
+them, one after another; NavFn plans each leg; the controller drives a
 unicycle integrated at 20 Hz (commands taken as the next velocity). RPP and DWB are
 Eddie's tuning from config/nav2.yaml, MPPI the Jazzy sample section as is. A goal is
 reached when the goal checker (0.25 m, 0.25 rad) says so within 3 × the plan's length at
-0.2 m/s + 20 s; a collision is the robot's disc (0.2245 m) overlapping an occupied cell.
+0.2 m/s + 20 s; a collision is the robot's disc (0.2245 m) overlapping an occupied cell
+(the move is refused). Each leg starts at the previous goal's pose, the same for every
+controller; no recoveries (the navigator's backup, spin, costmap clearing) are run.
 
     .venv/bin/python benchmarks/bench_mppi.py                       # both parts
     .venv/bin/python benchmarks/bench_mppi.py --parts cycle --repeat 41
@@ -209,11 +211,12 @@ def goals(n: int, seed: int, names: list[str]) -> tuple[list[dict[str, Any]], li
     for name, ctrl in controllers().items():
         if name not in names:
             continue
-        pose = np.array(start, dtype=float)
         recs = []
         for i, g in enumerate(targets):
-            rec = drive(ctrl, cm, space, pose, g)
-            pose = np.asarray(rec.pop("pose"), dtype=float)
+            # every controller drives the same legs: each from the previous goal pose
+            leg_start = np.array(start if i == 0 else targets[i - 1], dtype=float)
+            rec = drive(ctrl, cm, space, leg_start, g)
+            rec["final_error_m"] = float(np.hypot(*(np.asarray(rec.pop("pose"))[:2] - g[:2])))
             cpu = rec.pop("cpu_ms", [])
             rec.update(controller=name, goal=i, cpu_median_ms=statistics.median(cpu) if cpu else None)
             recs.append(rec)
