@@ -8,17 +8,13 @@ Zenoh transport) and a ROS 2-like DDS participant (Cyclone DDS: ``rt/`` names,
 
 from __future__ import annotations
 
-import contextlib
-import fcntl
 import os
-import random
 import signal
 import struct
 import sys
-import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -29,12 +25,9 @@ cyclonedds = pytest.importorskip("cyclonedds")
 from cyclonedds._clayer import ddspy_take, ddspy_write  # noqa: E402
 from cyclonedds.builtin import (  # noqa: E402
     BuiltinDataReader,
-    BuiltinTopicDcpsParticipant,
-    BuiltinTopicDcpsPublication,
     BuiltinTopicDcpsSubscription,
 )
-from cyclonedds.core import InstanceState, SampleState, ViewState  # noqa: E402
-from cyclonedds.domain import Domain, DomainParticipant  # noqa: E402
+from cyclonedds.core import InstanceState  # noqa: E402
 from cyclonedds.idl import make_idl_struct  # noqa: E402
 from cyclonedds.idl import types as idl  # noqa: E402
 from cyclonedds.pub import DataWriter  # noqa: E402
@@ -42,6 +35,12 @@ from cyclonedds.qos import Policy, Qos  # noqa: E402
 from cyclonedds.sub import DataReader  # noqa: E402
 from cyclonedds.topic import Topic  # noqa: E402
 
+from _support.dds_peer import ANY as _ANY  # noqa: E402
+from _support.dds_peer import RosPeer  # noqa: E402
+from _support.dds_peer import String_ as _String  # noqa: E402
+from _support.dds_peer import Twist_ as _Twist  # noqa: E402
+from _support.dds_peer import private_dds_domain as _private_dds_domain  # noqa: E402
+from _support.dds_peer import wait as _wait  # noqa: E402
 from eddiebot.core import Context, Node, QoSProfile, SingleThreadedExecutor  # noqa: E402
 from eddiebot.core.qos import DurabilityPolicy  # noqa: E402
 from eddiebot.msgs import TYPESTORE, serialize, type_hash  # noqa: E402
@@ -60,84 +59,6 @@ from eddiebot.transport.dds import (  # noqa: E402
 
 #: Only the topics of these tests are bridged (other tests share the router).
 PREFIX = "/ddstest"
-_ANY = SampleState.Any | ViewState.Any | InstanceState.Any
-
-# The types as a ROS 2 node declares them on DDS (written by hand, not by the bridge).
-_String = make_idl_struct("String_", "std_msgs::msg::dds_::String_", {"data": str})
-_Vector3 = make_idl_struct("Vector3_", "geometry_msgs::msg::dds_::Vector3_",
-                           {"x": idl.float64, "y": idl.float64, "z": idl.float64})
-_Twist = make_idl_struct("Twist_", "geometry_msgs::msg::dds_::Twist_",
-                         {"linear": _Vector3, "angular": _Vector3})
-
-
-def _wait(cond: Callable[[], bool], timeout: float = 15.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if cond():
-            return True
-        time.sleep(0.02)
-    return False
-
-
-class RosPeer:
-    """A DDS participant behaving as a ROS 2 node on rmw_cyclonedds (raw CDR in and out)."""
-
-    def __init__(self, domain_id: int) -> None:
-        self.domain = Domain(domain_id, cyclone_config("loopback"))
-        self.participant = DomainParticipant(domain_id, qos=Qos(Policy.Userdata(b"enclave=/;")))
-        self.publications = BuiltinDataReader(self.participant, BuiltinTopicDcpsPublication)
-        self.participants = BuiltinDataReader(self.participant, BuiltinTopicDcpsParticipant)
-        self._topics: dict[str, Any] = {}
-        self._known: dict[str, Any] = {}
-
-    def _topic(self, name: str, cls: Any) -> Any:
-        if name not in self._topics:
-            self._topics[name] = Topic(self.participant, name, cls)
-        return self._topics[name]
-
-    @staticmethod
-    def qos(ros_type: str, *, latched: bool = False, depth: int = 10) -> Qos:
-        return Qos(
-            Policy.Reliability.Reliable(max_blocking_time=100_000_000),
-            Policy.Durability.TransientLocal if latched else Policy.Durability.Volatile,
-            Policy.History.KeepLast(depth),
-            Policy.DataRepresentation(use_cdrv0_representation=True),
-            Policy.Userdata(f"typehash={type_hash(ros_type)};".encode()),
-        )
-
-    def writer(self, topic: str, cls: Any, ros_type: str, **kw: Any) -> Any:
-        return DataWriter(self.participant, self._topic("rt" + topic, cls),
-                          qos=self.qos(ros_type, **kw))
-
-    def reader(self, topic: str, cls: Any, ros_type: str, **kw: Any) -> Any:
-        return DataReader(self.participant, self._topic("rt" + topic, cls),
-                          qos=self.qos(ros_type, **kw))
-
-    @staticmethod
-    def pad(cdr: bytes) -> bytes:
-        return cdr.ljust(-(-len(cdr) // 4) * 4, b"\0")
-
-    @staticmethod
-    def write(writer: Any, msg: Any) -> None:
-        assert ddspy_write(writer._ref, RosPeer.pad(serialize(msg))) == 0
-
-    @staticmethod
-    def take(reader: Any, ros_type: str) -> list[Any]:
-        got = ddspy_take(reader._ref, _ANY, 100)
-        return [TYPESTORE.deserialize_cdr(bytes(d), ros_type) for d, info in got
-                if info.valid_data]
-
-    def publications_on(self, dds_topic: str) -> list[Any]:
-        """Alive publications of other participants on ``dds_topic`` (DCPSPublication)."""
-        for s in self.publications.take(N=200):
-            key = str(s.key)
-            if s.sample_info.instance_state == InstanceState.Alive:
-                self._known[key] = s
-            else:
-                self._known.pop(key, None)
-        own = str(self.participant.guid)
-        return [s for s in self._known.values()
-                if s.topic_name == dds_topic and str(s.participant_key) != own]
 
 
 # -- pure parts -----------------------------------------------------------------------------
@@ -224,27 +145,6 @@ def test_topic_filters() -> None:
 
 
 # -- through the bridge process ------------------------------------------------------------
-@contextlib.contextmanager
-def _private_dds_domain() -> Iterator[int]:
-    """A DDS domain id no other test process on this machine holds (a lock file per id,
-    held while the block runs)."""
-    ids = list(range(100, 230))
-    random.shuffle(ids)
-    for domain in ids:
-        path = os.path.join(tempfile.gettempdir(), f"eddie-dds-domain-{domain}.lock")
-        with open(path, "w") as lock:
-            try:
-                fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
-                continue
-            try:
-                yield domain
-            finally:
-                fcntl.flock(lock, fcntl.LOCK_UN)
-            return
-    pytest.skip("no free DDS domain id")
-
-
 @pytest.fixture(scope="module")
 def zenoh_env() -> Iterator[dict[str, str]]:
     """This module's own Zenoh router: no other test's endpoints reach the bridge."""
@@ -886,3 +786,134 @@ def test_our_action_client_drives_an_action_server_on_dds(
     assert result is not None and int(result.status) == 4
     assert len(goals) == 1 and result.result.total_elapsed_time.sec == goals[0][0]
     assert left == [2, 1, 0]
+
+
+# -- the bond across ------------------------------------------------------------------------
+_Header = make_idl_struct("Header_", "std_msgs::msg::dds_::Header_", {
+    "stamp": make_idl_struct("Time_", "builtin_interfaces::msg::dds_::Time_",
+                             {"sec": idl.int32, "nanosec": idl.uint32}),
+    "frame_id": str})
+_Status = make_idl_struct("Status_", "bond::msg::dds_::Status_", {
+    "header": _Header, "id": str, "instance_id": str, "active": bool,
+    "heartbeat_timeout": idl.float32, "heartbeat_period": idl.float32})
+
+
+class _DdsLifecycleNode:
+    """A lifecycle node on DDS as rclcpp_lifecycle and bondcpp make one: ``get_state`` and
+    ``change_state`` served the rmw_cyclonedds way, and, while active, ``bond/msg/Status``
+    heartbeats on ``bond`` every 0.1 s (id: its name, an instance id of its own, bondcpp's
+    4 s timeout) until :attr:`beating` is cleared."""
+
+    def __init__(self, peer: RosPeer, namespace: str, name: str) -> None:
+        from eddiebot.transport.dds.types import service_dds_type
+
+        self.name, self.state, self.instance = name, 1, os.urandom(8).hex()
+        self.beating = threading.Event()
+        self.beating.set()
+        self.seen: list[Any] = []  # the manager's heartbeats, as bondcpp's sister sees them
+        qos = Qos(Policy.Reliability.Reliable(max_blocking_time=100_000_000),
+                  Policy.History.KeepLast(10),
+                  Policy.DataRepresentation(use_cdrv0_representation=True))
+        self.servers = {}
+        base = f"{namespace}/{name}".lstrip("/")
+        for srv, type_name in (("get_state", "lifecycle_msgs/srv/GetState"),
+                               ("change_state", "lifecycle_msgs/srv/ChangeState")):
+            req = Topic(peer.participant, f"rq/{base}/{srv}Request",
+                        service_dds_type(type_name + "_Request"))
+            res = Topic(peer.participant, f"rr/{base}/{srv}Reply",
+                        service_dds_type(type_name + "_Response"))
+            self.servers[srv] = (DataReader(peer.participant, req, qos=qos),
+                                 DataWriter(peer.participant, res, qos=qos), type_name)
+        self.bond_writer = peer.writer(f"{namespace}/bond", _Status, "bond/msg/Status", depth=5)
+        self.bond_reader = peer.reader(f"{namespace}/bond", _Status, "bond/msg/Status", depth=100)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _serve(self) -> None:
+        from eddiebot.msgs.lifecycle_msgs import ChangeState, GetState, State
+
+        labels = {1: "unconfigured", 2: "inactive", 3: "active"}
+        goes = {(1, 1): 2, (2, 3): 3, (3, 4): 2, (2, 2): 1}  # (state, transition) → state
+        for srv, (reader, writer, type_name) in self.servers.items():
+            for data, info in ddspy_take(reader._ref, _ANY, 10):
+                raw = bytes(data)
+                if not info.valid_data:
+                    continue
+                request = TYPESTORE.deserialize_cdr(raw[:4] + raw[20:], type_name + "_Request")
+                if srv == "get_state":
+                    response: Any = GetState.Response(
+                        current_state=State(id=self.state, label=labels[self.state]))
+                else:
+                    after = goes.get((self.state, int(request.transition.id)))
+                    response = ChangeState.Response(success=after is not None)
+                    self.state = after or self.state
+                body = serialize(response, type_name + "_Response")
+                ddspy_write(writer._ref, RosPeer.pad(body[:4] + raw[4:20] + body[4:]))
+
+    def _run(self) -> None:
+        from eddiebot.msgs.bond import Status
+
+        next_beat = 0.0
+        while not self._stop.is_set():
+            self._serve()
+            self.seen.extend(m for m in RosPeer.take(self.bond_reader, "bond/msg/Status")
+                             if m.instance_id != self.instance)
+            if self.state == 3 and self.beating.is_set() and time.monotonic() >= next_beat:
+                next_beat = time.monotonic() + 0.1
+                RosPeer.write(self.bond_writer, Status(
+                    id=self.name, instance_id=self.instance, active=True,
+                    heartbeat_timeout=4.0, heartbeat_period=0.1))
+            time.sleep(0.005)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(2)
+
+
+def test_our_lifecycle_manager_keeps_a_bond_with_a_dds_node_while_it_beats(
+        ours: Any, ros_peer: RosPeer, bridge: Proc) -> None:
+    """bondcpp's protocol across the bridge: our manager brings a DDS lifecycle node up
+    through its services, keeps the bond while ``bond/msg/Status`` heartbeats arrive from
+    DDS, sees its own heartbeats reach the DDS side, and breaks the bond (taking the system
+    down) once the DDS node stops beating for the bond timeout."""
+    from eddiebot.core import MultiThreadedExecutor
+    from eddiebot.core.lifecycle import LifecycleManager
+
+    ctx, _node, transport = ours
+    dds_node = _DdsLifecycleNode(ros_peer, PREFIX, "dds_camera")
+    manager = LifecycleManager(
+        "lifecycle_manager", namespace=PREFIX, context=ctx, parameter_overrides={
+            "node_names": ["dds_camera"], "bond_timeout": 1.0,
+            "attempt_respawn_reconnection": False})
+    ex = MultiThreadedExecutor(context=ctx)
+    ex.add_node(manager)
+    spinner = threading.Thread(target=ex.spin, daemon=True)
+    spinner.start()
+    try:
+        # the node's services and the DDS side of /ddstest/bond are on our graph
+        assert _wait(lambda: bool(transport.cache.services(f"{PREFIX}/dds_camera/change_state"))
+                     and bool(transport.cache.publishers(f"{PREFIX}/bond"))), bridge.stderr
+        assert manager.startup(), (manager.last_error, bridge.stderr)
+        assert dds_node.state == 3 and manager.system_active
+        # 3 bond timeouts of heartbeats from DDS: the bond holds
+        end = time.monotonic() + 3.0
+        while time.monotonic() < end:
+            assert manager.system_active, (manager.last_error, manager.dead_nodes)
+            time.sleep(0.05)
+        assert manager.dead_nodes == []
+        # the manager's side of the bond reached the DDS node: its id, another instance
+        ours_beats = [m for m in dds_node.seen if m.id == "dds_camera" and m.active]
+        assert len(ours_beats) >= 10, len(ours_beats)
+        assert {m.instance_id for m in ours_beats} == {ours_beats[0].instance_id}
+        assert ours_beats[0].heartbeat_timeout == 1.0
+        # the DDS node stops beating: the bond breaks and the manager takes the system down
+        dds_node.beating.clear()
+        assert _wait(lambda: not manager.system_active, 10.0), bridge.stderr
+        assert manager.dead_nodes == ["dds_camera"]
+        assert manager.last_error == "bond with dds_camera timed out"
+    finally:
+        ex.shutdown()
+        spinner.join(2)
+        manager.destroy_node()
+        dds_node.close()

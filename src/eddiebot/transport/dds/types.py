@@ -330,8 +330,16 @@ def service_dds_type(ros_type: str) -> Any:
 
 
 def known(ros_type: str) -> bool:
+    """Whether the bridge can carry ``ros_type``: a type we ship, or one an interface file
+    on the search path (``EDDIE_INTERFACE_PATH``, ``AMENT_PREFIX_PATH``) describes (loaded
+    on first sight; a miss is remembered until the search path changes)."""
+    from eddiebot.msgs import load_type
+
     try:
-        return normalize_type_name(ros_type) in TYPESTORE.fielddefs
+        name = normalize_type_name(ros_type)
+        if name not in TYPESTORE.fielddefs:
+            load_type(name)
+        return name in TYPESTORE.fielddefs
     except Exception:
         return False
 
