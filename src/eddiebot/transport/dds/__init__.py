@@ -5,8 +5,10 @@
 
 - topics (:mod:`.topics`) as ROS 2 puts them on DDS (:mod:`.types`): ``/odom`` is ``rt/odom``
   of type ``nav_msgs::msg::dds_::Odometry_``; payloads pass as raw CDR, never re-serialized;
-  QoS (reliability, durability, history, depth) mapped both ways; endpoints carry
-  ``typehash=RIHS01_<hex>;`` and the participant ``enclave=/;`` in USER_DATA, as Jazzy does;
+  QoS (reliability, durability, history, depth, deadline, lifespan, liveliness and its
+  lease) mapped both ways; endpoints carry ``typehash=RIHS01_<hex>;`` and the participant
+  ``enclave=/;`` in USER_DATA, as Jazzy does; a type we do not ship is bridged when an
+  interface file on ``EDDIE_INTERFACE_PATH`` / ``AMENT_PREFIX_PATH`` describes it;
 - services (:mod:`.services`) as ``rq/<name>Request`` / ``rr/<name>Reply`` with
   rmw_cyclonedds's ``{uint64 guid; int64 seq}`` request header, both ways: ours served to
   DDS clients, servers on DDS called by our clients. A server on Fast DDS, which correlates

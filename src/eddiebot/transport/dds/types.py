@@ -302,8 +302,8 @@ def idl_type(ros_type: str) -> Any:
 def dds_type(ros_type: str) -> Any:
     """:func:`idl_type`, its type information computed. Cyclone normalizes every sample
     against its type as it is written and received (bools to 0/1, lengths checked), so a
-    type that only bears the right name could not carry the data: a type rosbags cannot
-    describe is not bridged."""
+    type that only bears the right name could not carry the data: a type neither shipped
+    nor described by an interface file on the search path (:func:`known`) is not bridged."""
     cls = idl_type(ros_type)
     cls.__idl__.populate()
     cls.__idl__.fill_type_data()
