@@ -6,8 +6,9 @@ straight segments instead of grid zig-zags. Upstream's cost model: every cell en
 ``w_euc_cost`` · step length + ``w_traversal_cost`` · ``(26 + 0.9·cost)² / 252²``; that
 factor is 0.011 for free space, and unknown space (``allow_unknown``) costs about as much as
 the most expensive known cell (1.03 per grid step, 1.008 on a line), so it is crossed only
-when going round is dearer. Heuristic ``w_heuristic_cost`` · Euclidean distance (cells). The result
-is interpolated at the costmap resolution.
+when going round is dearer. Heuristic ``min(w_euc_cost, 1)`` · Euclidean distance (cells), as
+upstream derives it (its documented ``w_heuristic_cost`` is accepted and, as upstream, not
+read). The result is interpolated at the costmap resolution.
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ class ThetaStarConfig:
     how_many_corners: int = 8
     w_euc_cost: float = 1.0
     w_traversal_cost: float = 2.0
+    #: accepted because Nav2's README lists it; upstream's code does not read it either
     w_heuristic_cost: float = 1.0
     use_final_approach_orientation: bool = False
     allow_unknown: bool = True
@@ -313,7 +315,7 @@ class ThetaStarPlanner:
         limit = self.max_expansions or costmap.size_x * costmap.size_y + 1
         cells = theta_star_search(
             costmap.data, cs[0], cs[1], cg[0], cg[1], self.config.w_euc_cost,
-            self.config.w_traversal_cost, self.config.w_heuristic_cost,
+            self.config.w_traversal_cost, min(self.config.w_euc_cost, 1.0),
             self.config.how_many_corners, au, limit,
         )
         if cells.shape[0] == 1 and cells[0, 0] < 0:
