@@ -10,8 +10,8 @@ sees 57°). With no frontier left, or after ``time_limit``, the robot is sent ba
 it started when ``return_to_init``, through ``navigate_to_pose`` (via a pose facing the start
 when the map does not know the start's floor as free); a failed goal home is tried again,
 up to three attempts, each after a recovery (both costmaps cleared through
-``clear_entirely_*``, the behaviour server's ``backup``, a 5 s wait), and the last failure's
-reason is kept (`home_failure`). `stop` cancels everything at once and never sends the
+``clear_entirely_*``, the behaviour server's ``backup``, a 5 s wait) and by way of the point
+of its own path 1.5 m back, and the last failure's reason is kept (`home_failure`). `stop` cancels everything at once and never sends the
 robot home (Ctrl-C).
 
 Where the camera has looked from, and which way, is remembered (`looks`): the Kinect's
@@ -69,6 +69,8 @@ _BACKUP_DISTANCE = 0.30
 _BACKUP_SPEED = 0.15
 #: ... and then waits this long (s, node clock) before the next attempt.
 _RECOVERY_WAIT_S = 5.0
+#: Attempts after the first go first to the point of the driven path this far back (m).
+_PATH_BACK = 1.5
 #: A start whose floor the map does not know as free is approached from this far, facing it.
 _STAGING_DISTANCE = 1.2
 
@@ -410,6 +412,9 @@ class ExploreNode(Node):
         assert self.initial_pose is not None
         self._home_attempts += 1
         goals: list[tuple[float, float, float]] = []
+        back = self._path_back() if self._home_attempts > 1 else None
+        if back is not None:  # away from what stopped the last attempt, where it has driven
+            goals.append(back)
         staging = self._staging_pose()
         if staging is not None:
             goals.append(staging)
@@ -487,6 +492,16 @@ class ExploreNode(Node):
             self._send(self._backup, goal, done)
         else:
             done(None)
+
+    def _path_back(self) -> tuple[float, float, float] | None:
+        """The point of the robot's own path ``_PATH_BACK`` m (along it) before where it
+        is now, facing the way the robot came; None on a shorter path."""
+        travelled = 0.0
+        for (x0, y0, _), (x1, y1, _) in zip(self.path[::-1], self.path[-2::-1], strict=False):
+            travelled += math.hypot(x1 - x0, y1 - y0)
+            if travelled >= _PATH_BACK:
+                return x1, y1, math.atan2(y1 - y0, x1 - x0)
+        return None
 
     def _staging_pose(self) -> tuple[float, float, float] | None:
         """A reachable pose ``_STAGING_DISTANCE`` m from the start facing it, when the map
