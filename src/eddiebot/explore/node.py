@@ -34,14 +34,7 @@ from eddiebot.core.node import Node
 from eddiebot.core.qos import qos_profile_latched
 from eddiebot.core.tf import Buffer, TransformException, TransformListener
 from eddiebot.explore.config import ExploreConfig
-from eddiebot.explore.frontiers import (
-    Frontier,
-    FrontierSearch,
-    information_gain,
-    looked_mask,
-    mark_swept,
-    search_frontiers,
-)
+from eddiebot.explore.frontiers import Frontier, FrontierSearch, mark_swept, search_frontiers
 from eddiebot.explore.tracking import Blacklist, FrontierTracker, ProgressMonitor, choose_frontier
 from eddiebot.geometry import yaw_to_quaternion
 from eddiebot.maps import OccupancyMap, map_from_msg
@@ -57,8 +50,6 @@ _IDLE_VISITS = 3
 #: The look memory keeps a pose every this many metres or radians.
 _LOOK_STEP = 0.1
 _LOOK_TURN = 0.15
-#: A goal whose frontier's viewpoint moved is kept while it shows this share of the new one's gain.
-_KEEP_SHARE = 0.5
 #: After an arrival the next plan waits for a map made since, at most this long (s).
 _MAP_WAIT_S = 10.0
 #: Attempts at getting home (each after a recovery but the first) before giving up.
@@ -320,12 +311,6 @@ class ExploreNode(Node):
         if tid == self._target and self._goal_handle is not None:
             old, new = self.goals[-1].viewpoint, self._goal_for(frontier, tid)
             if math.hypot(old[0] - new[0], old[1] - new[1]) < _RESEND_DISTANCE:
-                return
-            # the viewpoint moved: keep driving to the old one while it still shows a fair
-            # share of what the new one would (the robot does not dither between spots)
-            kept = information_gain(swept, old, self.config, looked_mask(
-                swept, np.asarray(self.looks, dtype=np.float64), self.config))
-            if kept >= max(self.config.min_gain, _KEEP_SHARE * frontier.gain):
                 return
         self._go_to(frontier, tid, now)
 
