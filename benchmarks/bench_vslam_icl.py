@@ -7,12 +7,13 @@ listed as TUM folders by ``tests/vslam/icl_data.py`` (nothing copied). Runs:
 - ``gt5``: frames 0-4 against their ground truth;
 - ``full``: frames 0-210 against Open3D's estimate (default parameters);
 - ``fb``: forward then backward (every return frame an exact revisit), every frame a node;
+- ``fb_icp``: ``fb`` with ICP odometry (``Reg/Strategy 1``): words and loop closures must stay;
 - ``gap``: frames 101-149 removed (a 0.86 m / 37° jump): odometry lost, re-seeded, a new map;
 - ``gap_return`` / ``gap_return_nodes``: the gap, then back to frame 0 through the frames the
   gap skipped (the return revisits the first map: a loop closure should merge the maps), with
   default update thresholds / every frame a node.
 
-    .venv/bin/python benchmarks/bench_vslam_icl.py [--runs gt5 full fb gap gap_return ...]
+    .venv/bin/python benchmarks/bench_vslam_icl.py [--runs gt5 full fb fb_icp gap gap_return ...]
         [--work DIR]  (where the TUM folders and outputs go; default a temporary folder)
 
 Writes ``benchmarks/results/vslam_icl.json`` (the reports, the commands, the machine).
@@ -36,6 +37,8 @@ from eddiebot.vslam.tum import write_tum_trajectory
 
 ROOT = Path(__file__).resolve().parents[1]
 EVERY_FRAME = {"RGBD/LinearUpdate": "0", "RGBD/AngularUpdate": "0"}
+#: ICP odometry (and ICP-refined loop closures): no visual features in the odometry
+ICP_ODOMETRY = {"Reg/Strategy": "1", "Icp/PointToPlane": "true", "Icp/DownsamplingStep": "4"}
 
 
 def _icl() -> Any:
@@ -58,6 +61,7 @@ def _runs(icl: Any) -> dict[str, tuple[list[int], dict[str, str], str]]:
         "gt5": (list(range(5)), {}, "ground truth of frames 0-4"),
         "full": (fwd, {}, o3d),
         "fb": (icl.forward_backward(1), EVERY_FRAME, o3d),
+        "fb_icp": (icl.forward_backward(1), {**EVERY_FRAME, **ICP_ODOMETRY}, o3d),
         "gap": (gap, {}, o3d),
         "gap_return": (gap + back, {}, o3d),
         "gap_return_nodes": (gap + back, EVERY_FRAME, o3d),
@@ -100,7 +104,8 @@ def main() -> int:
               "resets": r["report"]["odometry_resets"], "merges": r["report"]["map_merges"],
               "maps": r["report"]["maps"], "ate_cm": 100 * r["report"]["slam_ate_m"],
               "key_ate_cm": 100 * r["report"]["keyframe_ate_m"],
-              "odom_ate_cm": 100 * r["report"]["odom_ate_m"]} for r in rows]
+              "odom_ate_cm": 100 * r["report"]["odom_ate_m"],
+              "words": r["report"]["words"], "node_kb": r["report"]["node_kb"]} for r in rows]
     print_table(table, list(table[0]))
     path = write_json(args.out, {
         "machine": machine(),

@@ -6,6 +6,7 @@ guess, then ICP on the nodes' depth (as upstream's `Memory::computeTransform`)."
 import sqlite3
 
 import numpy as np
+from scipy.spatial import cKDTree
 from vslam_synthetic import frame, kinect_camera, planar_pose
 
 from eddiebot.vslam.database import SessionDatabase
@@ -92,8 +93,19 @@ def test_loop_closure_registration_with_reg_strategy_1_is_refined_by_icp():
                        se3_inverse(verified.link.transform), slam._icp)
     assert icp.transform is not None
     np.testing.assert_allclose(se3_inverse(verified.link.transform), icp.transform, atol=1e-3)
-    np.testing.assert_allclose(verified.link.information, np.linalg.inv(icp.covariance),
-                               rtol=1e-6)
+    # covariance as upstream's RegistrationIcp: 2.1981 · median squared correspondence
+    # distance / 10 on every axis, a tenth of that on the rotations
+    t = icp.transform
+    source = make_scan(b.depth(), b.camera, slam._icp)
+    target = make_scan(a.depth(), a.camera, slam._icp)
+    d, _ = cKDTree(target.points).query(source.points @ t[:3, :3].T + t[:3, 3],
+                                        distance_upper_bound=0.1)
+    var = 2.1981 * np.median(d[np.isfinite(d)] ** 2) / 10
+    assert 1e-8 < var < 1e-3  # voxel-sampled clouds: correspondences a few cm apart
+    np.testing.assert_allclose(np.diag(verified.link.information),
+                               [1 / var] * 3 + [10 / var] * 3, rtol=0.05)
+    assert np.count_nonzero(verified.link.information - np.diag(np.diag(
+        verified.link.information))) == 0
     t = se3_inverse(verified.link.transform)  # new node in the old one's frame
     assert abs(t[0, 3] - 0.15) < 0.01 and abs(t[1, 3] - 0.04) < 0.01
     assert abs(yaw_of(t) - 0.05) < np.radians(0.5)

@@ -301,6 +301,10 @@ class SessionDatabase:
                 out[k] = v
         return out
 
+    def word_count(self) -> int:
+        """Visual words stored (the dictionary)."""
+        return int(self._conn.execute("SELECT COUNT(*) FROM Word").fetchone()[0])
+
     def node_ids(self) -> list[int]:
         """All stored node ids."""
         return [r[0] for r in self._conn.execute("SELECT id FROM Node ORDER BY id")]

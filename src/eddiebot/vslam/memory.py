@@ -76,6 +76,20 @@ class NodeData:
     cloud: CloudImages | None = None
     scan_points: F64 | None = None  # (N, 2) base frame, for neighbour-link refinement
 
+    @property
+    def nbytes(self) -> int:
+        """RAM held by the arrays and images (not Python object overhead)."""
+        f = self.features
+        n = sum(a.nbytes for a in (f.uv, f.responses, f.sizes, f.angles, f.octaves,
+                                   f.descriptors, f.points)) + self.words.nbytes
+        if self.grid is not None:
+            n += sum(a.nbytes for a in (self.grid.ground, self.grid.obstacles, self.grid.empty))
+        if self.cloud is not None:
+            n += self.cloud.nbytes
+        if self.scan_points is not None:
+            n += self.scan_points.nbytes
+        return n
+
     def word_counts(self) -> dict[int, int]:
         """Word id → occurrences (valid words only)."""
         w = self.words[self.words > 0]

@@ -79,7 +79,9 @@ class ReplayReport:
     failed registration or `RGBD/OptimizeMaxError`. `odometry_resets` counts re-initialised
     odometry (each starts a new map), `map_merges` closures that joined two maps, `maps` the
     map frames left at the end (1 when every new map was merged; poses of the others are in
-    their own frames, so one ATE alignment cannot fit them).
+    their own frames, so one ATE alignment cannot fit them). `words` counts the visual words in
+    the database, `node_kb` the mean RAM of a node's data (features, words, grid, cloud images)
+    over the nodes that hold it at the end.
     """
 
     frames: int
@@ -101,6 +103,8 @@ class ReplayReport:
     odometry_resets: int = 0
     map_merges: int = 0
     maps: int = 1
+    words: int = 0
+    node_kb: float = 0.0
 
 
 def replay_tum(
@@ -193,6 +197,9 @@ def replay_tum(
         poses, _ = slam.graph()
         db.save_optimized(poses, slam.occupancy_grid())
         db.save_weights({i: n.weight for i, n in slam.memory.nodes.items()})
+        words = db.word_count()
+        in_ram = [n.data.nbytes for n in slam.memory.nodes.values() if n.data is not None]
+        node_kb = float(np.mean(in_ram)) / 1e3 if in_ram else 0.0
     ids = sorted(i for i in poses if i in node_stamps)
     key_stamps = [node_stamps[i] for i in ids]
     key_poses = [poses[i] @ lt for i in ids]
@@ -219,7 +226,8 @@ def replay_tum(
         intrinsics=(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height),
         intrinsics_source=setup.intrinsics_source, depth_scale=scale,
         depth_scale_source=setup.depth_scale_source, odometry_resets=resets,
-        map_merges=merges, maps=max(1, len(slam.map_frames())),
+        map_merges=merges, maps=max(1, len(slam.map_frames())), words=words,
+        node_kb=node_kb,
     )
     (out / "report.json").write_text(json.dumps(asdict(report), indent=2))
     return report

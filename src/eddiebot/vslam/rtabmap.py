@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
 from eddiebot.vslam.bayes import BayesFilter, adjust_likelihood, tfidf_scores
 from eddiebot.vslam.camera import CameraIntrinsics
@@ -636,7 +638,20 @@ class Rtabmap:
             return IcpResult(None, reason="no depth")
         target = make_scan(a.depth(), a.camera, self._icp)
         source = make_scan(b.depth(), b.camera, self._icp)
-        return icp_register(target, source, guess, self._icp)
+        result = icp_register(target, source, guess, self._icp)
+        if result.transform is None:
+            return result
+        # upstream's RegistrationIcp covariance: 2.1981 · median squared correspondence
+        # distance / 10 on every axis, the rotation's a tenth of that
+        t = result.transform
+        moved = source.points @ t[:3, :3].T + t[:3, 3]
+        dist, _ = cKDTree(target.points).query(
+            moved, distance_upper_bound=self._icp.max_correspondence_distance)
+        dist = dist[np.isfinite(dist)]
+        if dist.size == 0:
+            return result
+        var = max(2.1981 * float(np.median(dist**2)) / 10.0, 1e-9)
+        return replace(result, covariance=np.diag([var, var, var, var / 10, var / 10, var / 10]))
 
     def _refine_with_scan(self, link: Link, prev: Node, scan: Scan2D) -> Link:
         """`RGBD/NeighborLinkRefining`: 2D ICP of this scan against the previous node's scan."""
