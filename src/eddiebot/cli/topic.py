@@ -2,8 +2,8 @@
 
 ``hz``, ``bw`` take samples raw (CDR bytes), so they work on any type, described here or
 not; ``echo`` and ``delay`` decode, so they need the type's definition (shipped, or an
-interface file on ``EDDIE_INTERFACE_PATH``/``AMENT_PREFIX_PATH``) and say so in one line
-when there is none.
+interface file on ``EDDIE_INTERFACE_PATH``/``AMENT_PREFIX_PATH``; ``echo`` also asks the
+publishers' ``~/get_type_description``) and say so in one line when there is none.
 """
 
 from __future__ import annotations
@@ -184,6 +184,54 @@ def _publisher_qos_hint(s: CliSession, topic: str) -> tuple[bool, bool]:
     return tl, be
 
 
+#: How long echo waits for a publisher's ``~/get_type_description`` to appear, and to answer.
+TYPE_DESCRIPTION_WAIT_S = 2.0
+TYPE_DESCRIPTION_TIMEOUT_S = 5.0
+
+
+def _type_from_publishers(s: CliSession, topic: str, type_name: str) -> Any:
+    """The class of ``type_name`` as the publishers of ``topic`` describe it: each publishing
+    node's ``~/get_type_description`` is asked for the type by name and RIHS01 hash (with its
+    sources), and the first answer that hashes to that hash is registered. Else a string to
+    append to the one-line error, saying what each publisher answered."""
+    from eddiebot.msgs import get_message, get_service, register_type_description
+
+    cache = s.remote()
+    publishers = sorted({(e.node, e.type_hash) for e in (cache.publishers(topic) if cache else [])
+                         if e.type_name == type_name and e.type_hash.startswith("RIHS01_")})
+    if not publishers:
+        return ""
+    srv_type = get_service("type_description_interfaces/srv/GetTypeDescription")
+    answers: list[str] = []
+    for node, rihs01 in publishers:
+        name = f"{node}/get_type_description"
+        client = s.node.create_client(srv_type, name)
+        try:
+            if not client.wait_for_service(timeout_sec=TYPE_DESCRIPTION_WAIT_S):
+                answers.append(f"{node} does not serve ~/get_type_description")
+                continue
+            request = srv_type.Request(type_name=type_name, type_hash=rihs01,
+                                       include_type_sources=True)
+            try:
+                response = client.call(request, timeout_sec=TYPE_DESCRIPTION_TIMEOUT_S)
+            except Exception as exc:  # timeout, unavailable, remote error
+                answers.append(f"{name}: {exc}")
+                continue
+            if not response.successful:
+                answers.append(f"{name}: {response.failure_reason or 'not successful'}")
+                continue
+            try:
+                register_type_description(type_name, rihs01, response.type_description,
+                                          response.type_sources)
+            except ValueError as exc:
+                answers.append(f"{name} refused: {exc}")
+                continue
+            return get_message(type_name)
+        finally:
+            s.node.destroy_client(client)
+    return f"; asked the publisher{'s' if len(answers) > 1 else ''}: {'; '.join(answers)}"
+
+
 def _echo(args: argparse.Namespace) -> int:
     from eddiebot.core import SingleThreadedExecutor
     from eddiebot.msgs import get_message
@@ -216,8 +264,11 @@ def _echo(args: argparse.Namespace) -> int:
         try:
             msg_type = get_message(type_name)
         except UnknownTypeError as exc:
-            print(f"eddie topic echo: cannot decode {topic}: {exc}", file=sys.stderr)
-            return 2
+            asked = _type_from_publishers(s, topic, type_name)
+            if isinstance(asked, str):
+                print(f"eddie topic echo: cannot decode {topic}: {exc}{asked}", file=sys.stderr)
+                return 2
+            msg_type = asked
         s.node.create_subscription(msg_type, topic, on_msg,
                                    _qos(args, default_tl=tl, default_be=be))
         ex = SingleThreadedExecutor(context=s.context)
