@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 from _procs import Proc
+from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from eddiebot.core.type_description import describe, rihs01, to_message
@@ -190,11 +191,24 @@ def test_register_refuses_what_does_not_hash_to_the_announced_hash() -> None:
     h, description, sources = _described(pkg)
     with pytest.raises(ValueError, match=r"description of .* hashes to RIHS01_\w+, not to"):
         register_type_description(f"{pkg}/msg/Blob", "RIHS01_" + "0" * 64, description, sources)
-    # sources of another definition than the (intact) description
-    inner = type(sources[1])(type_name=f"{pkg}/msg/Inner", encoding="msg",
-                             raw_file_contents="int64 x\nfloat64[2] y\n")
-    other = [sources[0], inner]
-    with pytest.raises(ValueError, match=r"definitions given for .* hash to RIHS01_\w+, not to"):
-        register_type_description(f"{pkg}/msg/Blob", h, description, other)
+    # a referenced type this store knows with another definition
+    defs = dict(get_typestore(Stores.ROS2_JAZZY).fielddefs)
+    defs.update(get_types_from_msg(INNER, f"{pkg}/msg/Inner"))
+    defs.update(get_types_from_msg(BLOB, f"{pkg}/msg/Blob"))
+    defs["std_msgs/msg/Header"] = ([], [("frame_id", (Nodetype.BASE, ("string", 0)))])
+    other = describe(defs, f"{pkg}/msg/Blob")
+    with pytest.raises(ValueError, match=r"uses std_msgs/msg/Header of another definition"):
+        register_type_description(f"{pkg}/msg/Blob", rihs01(other), to_message(other), sources)
     assert f"{pkg}/msg/Blob" not in TYPESTORE.fielddefs
     assert f"{pkg}/msg/Inner" not in TYPESTORE.fielddefs
+
+
+def test_sources_that_disagree_with_the_description_give_way_to_its_fields() -> None:
+    pkg = "desc_src_bad_test_msgs"
+    h, description, sources = _described(pkg)
+    inner = type(sources[1])(type_name=f"{pkg}/msg/Inner", encoding="msg",
+                             raw_file_contents="int64 x\nfloat64[2] y\n")
+    register_type_description(f"{pkg}/msg/Blob", h, description, [sources[0], inner])
+    assert type_hash(f"{pkg}/msg/Blob") == h
+    assert TYPESTORE.fielddefs[f"{pkg}/msg/Inner"][1][0] == ("x", (Nodetype.BASE, ("int32", 0)))
+    assert not hasattr(get_message(f"{pkg}/msg/Blob"), "LIMIT")  # constants are not hashed

@@ -515,6 +515,41 @@ def _description_hash(description: Any) -> str:
     return f"RIHS01_{hashlib.sha256(json.dumps(data).encode()).hexdigest()}"
 
 
+def _definitions(description: Any, texts: dict[str, str]
+                 ) -> tuple[dict[str, Any], dict[str, dict[str, Any]]]:
+    """Parsed definitions (and file defaults) of the description's types this store lacks:
+    from their ``msg`` source in ``texts`` when it parses, else from the description."""
+    typs: dict[str, Any] = {}
+    defaults: dict[str, dict[str, Any]] = {}
+    for individual in (description.type_description, *description.referenced_type_descriptions):
+        name = normalize_type_name(str(individual.type_name))
+        if name in TYPESTORE.fielddefs or name in typs:
+            continue
+        parsed: dict[str, Any] = {}
+        if name in texts:
+            try:
+                parsed = get_types_from_msg(texts[name], name)
+            except Exception:  # the description's fields describe it too
+                parsed = {}
+        if len(parsed) == 1:
+            typs[name] = _fix_action_refs(next(iter(parsed.values())))
+            defaults[name] = _field_defaults(texts[name])
+        else:
+            typs[name] = _fields_of(individual)
+    return typs, defaults
+
+
+def _hash_with(typs: dict[str, Any], full: str) -> str:
+    """The RIHS01 hash of ``full`` were ``typs`` registered (nothing is registered)."""
+    scratch = Typestore()
+    scratch.fielddefs.update(TYPESTORE.fielddefs)
+    scratch.fielddefs.update(typs)
+    try:
+        return scratch.hash_rihs01(full)
+    except KeyError as exc:
+        raise ValueError(f"the description of {full} does not describe {exc}") from None
+
+
 def register_type_description(type_name: str, rihs01: str, description: Any,
                               sources: Any = ()) -> list[str]:
     """Register message type ``type_name`` and the types it uses from a REP-2016 description,
@@ -522,8 +557,9 @@ def register_type_description(type_name: str, rihs01: str, description: Any,
 
     ``description`` is a ``type_description_interfaces/msg/TypeDescription``; ``sources``
     its ``TypeSource`` list: a type with an ``msg`` source is read from that text (so its
-    constants and default values come too), any other from the description's fields. Types
-    this store already has keep their definition. The description, and the definitions
+    constants and default values come too), any other from the description's fields, and
+    all from the fields when the sources do not hash as the description does. Types this
+    store already has keep their definition. The description, and the definitions
     about to be registered, must both hash to ``rihs01`` (the hash the publisher announces),
     else ``ValueError`` says which does not and nothing is registered. A type already known
     under another hash is refused the same way.
@@ -545,32 +581,22 @@ def register_type_description(type_name: str, rihs01: str, description: Any,
             return []
         texts = {normalize_type_name(str(s.type_name)): str(s.raw_file_contents)
                  for s in sources if str(s.encoding) == "msg"}
-        typs: dict[str, Any] = {}
-        defaults: dict[str, dict[str, Any]] = {}
-        for individual in (description.type_description,
-                           *description.referenced_type_descriptions):
-            name = normalize_type_name(str(individual.type_name))
-            if name in TYPESTORE.fielddefs or name in typs:
-                continue
-            if name in texts:
-                try:
-                    parsed = get_types_from_msg(texts[name], name)
-                except Exception as exc:
-                    raise ValueError(f"the source of {name} does not parse: {exc}") from None
-                if len(parsed) != 1:
-                    raise ValueError(f"the source of {name} defines {len(parsed)} types")
-                typs[name] = _fix_action_refs(next(iter(parsed.values())))
-                defaults[name] = _field_defaults(texts[name])
-            else:
-                typs[name] = _fields_of(individual)
-        scratch = Typestore()
-        scratch.fielddefs.update(TYPESTORE.fielddefs)
-        scratch.fielddefs.update(typs)
-        try:
-            ours = scratch.hash_rihs01(full)
-        except KeyError as exc:
-            raise ValueError(f"the description of {full} does not describe {exc}") from None
+        typs, defaults = _definitions(description, texts)
+        ours = _hash_with(typs, full)
+        if ours != rihs01 and texts:
+            # sources another parser reads otherwise (a .msg ``char`` is IDL uint8 to rosidl,
+            # not rosbags' char): the hashed description's fields alone still decode
+            typs, defaults = _definitions(description, {})
+            if _hash_with(typs, full) == rihs01:
+                ours = rihs01
         if ours != rihs01:
+            differ = [str(i.type_name) for i in description.referenced_type_descriptions
+                      if normalize_type_name(str(i.type_name)) in TYPESTORE.fielddefs
+                      and _fields_of(i)[1] != TYPESTORE.fielddefs[
+                          normalize_type_name(str(i.type_name))][1]]
+            if differ:
+                raise ValueError(f"{full} uses {', '.join(differ)} of another definition than "
+                                 f"the one known here")
             raise ValueError(f"the definitions given for {full} hash to {ours}, not to the "
                              f"publisher's {rihs01}")
         try:
