@@ -265,3 +265,42 @@ def test_obstacles_critic_distances_from_inflation() -> None:
     raw = np.array([0.0, 0.10 - dist240, 0.0])
     assert d.costs == pytest.approx(20.0 * raw + 1.5 * rep)
     assert not d.fail_flag
+
+
+def test_cost_critic_footprint_checks() -> None:
+    from eddiebot.maps import OccupancyMap
+    from eddiebot.nav.costmap import build_costmap
+    from eddiebot.nav.errors import ControllerError
+
+    critic = CostCritic(CostCriticConfig(consider_footprint=True))
+    d = data(goal=(3.5, 3.5, 0), shape=(1, 2), costmap=_grid_costmap())
+    with pytest.raises(ControllerError, match="consider_footprint"):
+        critic.score(d)  # a robot_radius costmap has no footprint polygon
+    occ = np.zeros((40, 40), dtype=np.int8)
+    occ[:, 20] = 100  # a wall at x = 2.0-2.1
+    cm = build_costmap({"resolution": 0.1, "footprint": "[[0.3, 0.1], [0.3, -0.1], "
+                        "[-0.3, -0.1], [-0.3, 0.1]]", "footprint_padding": 0.0,
+                        "plugins": ["static_layer", "inflation_layer"],
+                        "inflation_layer": {"inflation_radius": 0.5, "cost_scaling_factor": 3.0}},
+                       "fp")
+    cm.set_static_map(OccupancyMap(occ, 0.1))
+    cm.update_map((0.0, 0.0, 0.0))
+    # the centre at x = 1.75 is 0.3 m from the wall, above the cost at the circumscribed
+    # radius: the footprint decides. The 0.6 m long footprint along x reaches the wall, across
+    # it (yaw 90°) it does not and the centre's cost counts
+    d = data(goal=(3.5, 3.5, 0), shape=(2, 2), costmap=cm)
+    d.traj_x[:] = 1.75
+    d.traj_y[:] = 2.0
+    d.traj_yaw[0] = 0.0
+    d.traj_yaw[1] = math.pi / 2
+    centre = cm.master.cost_at_world(1.75, 2.0)
+    assert centre == int(252 * math.exp(-3.0 * (0.3 - 0.1)))
+    critic.score(d)
+    assert d.costs[0] == pytest.approx(1e6 * 3.81 / 254.0)  # 1 sampled point
+    assert d.costs[1] == pytest.approx(centre * 3.81 / 254.0)
+    # upstream skips free cells before any footprint check: a free centre never collides
+    d = data(goal=(3.5, 3.5, 0), shape=(1, 2), costmap=cm)
+    d.traj_x[:] = 1.0
+    d.traj_y[:] = 2.0
+    critic.score(d)
+    assert d.costs[0] == 0.0
