@@ -226,7 +226,7 @@ def _tour(run: _Run) -> None:
                            "--qos-durability", "transient_local"],
                           env=run.env, capture_output=True, text=True, timeout=60)
     assert "frame_id: map" in pose.stdout, pose.stderr
-    run.check("eddie goal 2.0 0.0 0.0", "--timeout", "120", timeout=150,
+    run.check("eddie goal 2.0 0.0 0.0", "--timeout", "300", timeout=330,
               expect="Goal reached.")
     run.check("eddie action send_goal /navigate_to_pose nav2_msgs/action/NavigateToPose "
               "\"{pose: {header: {frame_id: map}, pose: {position: {x: 2.0}}}}\"",

@@ -127,9 +127,11 @@ def test_slam_attaches_and_ctrl_c_saves_the_map(sim: Proc, env: dict[str, str],
     out = tmp_path / "run"
     slam = Proc([*EDDIE, "slam", "--output", str(out)], env)
     assert slam.wait_for("attached to the simulator", timeout=30), slam.stderr
-    deadline = time.monotonic() + 60
+    # a loaded machine can take a minute or more to bring SLAM up; Ctrl-C before that exits 130
+    deadline = time.monotonic() + 240
     while "slam in mapping mode" not in slam.stderr and time.monotonic() < deadline:
         time.sleep(0.1)
+    assert "slam in mapping mode" in slam.stderr, slam.stderr
     time.sleep(3.0)  # a few scans
     slam.popen.send_signal(signal.SIGINT)
     assert slam.popen.wait(timeout=30) == 0, slam.stderr
