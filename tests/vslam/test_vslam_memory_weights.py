@@ -162,3 +162,26 @@ def test_nodes_rebuild_their_cloud_from_decimated_depth():
     pose = slam.optimized_poses[r.node_id]
     local = images.cloud(0.02)[0]
     np.testing.assert_allclose(cloud[:5], local[:5] @ pose[:3, :3].T + pose[:3, 3], atol=1e-9)
+
+
+def test_nodes_loaded_from_the_database_rebuild_their_cloud_from_the_stored_depth(tmp_path):
+    poses = [planar_pose(0.0, 0.0, 0.0), planar_pose(0.3, 0.0, 0.4)]
+    with SessionDatabase(tmp_path / "c.db") as db:
+        slam = Rtabmap(BASE, database=db)
+        for k, pose in enumerate(poses):
+            slam.process(*frame(3, 2.0 + pose[0, 3], 3.0, 0.4 * k), CAM, pose, k)
+        before = {i: n.data.cloud.cloud(0.02) for i, n in slam.memory.nodes.items()}
+        db.close(slam)
+    assert len(before) == 2 and all(xyz.shape[0] > 500 for xyz, _ in before.values())
+    with SessionDatabase(tmp_path / "c.db") as db:
+        again = Rtabmap(BASE, database=db)
+        assert all(n.data is not None and n.data.cloud is None
+                   for n in again.memory.nodes.values())
+        for i, (xyz, rgb) in before.items():
+            images = again._cloud_images(again.memory.nodes[i])
+            assert images is not None
+            after, after_rgb = images.cloud(0.02)
+            np.testing.assert_allclose(after, xyz, atol=1e-9)
+            # colours from the stored JPEG, compressed once more
+            assert np.mean(np.abs(after_rgb.astype(int) - rgb.astype(int))) < 8
+            assert again.memory.nodes[i].data.cloud is images  # kept from now on

@@ -348,6 +348,17 @@ class SessionDatabase:
         return (decode_image(row[0]) if row[0] else None,
                 decode_depth(row[1]) if row[1] else None)
 
+    def frame(self, node_id: int) -> tuple[NDArray[np.uint8] | None, NDArray[np.uint16] | None,
+                                           CameraIntrinsics | None]:
+        """Decoded RGB image, depth (mm) and camera of a node (None where not stored)."""
+        row = self._conn.execute("SELECT image, depth, calibration FROM Data WHERE id=?",
+                                 (node_id,)).fetchone()
+        if row is None:
+            return None, None, None
+        return (decode_image(row[0]) if row[0] else None,
+                decode_depth(row[1]) if row[1] else None,
+                camera_from_json(row[2]) if row[2] else None)
+
     def load_node_data(self, node_id: int) -> NodeData | None:
         """Features, word ids, local grid and scan of a node (for retrieval from LTM)."""
         rows = self._conn.execute(

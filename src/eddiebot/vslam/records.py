@@ -91,3 +91,8 @@ class MapDatabase(Protocol):
     def load_node_data(self, node_id: int) -> NodeData | None:
         """Heavy data of an LTM node."""
         ...
+
+    def frame(self, node_id: int) -> tuple[NDArray[np.uint8] | None, NDArray[np.uint16] | None,
+                                           CameraIntrinsics | None]:
+        """The stored RGB image, depth (mm) and camera of a node."""
+        ...

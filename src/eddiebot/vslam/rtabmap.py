@@ -499,10 +499,28 @@ class Rtabmap:
     def point_cloud(self, voxel_size: float = 0.05) -> tuple[F64, NDArray[np.uint8]]:
         """Assembled coloured cloud (map frame) of the current map's nodes in RAM."""
         frame = self.current_frame
-        clouds = {i: n.data.cloud.cloud(_CLOUD_VOXEL) for i, n in self.memory.nodes.items()
-                  if n.data is not None and n.data.cloud is not None and self.frame_of(i) == frame
-                  and i in self.optimized_poses}
+        clouds = {}
+        for i, n in self.memory.nodes.items():
+            if n.data is None or self.frame_of(i) != frame or i not in self.optimized_poses:
+                continue
+            images = self._cloud_images(n)
+            if images is not None:
+                clouds[i] = images.cloud(_CLOUD_VOXEL)
         return assemble_cloud(clouds, self.optimized_poses, voxel_size)
+
+    def _cloud_images(self, node: Node) -> CloudImages | None:
+        """A node's cloud images; for a node loaded from the database (a reloaded map, a
+        retrieval) they are made from its stored depth and colour the first time."""
+        data = node.data
+        if data is None:
+            return None
+        if data.cloud is None and self._db is not None:
+            rgb, depth, camera = self._db.frame(node.id)
+            if depth is not None and camera is not None:
+                p = self.params
+                data.cloud = CloudImages.from_frame(depth, rgb, camera, p.grid_depth_decimation,
+                                                    p.grid_range_min, p.grid_range_max)
+        return data.cloud
 
     def graph(self) -> tuple[dict[int, F64], list[Link]]:
         """Optimised poses and all links."""
@@ -632,8 +650,7 @@ class Rtabmap:
     def _icp_refine(self, old: Node, new: Node, guess: F64) -> IcpResult:
         """ICP of the new node's depth cloud against the old one's from `guess` (new node in
         the old one's frame); clouds rebuilt from the nodes' decimated depth."""
-        a = None if old.data is None else old.data.cloud
-        b = None if new.data is None else new.data.cloud
+        a, b = self._cloud_images(old), self._cloud_images(new)
         if a is None or b is None:
             return IcpResult(None, reason="no depth")
         target = make_scan(a.depth(), a.camera, self._icp)
