@@ -432,3 +432,33 @@ def test_remove_passed_goals():
         PoseContext((0.25, 0.0, 0.0)))
     assert tree.tick_once() == Status.SUCCESS
     assert bb.get("goals") == poses[2:]
+
+
+def test_follow_path_keeps_its_path_when_the_planner_writes_an_empty_one():
+    """Nav2's FollowPathAction::on_wait_for_result: a new path preempts the running goal, a
+    default Path (what a failed ComputePathToPose writes) does not; the controller keeps the
+    last good path while the planner's recovery retries."""
+    from eddiebot.msgs.nav_msgs import Path
+    from eddiebot.nav.nodes._common import pose_stamped
+
+    f = BehaviorTreeFactory()
+    tree = f.create_tree_from_text(
+        '<root BTCPP_format="4"><BehaviorTree ID="T"><FollowPath name="follow" path="{path}"/>'
+        '</BehaviorTree></root>', None, TreeContext(clock=lambda: 0))
+    (node,) = tree.find("follow")
+    from eddiebot.msgs.nav2_msgs import FollowPath
+
+    node.goal = FollowPath.Goal()
+    good = Path()
+    good.header.frame_id = "map"
+    good.poses = [pose_stamped(0.0, 0.0, 0.0, "map"), pose_stamped(1.0, 0.0, 0.0, "map")]
+    node.goal.path = good
+    tree.blackboard.set("path", Path())
+    node.on_wait_for_result()
+    assert not node.goal_updated and node.goal.path is good
+    better = Path()
+    better.header.frame_id = "map"
+    better.poses = [pose_stamped(0.0, 0.0, 0.0, "map"), pose_stamped(2.0, 0.0, 0.0, "map")]
+    tree.blackboard.set("path", better)
+    node.on_wait_for_result()
+    assert node.goal_updated and node.goal.path is better

@@ -259,8 +259,11 @@ class FollowPath(BtActionNode):
         self.goal.progress_checker_id = str(self.get_input("progress_checker_id") or "")
 
     def on_wait_for_result(self) -> None:
+        # as upstream, a default (empty) path — what a failed ComputePathToPose writes — is
+        # not sent: the controller keeps following the last good one while the planner retries
         path = self.get_input("path")
-        if path is not None and path is not self.goal.path and path != self.goal.path:
+        if (path is not None and path is not self.goal.path and path != self.goal.path
+                and not _is_default_path(path)):
             self.goal.path = path
             self.goal_updated = True
         for port in ("controller_id", "goal_checker_id", "progress_checker_id"):
@@ -268,6 +271,16 @@ class FollowPath(BtActionNode):
             if value != getattr(self.goal, port):
                 setattr(self.goal, port, value)
                 self.goal_updated = True
+
+
+def _is_default_path(path: Any) -> bool:
+    """``path == nav_msgs::msg::Path()``: no poses, no frame, stamp 0."""
+    header = getattr(path, "header", None)
+    poses = getattr(path, "poses", None)
+    if header is None or poses is None:
+        return False
+    return (len(poses) == 0 and not header.frame_id
+            and header.stamp.sec == 0 and header.stamp.nanosec == 0)
 
 
 class SmoothPath(BtActionNode):
