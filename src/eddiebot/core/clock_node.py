@@ -12,6 +12,7 @@ logger publish rcl_interfaces/Log on ``/rosout``, as rcl does.
 
 from __future__ import annotations
 
+import threading
 from typing import TYPE_CHECKING, Any
 
 from eddiebot.core.qos import DurabilityPolicy, QoSProfile
@@ -42,13 +43,22 @@ class ClockPublisher:
         self.pub = node.create_publisher(Clock, "/clock", CLOCK_QOS)
         self.last_published_ns: int | None = None
         self.pending_ns: int | None = None
+        self._lock = threading.Lock()
         executor.on_sim_time_advanced.append(self._on_advanced)
         self.publish(executor.context.sim_clock.now_ns())
 
     def publish(self, time_ns: int) -> None:
-        self.pub.publish(self._msg_type(clock=ns_to_stamp(time_ns)))
-        self.last_published_ns = time_ns
-        self.pending_ns = None
+        """Publish ``time_ns`` unless a later time already went out: executor threads report
+        their advances concurrently, and a stale one published after a newer one would be a
+        jump back in time for every follower (which clears their tf buffers)."""
+        with self._lock:
+            last = self.last_published_ns
+            if last is not None and time_ns < last:
+                self.pending_ns = None
+                return
+            self.pub.publish(self._msg_type(clock=ns_to_stamp(time_ns)))
+            self.last_published_ns = time_ns
+            self.pending_ns = None
 
     def flush(self) -> None:
         """Publish a throttled time now (call when the simulation pauses)."""
