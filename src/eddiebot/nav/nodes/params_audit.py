@@ -49,7 +49,8 @@ from eddiebot.nav.costmap.layers import (
     StaticLayerConfig,
 )
 from eddiebot.nav.errors import UnsupportedPlugin
-from eddiebot.nav.planners import PLANNER_PLUGINS, PlannerServerConfig, plugin_key
+from eddiebot.nav.planners import PLANNER_PLUGINS, PlannerServerConfig
+from eddiebot.nav.plugins import PluginRegistry, PluginType, plugin_key
 from eddiebot.nav.smoother import SMOOTHERS
 from eddiebot.nav.velocity_smoother import VelocitySmootherConfig
 
@@ -123,8 +124,19 @@ class _Audit:
             if plugin not in registry:
                 raise UnsupportedPlugin(server, f"{name}.plugin", plugin or None,
                                         f"plugin not available; available: {sorted(registry)}")
-            out[name] = kinds[plugin]
+            if plugin in kinds:
+                out[name] = kinds[plugin]
+            elif isinstance(registry, PluginRegistry):
+                out[name] = self._installed(registry.resolve(plugin, server, f"{name}.plugin"))
         return out
+
+    def _installed(self, entry: PluginType) -> Callable[[str, dict[str, Any]], None]:
+        """A registered or installed plugin's keys: its config's fields, or all kept when it
+        names no config (its own ``from_params`` reads them)."""
+        config = entry.config
+        if config is None:
+            return lambda w, d: None
+        return lambda w, d: self.keys(w, d, _fields(config) | {"plugin"})
 
 
 def _audit_costmap(a: _Audit, where: str, params: dict[str, Any], server: str) -> None:
@@ -220,8 +232,7 @@ def _audit_controller_server(a: _Audit, params: dict[str, Any]) -> None:
 
 def _audit_planner_server(a: _Audit, params: dict[str, Any]) -> None:
     server = "planner_server"
-    kinds = {p: (lambda c: lambda w, d: a.keys(w, d, _fields(c) | {"plugin"}))(cfg)
-             for p, (_, cfg) in PLANNER_PLUGINS.items()}
+    kinds: dict[str, Callable[[str, dict[str, Any]], None]] = {}
     names = _names(params.get("planner_plugins", list(PlannerServerConfig().planner_plugins)))
     nested = a.plugins(server, params, names, kinds,
                        {"GridBased": "nav2_navfn_planner::NavfnPlanner"}, PLANNER_PLUGINS, server)

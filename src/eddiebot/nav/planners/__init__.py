@@ -1,10 +1,11 @@
 """Global planners with Nav2's plugin registry (``planner_plugins``).
 
-``PLANNER_PLUGINS`` maps plugin type names to classes; :func:`build_planners` reads a
-planner server's ``ros__parameters`` (``planner_plugins: [GridBased]``, ``GridBased:
-{plugin: nav2_navfn_planner::NavfnPlanner, ...}``) and returns ``{name: planner}``. Every
-planner has ``create_plan(start, goal, costmap) -> (N, 3) path`` and raises the typed
-failures of :mod:`eddiebot.nav.errors`.
+``PLANNER_PLUGINS`` is the ``planners`` registry of :mod:`eddiebot.nav.plugins` (built-in
+types, :func:`register_planner` calls and entry points of group ``eddiebot.nav.planners``);
+:func:`build_planners` reads a planner server's ``ros__parameters`` (``planner_plugins:
+[GridBased]``, ``GridBased: {plugin: nav2_navfn_planner::NavfnPlanner, ...}``) and returns
+``{name: planner}``. Every planner has ``create_plan(start, goal, costmap) -> (N, 3) path``
+and raises the typed failures of :mod:`eddiebot.nav.errors`.
 """
 
 from __future__ import annotations
@@ -17,10 +18,11 @@ import numpy as np
 import numpy.typing as npt
 
 from eddiebot.nav.costmap.costmap2d import Costmap2D
-from eddiebot.nav.errors import InvalidPlanner, ParameterError, UnsupportedPlugin
+from eddiebot.nav.errors import InvalidPlanner, ParameterError
 from eddiebot.nav.params import from_params, require
 from eddiebot.nav.planners.navfn import NavfnConfig, NavfnPlanner
 from eddiebot.nav.planners.theta_star import ThetaStarConfig, ThetaStarPlanner
+from eddiebot.nav.plugins import PluginContext, PluginFactory, plugin_key, registry
 
 
 class GlobalPlanner(Protocol):
@@ -31,10 +33,22 @@ class GlobalPlanner(Protocol):
     ) -> npt.NDArray[np.float64]: ...
 
 
-PLANNER_PLUGINS: dict[str, tuple[type[Any], type[Any]]] = {
-    "nav2_navfn_planner::NavfnPlanner": (NavfnPlanner, NavfnConfig),
-    "nav2_theta_star_planner::ThetaStarPlanner": (ThetaStarPlanner, ThetaStarConfig),
-}
+PLANNER_PLUGINS = registry("planners")
+
+
+def register_planner(type_name: str, cls: type[Any], config_cls: type[Any]) -> None:
+    """Register a planner built as ``cls(config, name=name)`` with its config dataclass
+    ``config_cls`` read from the instance's parameters (Nav2 names and defaults)."""
+
+    def factory(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+        return cls(from_params(config_cls, params, server=context.where), name=name)
+
+    f: PluginFactory = factory
+    PLANNER_PLUGINS.register(type_name, f, config_cls, source="built-in")
+
+
+register_planner("nav2_navfn_planner::NavfnPlanner", NavfnPlanner, NavfnConfig)
+register_planner("nav2_theta_star_planner::ThetaStarPlanner", ThetaStarPlanner, ThetaStarConfig)
 
 
 @dataclass(frozen=True)
@@ -50,11 +64,6 @@ class PlannerServerConfig:
                 list(self.planner_plugins), "needs at least one planner")
 
 
-def plugin_key(name: str) -> str:
-    """``pkg/Type`` (Humble) and ``pkg::Type`` (Jazzy) name the same plugin."""
-    return name.replace("/", "::")
-
-
 def build_planners(params: Mapping[str, Any] | None = None, server: str = "planner_server"
                    ) -> dict[str, GlobalPlanner]:
     params = dict(params or {})
@@ -66,12 +75,8 @@ def build_planners(params: Mapping[str, Any] | None = None, server: str = "plann
         plugin = sub.pop("plugin", "nav2_navfn_planner::NavfnPlanner" if name == "GridBased" else None)
         if plugin is None:
             raise ParameterError(server, f"{name}.plugin", None, "missing plugin type")
-        entry = PLANNER_PLUGINS.get(plugin_key(str(plugin)))
-        if entry is None:
-            raise UnsupportedPlugin(server, f"{name}.plugin", plugin,
-                                 f"unknown planner plugin; known: {sorted(PLANNER_PLUGINS)}")
-        cls, cfg_cls = entry
-        out[name] = cls(from_params(cfg_cls, sub, server=f"{server}.{name}"), name=name)
+        out[name] = PLANNER_PLUGINS.create(str(plugin), sub, name,
+                                           PluginContext(server, name, cfg))
     return out
 
 
@@ -95,4 +100,5 @@ __all__ = [
     "build_planners",
     "get_planner",
     "plugin_key",
+    "register_planner",
 ]
