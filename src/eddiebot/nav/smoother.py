@@ -25,8 +25,9 @@ import numpy.typing as npt
 
 from eddiebot.nav.cost_values import MAX_NON_OBSTACLE, NO_INFORMATION
 from eddiebot.nav.costmap.costmap2d import Costmap2D
-from eddiebot.nav.errors import InvalidPathForSmoothing, UnsupportedPlugin
+from eddiebot.nav.errors import InvalidPathForSmoothing
 from eddiebot.nav.params import from_params, require
+from eddiebot.nav.plugins import PluginContext, PluginFactory, registry
 from eddiebot.nav.types import as_path
 
 
@@ -247,27 +248,33 @@ class Smoother(Protocol):
     def smooth(self, path: npt.ArrayLike, costmap: Costmap2D | None = None) -> SmoothResult: ...
 
 
-SMOOTHERS: dict[str, tuple[type[Any], type[Any]]] = {
-    "nav2_smoother::SimpleSmoother": (SimpleSmoother, SimpleSmootherConfig),
-    "nav2_smoother::SavitzkyGolaySmoother": (SavitzkyGolaySmoother, SavitzkyGolaySmootherConfig),
-}
+SMOOTHERS = registry("smoothers")
+
+
+def register_smoother(type_name: str, cls: type[Any], config_cls: type[Any]) -> None:
+    """Register a smoother built as ``cls(config, name)`` with its config dataclass
+    ``config_cls`` read from the instance's parameters."""
+
+    def factory(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+        return cls(from_params(config_cls, params, server=context.where), name)
+
+    f: PluginFactory = factory
+    SMOOTHERS.register(type_name, f, config_cls, source="built-in")
+
+
+register_smoother("nav2_smoother::SimpleSmoother", SimpleSmoother, SimpleSmootherConfig)
+register_smoother("nav2_smoother::SavitzkyGolaySmoother", SavitzkyGolaySmoother,
+                  SavitzkyGolaySmootherConfig)
 
 
 def build_smoother(name: str, params: dict[str, Any], server: str = "smoother_server"
                    ) -> Smoother:
     """The smoother instance ``name`` from its parameter block (``plugin`` defaults to
     SimpleSmoother, as in Nav2's sample files)."""
-    from eddiebot.nav.planners import plugin_key
-
-    sub = dict(params)
-    plugin = plugin_key(str(sub.pop("plugin", "nav2_smoother::SimpleSmoother")))
-    if plugin not in SMOOTHERS:
-        raise UnsupportedPlugin(server, f"{name}.plugin", plugin,
-                                f"available smoothers: {sorted(SMOOTHERS)}")
-    cls, cfg_cls = SMOOTHERS[plugin]
-    smoother: Smoother = cls(from_params(cfg_cls, sub, server=f"{server}.{name}"), name)
+    plugin = str(params.get("plugin", "nav2_smoother::SimpleSmoother"))
+    smoother: Smoother = SMOOTHERS.create(plugin, params, name, PluginContext(server, name))
     return smoother
 
 
 __all__ = ["SMOOTHERS", "SavitzkyGolaySmoother", "SavitzkyGolaySmootherConfig", "SimpleSmoother",
-           "SimpleSmootherConfig", "SmoothResult", "Smoother", "build_smoother"]
+           "SimpleSmootherConfig", "SmoothResult", "Smoother", "build_smoother", "register_smoother"]

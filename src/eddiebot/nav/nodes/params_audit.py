@@ -243,11 +243,9 @@ def _audit_planner_server(a: _Audit, params: dict[str, Any]) -> None:
 
 def _audit_smoother_server(a: _Audit, params: dict[str, Any]) -> None:
     server = "smoother_server"
-    kinds = {plugin: (lambda keys: lambda w, d: a.keys(w, d, keys))(_fields(cfg) | {"plugin"})
-             for plugin, (_cls, cfg) in SMOOTHERS.items()}
     names = _names(params.get("smoother_plugins", ["simple_smoother"]))
-    nested = a.plugins(server, params, names, kinds,
-                       dict.fromkeys(names, "nav2_smoother::SimpleSmoother"), kinds, server)
+    nested = a.plugins(server, params, names, {},
+                       dict.fromkeys(names, "nav2_smoother::SimpleSmoother"), SMOOTHERS, server)
     a.keys(server, params, _node_keys(server), nested)
 
 
