@@ -1,8 +1,12 @@
 """Local controllers and their checkers, with Nav2's plugin registries.
 
-``CONTROLLER_PLUGINS``, ``PROGRESS_CHECKER_PLUGINS`` and ``GOAL_CHECKER_PLUGINS`` map plugin
-type names to classes; :func:`build_controller_server` reads a controller server's
-``ros__parameters`` (``controller_plugins: [FollowPath]``, ``FollowPath: {plugin: ...}``).
+``CONTROLLER_PLUGINS``, ``PROGRESS_CHECKER_PLUGINS`` and ``GOAL_CHECKER_PLUGINS`` are the
+``controllers``, ``progress_checkers`` and ``goal_checkers`` registries of
+:mod:`eddiebot.nav.plugins` (built-in types, ``register`` calls, entry points);
+:func:`build_controller_server` reads a controller server's ``ros__parameters``
+(``controller_plugins: [FollowPath]``, ``FollowPath: {plugin: ...}``) and builds each
+instance by its type's factory, with a :class:`~eddiebot.nav.plugins.PluginContext` whose
+``server_config`` is the :class:`ControllerServerConfig` (``controller_frequency``).
 A controller has ``compute_velocity_commands(pose, velocity, path, costmap, dt) -> Twist2D``,
 ``set_plan``, ``set_speed_limit`` and ``set_goal_tolerance``.
 """
@@ -30,9 +34,9 @@ from eddiebot.nav.controllers.rpp import (
     RegulatedPurePursuitController,
 )
 from eddiebot.nav.costmap.layered import LayeredCostmap
-from eddiebot.nav.errors import InvalidController, ParameterError, UnsupportedPlugin
+from eddiebot.nav.errors import InvalidController, ParameterError
 from eddiebot.nav.params import from_params, require
-from eddiebot.nav.planners import plugin_key
+from eddiebot.nav.plugins import PluginContext, PluginRegistry, registry
 from eddiebot.nav.types import Twist2D
 
 
@@ -51,19 +55,51 @@ class Controller(Protocol):
     ) -> Twist2D: ...
 
 
-CONTROLLER_PLUGINS: dict[str, type[Any]] = {
-    "nav2_regulated_pure_pursuit_controller::RegulatedPurePursuitController":
-        RegulatedPurePursuitController,
-    "dwb_core::DWBLocalPlanner": DWBController,
-    "nav2_mppi_controller::MPPIController": MPPIController,
-}
-PROGRESS_CHECKER_PLUGINS: dict[str, type[Any]] = {
-    "nav2_controller::SimpleProgressChecker": SimpleProgressChecker,
-    "nav2_controller::PoseProgressChecker": PoseProgressChecker,
-}
-GOAL_CHECKER_PLUGINS: dict[str, type[Any]] = {
-    "nav2_controller::SimpleGoalChecker": SimpleGoalChecker,
-}
+CONTROLLER_PLUGINS = registry("controllers")
+PROGRESS_CHECKER_PLUGINS = registry("progress_checkers")
+GOAL_CHECKER_PLUGINS = registry("goal_checkers")
+
+
+def _rpp(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+    return RegulatedPurePursuitController(
+        from_params(RegulatedPurePursuitConfig, params, server=context.where), name,
+        context.server_config.controller_frequency)
+
+
+def _dwb(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+    return DWBController(dwb_config_from_params(params, context.where), name,
+                         context.server_config.controller_frequency)
+
+
+def _mppi(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+    return MPPIController.from_params(params, name, context.server_config.controller_frequency,
+                                      context.server)
+
+
+def _checker(cls: type[Any], config_cls: type[Any]) -> Any:
+    def factory(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+        return cls(from_params(config_cls, params, server=context.where))
+    return factory
+
+
+CONTROLLER_PLUGINS.register(
+    "nav2_regulated_pure_pursuit_controller::RegulatedPurePursuitController", _rpp,
+    RegulatedPurePursuitConfig, source="built-in")
+# DWB's and MPPI's keys nest (critics' blocks), so no one config dataclass lists them
+CONTROLLER_PLUGINS.register("dwb_core::DWBLocalPlanner", _dwb, source="built-in")
+CONTROLLER_PLUGINS.register("nav2_mppi_controller::MPPIController", _mppi, source="built-in")
+PROGRESS_CHECKER_PLUGINS.register(
+    "nav2_controller::SimpleProgressChecker",
+    _checker(SimpleProgressChecker, SimpleProgressCheckerConfig), SimpleProgressCheckerConfig,
+    source="built-in")
+PROGRESS_CHECKER_PLUGINS.register(
+    "nav2_controller::PoseProgressChecker",
+    _checker(PoseProgressChecker, PoseProgressCheckerConfig), PoseProgressCheckerConfig,
+    source="built-in")
+GOAL_CHECKER_PLUGINS.register(
+    "nav2_controller::SimpleGoalChecker",
+    _checker(SimpleGoalChecker, SimpleGoalCheckerConfig), SimpleGoalCheckerConfig,
+    source="built-in")
 
 
 @dataclass(frozen=True)
@@ -114,17 +150,13 @@ _DEFAULT_PLUGIN = {
 }
 
 
-def _plugin(params: Mapping[str, Any], name: str, registry: Mapping[str, type[Any]],
-            server: str) -> tuple[type[Any], dict[str, Any]]:
-    sub = dict(params.get(name, {}) or {})
-    plugin = sub.pop("plugin", _DEFAULT_PLUGIN.get(name))
+def _build(params: Mapping[str, Any], name: str, plugins: PluginRegistry,
+           context: PluginContext) -> Any:
+    sub = params.get(name, {}) or {}
+    plugin = sub.get("plugin", _DEFAULT_PLUGIN.get(name))
     if plugin is None:
-        raise ParameterError(server, f"{name}.plugin", None, "missing plugin type")
-    cls = registry.get(plugin_key(str(plugin)))
-    if cls is None:
-        raise UnsupportedPlugin(server, f"{name}.plugin", plugin,
-                             f"unknown plugin; known: {sorted(registry)}")
-    return cls, sub
+        raise ParameterError(context.server, f"{name}.plugin", None, "missing plugin type")
+    return plugins.create(str(plugin), sub, name, context)
 
 
 def build_controller_server(params: Mapping[str, Any] | None = None,
@@ -137,31 +169,14 @@ def build_controller_server(params: Mapping[str, Any] | None = None,
     cfg = from_params(ControllerServerConfig, flat, server=server)
     out = ControllerServer(cfg)
     for name in cfg.controller_plugins:
-        cls, sub = _plugin(params, name, CONTROLLER_PLUGINS, server)
-        where = f"{server}.{name}"
-        if cls is DWBController:
-            out.controllers[name] = DWBController(dwb_config_from_params(sub, where), name,
-                                                  cfg.controller_frequency)
-        elif cls is MPPIController:
-            out.controllers[name] = MPPIController.from_params(
-                sub, name, cfg.controller_frequency, server)
-        else:
-            out.controllers[name] = RegulatedPurePursuitController(
-                from_params(RegulatedPurePursuitConfig, sub, server=where), name,
-                cfg.controller_frequency,
-            )
+        out.controllers[name] = _build(params, name, CONTROLLER_PLUGINS,
+                                       PluginContext(server, name, cfg))
     for name in cfg.progress_checker_plugins:
-        pcls, sub = _plugin(params, name, PROGRESS_CHECKER_PLUGINS, server)
-        if pcls is PoseProgressChecker:
-            out.progress_checkers[name] = PoseProgressChecker(
-                from_params(PoseProgressCheckerConfig, sub, server=f"{server}.{name}"))
-        else:
-            out.progress_checkers[name] = SimpleProgressChecker(
-                from_params(SimpleProgressCheckerConfig, sub, server=f"{server}.{name}"))
+        out.progress_checkers[name] = _build(params, name, PROGRESS_CHECKER_PLUGINS,
+                                             PluginContext(server, name, cfg))
     for name in cfg.goal_checker_plugins:
-        _, sub = _plugin(params, name, GOAL_CHECKER_PLUGINS, server)
-        out.goal_checkers[name] = SimpleGoalChecker(
-            from_params(SimpleGoalCheckerConfig, sub, server=f"{server}.{name}"))
+        out.goal_checkers[name] = _build(params, name, GOAL_CHECKER_PLUGINS,
+                                         PluginContext(server, name, cfg))
     return out
 
 
