@@ -21,10 +21,6 @@ CERES = (
     "with isam2, see the 'optimizer' parameter)"
 )
 STACK = "ignored: stack_size_to_use (the Python (de)serialisation needs no larger stack)"
-INTERACTIVE = (
-    "ignored: enable_interactive_mode (no interactive markers; the graph is published on "
-    "~/graph_visualization)"
-)
 LIFELONG = (
     "ignored: lifelong_search_use_tree, lifelong_minimum_score, lifelong_iou_match, "
     "lifelong_node_removal_score, lifelong_overlap_score_scale, lifelong_constraint_multiplier, "
@@ -33,9 +29,9 @@ LIFELONG = (
 )
 
 EXPECTED = {
-    "mapper_params_online_async.yaml": [CERES, STACK, INTERACTIVE],
-    "mapper_params_online_sync.yaml": [CERES, STACK, INTERACTIVE],
-    "mapper_params_offline.yaml": [CERES, STACK, INTERACTIVE],
+    "mapper_params_online_async.yaml": [CERES, STACK],
+    "mapper_params_online_sync.yaml": [CERES, STACK],
+    "mapper_params_offline.yaml": [CERES, STACK],
     "mapper_params_localization.yaml": [CERES, STACK],
     "mapper_params_lifelong.yaml": [CERES, LIFELONG, STACK],
 }

@@ -524,8 +524,10 @@ _IGNORED: dict[str, _Rule] = {
         ),
     ),
     "stack_size_to_use": _always("the Python (de)serialisation needs no larger stack"),
-    "enable_interactive_mode": _if_true(
-        "no interactive markers; the graph is published on ~/graph_visualization"
+    "enable_interactive_mode": lambda config, value: (
+        f"interactive editing works in mapping mode only, and mode is {config.mode}"
+        if value and config.mode != "mapping"
+        else None
     ),
     "position_covariance_scale": _if_not_one("no ~/pose topic is published"),
     "yaw_covariance_scale": _if_not_one("no ~/pose topic is published"),

@@ -5,6 +5,8 @@ from __future__ import annotations
 __all__ = [
     "CarmenFormatError",
     "ConfigError",
+    "GraphEditError",
+    "MergeError",
     "PoseGraphFormatError",
     "SessionError",
     "SessionVersionError",
@@ -22,6 +24,15 @@ class ConfigError(SlamError, ValueError):
 
 class CarmenFormatError(SlamError, ValueError):
     """A CARMEN log line cannot be parsed; the message names the file and line number."""
+
+
+class GraphEditError(SlamError, ValueError):
+    """An interactive edit of the graph is refused (unknown node, not in interactive mode);
+    the message names the node or the reason."""
+
+
+class MergeError(SlamError, ValueError):
+    """A second session cannot be merged (unreadable, another laser mount, not placed)."""
 
 
 class PoseGraphFormatError(SlamError, ValueError):

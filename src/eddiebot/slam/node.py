@@ -32,7 +32,10 @@ the match's x, y, yaw covariance) in every mode, as upstream.
 Services (under the node's name, as slam_toolbox): ``~/save_map`` (slam_toolbox/SaveMap:
 nav2 map_server files), ``~/serialize_map`` and ``~/deserialize_map`` (the session file),
 ``~/pause_new_measurements`` (toggle), ``~/reset``, ``~/clear_queue``. The graph is published
-as markers on ``~/graph_visualization``.
+as markers on ``~/graph_visualization`` (node ``i`` is point ``i`` of the sphere list).
+Interactive editing (``~/toggle_interactive_mode``, ``~/feedback``, ``~/manual_loop_closure``,
+``~/clear_changes``), merging a second session (``~/add_submap``, ``~/merge_submaps``) and
+``~/set_localization_mode``: `eddiebot.slam.node_editing`.
 
 ``odom_session`` (eddiebot) names the odometry the node maps on (the ``/odom`` publisher's
 process and node, set by ``eddie slam``); with it, a map written by ``~/save_map`` or
@@ -93,6 +96,7 @@ from eddiebot.msgs.std_srvs import Empty
 from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
 from eddiebot.slam.config import SlamConfig, parameter_warnings
 from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning, warm_up
+from eddiebot.slam.node_editing import GraphEditing
 from eddiebot.slam.scan import Scan
 from eddiebot.slam.session import load_session, save_session
 
@@ -204,6 +208,7 @@ class SlamNode(Node):
         self.create_service(Pause, "~/pause_new_measurements", self._pause)
         self.create_service(Reset, "~/reset", self._reset)
         self.create_service(ClearQueue, "~/clear_queue", self._clear_queue)
+        self.editing = GraphEditing(self)
         self.get_logger().info(
             f"slam in {self.config.mode} mode ({self.processing}), resolution {self.config.resolution} m"
         )
@@ -269,7 +274,7 @@ class SlamNode(Node):
 
     def _on_scan(self, msg: Any) -> None:
         self.scans_received += 1
-        if self.paused:
+        if self.paused or self.editing.interactive_mode:
             return
         self._scan_count += 1
         if self.config.throttle_scans > 1 and self._scan_count % self.config.throttle_scans:
@@ -628,6 +633,10 @@ class SlamNode(Node):
         self.get_logger().info(f"clear_queue: dropped {dropped} queued scans")
         res.status = True
         return res
+
+    def mark_map_dirty(self) -> None:
+        """Re-render and publish the map and graph at the next map update."""
+        self._map_dirty = True
 
     def map_to_odom_quaternion(self) -> tuple[float, float, float, float]:
         return yaw_to_quaternion(float(self.core.map_to_odom[2]))

@@ -1,0 +1,264 @@
+"""Merging a second SLAM session into a running graph (slam_toolbox's ``add_submap`` /
+``merge_submaps``), pure — no bus, no clock, no files.
+
+slam_toolbox's merge tool (``merge_maps_kinematic``) loads serialized sessions, shows each
+as a map the user drags into place, and on ``merge_submaps`` renders every scan at its moved
+pose into one grid; the graphs stay apart. Here a session is merged into the graph itself:
+
+1. `place_session` finds the rigid transform from the second session's map frame into this
+   one — by scan matching when no pose is given (up to ``samples`` of its nodes, spread
+   along its path, are relocalised over the whole current map; the transforms they imply are
+   clustered and the largest cluster wins), or from a given transform (the user's placement).
+   Each sampled node is then matched against the current nodes near its placed pose (the
+   loop-closure search window and thresholds); every match that agrees with the placement is a
+   `MergeLink`.
+2. `merge_session` appends the session's nodes (scans, odometry, retired flags) and edges to
+   the graph, its poses moved by the transform, adds each link as a loop edge (the links
+   were vetted together, so they skip the χ² gate), and re-optimises. A session placed by
+   hand with no link is tied to node 0 by the transform alone (`HAND_PLACEMENT_SIGMAS`).
+
+The merged nodes keep their own odometry frame: the next scan of a running mapper starts a
+new chain linked by scan matching to the nodes it is matched against, as after a start pose.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from eddiebot.geometry import se2_between, se2_compose, se2_inverse
+from eddiebot.slam.errors import MergeError
+from eddiebot.slam.mapper import SlamCore
+from eddiebot.slam.mapper.measurement import _rotate_covariance
+from eddiebot.slam.pose_graph import EdgeKind
+
+__all__ = [
+    "AGREEMENT_HEADING",
+    "AGREEMENT_POSITION",
+    "HAND_PLACEMENT_SIGMAS",
+    "MergeLink",
+    "Placement",
+    "merge_session",
+    "place_session",
+]
+
+FloatArray = npt.NDArray[np.float64]
+
+#: Two placements agree when their transforms differ by at most this much (m, rad).
+AGREEMENT_POSITION = 0.3
+AGREEMENT_HEADING = 0.1
+#: Standard deviations (m, m, rad) tying a session placed by hand, with no scan-matched link,
+#: to node 0 of the graph.
+HAND_PLACEMENT_SIGMAS = np.array([0.1, 0.1, 0.05])
+
+
+@dataclass(frozen=True)
+class MergeLink:
+    """A node of the second session matched against the current map."""
+
+    node: int
+    """Node id in the second session."""
+    anchor: int
+    """The nearest current node it was matched against."""
+    pose: FloatArray
+    """The matched robot pose in this map's frame (x, y, theta)."""
+    response: float
+    covariance: FloatArray
+    """The match's covariance, map frame (3, 3)."""
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where a second session goes: ``transform`` maps its map frame into this one."""
+
+    transform: FloatArray
+    links: tuple[MergeLink, ...]
+    by_scan_matching: bool
+    relocalized: int = 0
+    """Sampled nodes whose global relocalisation passed the loop-closure thresholds."""
+
+
+def _mean_transform(ts: list[FloatArray]) -> FloatArray:
+    a = np.array(ts)
+    th = math.atan2(float(np.sin(a[:, 2]).mean()), float(np.cos(a[:, 2]).mean()))
+    return np.array([float(a[:, 0].mean()), float(a[:, 1].mean()), th])
+
+
+def _agree(a: FloatArray, b: FloatArray) -> bool:
+    return (
+        math.hypot(float(a[0] - b[0]), float(a[1] - b[1])) <= AGREEMENT_POSITION
+        and abs(math.remainder(float(a[2] - b[2]), math.tau)) <= AGREEMENT_HEADING
+    )
+
+
+def _largest_cluster(ts: list[FloatArray]) -> list[FloatArray]:
+    best: list[FloatArray] = []
+    for t in ts:
+        members = [u for u in ts if _agree(t, u)]
+        if len(members) > len(best):
+            best = members
+    return best
+
+
+def _samples(other: SlamCore, count: int) -> list[int]:
+    active = [i for i, n in enumerate(other.nodes) if not n.retired and n.points.shape[0] >= 10]
+    if len(active) <= count:
+        return active
+    picks = np.linspace(0, len(active) - 1, count).round().astype(int)
+    return [active[int(k)] for k in picks]
+
+
+def _check(core: SlamCore, other: SlamCore) -> None:
+    if not core.nodes:
+        raise MergeError("the current graph is empty: load the session instead of merging it")
+    if not other.nodes:
+        raise MergeError("the session to merge holds no nodes")
+    a, b = core.sensor_offset, other.sensor_offset
+    if math.hypot(float(a[0] - b[0]), float(a[1] - b[1])) > 1e-3 or abs(
+        math.remainder(float(a[2] - b[2]), math.tau)
+    ) > 1e-3:
+        raise MergeError(
+            f"the session's laser was mounted at ({b[0]:.3f}, {b[1]:.3f}, {b[2]:.3f}), this "
+            f"map's at ({a[0]:.3f}, {a[1]:.3f}, {a[2]:.3f}): one laser per map"
+        )
+
+
+def _relocalized_transforms(core: SlamCore, other: SlamCore, picks: list[int]) -> list[FloatArray]:
+    """Transforms implied by the sampled nodes that global relocalisation places."""
+    poses = other.node_poses()
+    # the whole-map grid relocalisation caches is the graph as it was: rebuild it now, and
+    # leave the core's record of relocalisation attempts as it was
+    core._global = None
+    before = len(core.relocalizations)
+    out = []
+    try:
+        for k in picks:
+            found = core.relocalize(other.nodes[k].points)
+            if found.accepted:
+                out.append(se2_compose(found.pose, se2_inverse(poses[k])))
+    finally:
+        del core.relocalizations[before:]
+        core._global = None
+    return out
+
+
+def _link(core: SlamCore, other: SlamCore, k: int, placed: FloatArray) -> MergeLink | None:
+    """Node ``k`` of ``other`` matched against the current nodes near ``placed`` (its robot
+    pose in this map); None when nothing near or the match is weak."""
+    cfg = core.config
+    offset = core.sensor_offset
+    sensor = se2_compose(placed, offset)
+    positions = core._positions()
+    active = np.flatnonzero(core.active_mask())
+    d = np.hypot(positions[active, 0] - sensor[0], positions[active, 1] - sensor[1])
+    keep = d <= cfg.loop_search_maximum_distance
+    if not np.any(keep):
+        return None
+    near = [int(i) for i in active[keep][np.argsort(d[keep], kind="stable")]][
+        : 2 * cfg.scan_buffer_size
+    ]
+    points = other.nodes[k].points
+    coarse = core._match_against(near, points, sensor, core._loop_coarse)
+    if coarse.response < cfg.loop_match_minimum_response_coarse:
+        return None
+    fine = core._match_against(near, points, coarse.pose, core._loop_fine)
+    if fine.response < cfg.loop_match_minimum_response_fine:
+        return None
+    variance = float(np.linalg.eigvalsh(0.5 * (fine.covariance[:2, :2] + fine.covariance[:2, :2].T))[-1])
+    if cfg.loop_match_maximum_variance_fine > 0.0 and variance > cfg.loop_match_maximum_variance_fine:
+        return None
+    pose = se2_compose(fine.pose, se2_inverse(offset))
+    return MergeLink(k, near[0], pose, float(fine.response), np.asarray(fine.covariance))
+
+
+def place_session(
+    core: SlamCore,
+    other: SlamCore,
+    *,
+    transform: npt.ArrayLike | None = None,
+    samples: int = 12,
+) -> Placement:
+    """Where ``other`` (a loaded session) lies in ``core``'s map: by scan matching, or at
+    ``transform`` (its map frame in this one, x, y, theta) refined by the links found near it.
+    `MergeError` when it cannot be placed (nothing matches and no transform is given)."""
+    _check(core, other)
+    picks = _samples(other, max(1, samples))
+    relocalized = 0
+    if transform is None:
+        found = _relocalized_transforms(core, other, picks)
+        relocalized = len(found)
+        cluster = _largest_cluster(found)
+        if not cluster:
+            raise MergeError(
+                f"none of the {len(picks)} sampled nodes of the session relocalised in the "
+                "current map: place it by hand (give its pose) or map where the sessions overlap"
+            )
+        guess = _mean_transform(cluster)
+    else:
+        guess = np.asarray(transform, dtype=np.float64).reshape(3).copy()
+        if not np.all(np.isfinite(guess)):
+            raise MergeError(f"placement {guess.tolist()} is not a finite (x, y, theta)")
+    poses = other.node_poses()
+    links = []
+    for k in picks:
+        link = _link(core, other, k, se2_compose(guess, poses[k]))
+        if link is not None:
+            links.append(link)
+    implied = [se2_compose(lk.pose, se2_inverse(poses[lk.node])) for lk in links]
+    cluster = _largest_cluster(implied)
+    # the links that agree with each other (and, for a search, with the relocalisation)
+    keep = [
+        lk for lk, t in zip(links, implied)
+        if any(t is c for c in cluster) and (transform is not None or _agree(t, guess))
+    ]
+    if keep:
+        final = _mean_transform([se2_compose(lk.pose, se2_inverse(poses[lk.node])) for lk in keep])
+    else:
+        final = guess
+    return Placement(final, tuple(keep), transform is None, relocalized)
+
+
+def merge_session(core: SlamCore, other: SlamCore, placement: Placement) -> range:
+    """Append ``other``'s nodes and edges to ``core`` at ``placement``, link them and
+    re-optimise; returns the new node ids."""
+    _check(core, other)
+    t = placement.transform
+    poses = se2_compose(np.broadcast_to(t, other.node_poses().shape), other.node_poses())
+    offset = len(core.nodes)
+    core.node_poses()  # folds in anything pending before the graph grows
+    for k, node in enumerate(other.nodes):
+        core.graph.add_node(poses[k])
+        core.nodes.append(dataclasses.replace(node, odom_pose=node.odom_pose.copy()))
+    for e in other.graph.edges:
+        core.graph.add_edge(
+            e.i + offset, e.j + offset, e.measurement, e.covariance, kind=e.kind, robust=e.robust
+        )
+    graph_poses = core.graph.poses
+    for lk in placement.links:
+        anchor = graph_poses[lk.anchor]
+        core.graph.add_edge(
+            lk.anchor,
+            lk.node + offset,
+            se2_between(anchor, lk.pose),
+            _rotate_covariance(lk.covariance, float(anchor[2])),
+            kind=EdgeKind.LOOP,
+        )
+    if not placement.links:
+        core.graph.add_edge(
+            0,
+            offset,
+            se2_between(graph_poses[0], poses[0]),
+            np.diag(HAND_PLACEMENT_SIGMAS**2),
+            kind=EdgeKind.LOOP,
+        )
+    core.graph.optimize(full=True)
+    # the next live scan starts a new chain: the last node is now the session's, not its own
+    core._state.last_processed_odom = None
+    core._global = None
+    return range(offset, len(core.nodes))
+
+
