@@ -18,7 +18,7 @@ import numpy.typing as npt
 from eddiebot.maps import OccupancyMap
 from eddiebot.nav.cost_values import FREE_SPACE, NO_INFORMATION
 from eddiebot.nav.costmap.costmap2d import Costmap2D
-from eddiebot.nav.costmap.filters import FILTER_PLUGINS, CostmapFilter, SpeedFilter
+from eddiebot.nav.costmap.filters import FILTER_PLUGINS, SpeedFilter
 from eddiebot.nav.costmap.footprint import (
     inscribed_and_circumscribed_radius,
     make_footprint_from_radius,
@@ -40,8 +40,9 @@ from eddiebot.nav.costmap.layers import (
     StaticLayerConfig,
     empty_bounds,
 )
-from eddiebot.nav.errors import ParameterError, UnsupportedPlugin
+from eddiebot.nav.errors import ParameterError
 from eddiebot.nav.params import from_params, require
+from eddiebot.nav.plugins import PluginContext, PluginFactory, registry
 
 
 @dataclass(frozen=True)
@@ -245,14 +246,8 @@ class LayeredCostmap:
 
 
 # --- plugins -----------------------------------------------------------------------------
-COSTMAP_PLUGINS: dict[str, type[Layer]] = {
-    "nav2_costmap_2d::StaticLayer": StaticLayer,
-    "nav2_costmap_2d::ObstacleLayer": ObstacleLayer,
-    "nav2_costmap_2d::VoxelLayer": ObstacleLayer,
-    "nav2_costmap_2d::InflationLayer": InflationLayer,
-    "nav2_costmap_2d::RangeSensorLayer": RangeLayer,
-    **FILTER_PLUGINS,
-}
+#: the ``costmap_layers`` registry: layers and filters (``plugins`` and ``filters`` lists)
+COSTMAP_PLUGINS = registry("costmap_layers")
 
 _DEFAULT_TYPES = {
     "static_layer": "nav2_costmap_2d::StaticLayer",
@@ -261,39 +256,59 @@ _DEFAULT_TYPES = {
 }
 
 
-def _layer_from_params(name: str, params: Mapping[str, Any], server: str) -> Layer:
+def _configured(cls: type[Any], config_cls: type[Any]) -> PluginFactory:
+    """Factory of a layer built as ``cls(name, config)``."""
+
+    def factory(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+        return cls(name, from_params(config_cls, params, server=context.where))
+
+    return factory
+
+
+def _obstacle_layer(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+    where = context.where
+    known = {f.name for f in fields(ObservationSourceConfig)}
+    sources: dict[str, ObservationSourceConfig] = {}
+    for src in str(params.get("observation_sources", "")).split():
+        sp = dict(params.get(src, {}) or {})
+        sources[src] = from_params(
+            ObservationSourceConfig, {k: v for k, v in sp.items() if k in known},
+            server=f"{where}.{src}",
+        )
+    plain = {k: v for k, v in params.items() if k != "sources" and not isinstance(v, dict)}
+    cfg = from_params(ObstacleLayerConfig, plain, server=where, validate=lambda c, s: None)
+    cfg = ObstacleLayerConfig(**{**cfg.__dict__, "sources": sources})
+    cfg.validate(where)
+    return ObstacleLayer(name, cfg)
+
+
+def _register_built_in_layers() -> None:
+    layers: dict[str, tuple[type[Any], type[Any]]] = {
+        "nav2_costmap_2d::StaticLayer": (StaticLayer, StaticLayerConfig),
+        "nav2_costmap_2d::InflationLayer": (InflationLayer, InflationLayerConfig),
+        "nav2_costmap_2d::RangeSensorLayer": (RangeLayer, RangeLayerConfig),
+        **{t: (c, c.config_class) for t, c in FILTER_PLUGINS.items()},
+    }
+    for type_name, (cls, config_cls) in layers.items():
+        COSTMAP_PLUGINS.register(type_name, _configured(cls, config_cls), config_cls,
+                                 source="built-in")
+    # the obstacle layer's observation sources nest: its config dataclass does not list them
+    for type_name in ("nav2_costmap_2d::ObstacleLayer", "nav2_costmap_2d::VoxelLayer"):
+        COSTMAP_PLUGINS.register(type_name, _obstacle_layer, source="built-in")
+
+
+_register_built_in_layers()
+
+
+def _layer_from_params(name: str, params: Mapping[str, Any], config: CostmapConfig,
+                       server: str) -> Layer:
     sub = params.get(name, {}) or {}
     plugin = sub.get("plugin", _DEFAULT_TYPES.get(name))
     if plugin is None:
         raise ParameterError(server, f"{name}.plugin", None, "missing plugin type")
-    cls = COSTMAP_PLUGINS.get(plugin)
-    if cls is None:
-        raise UnsupportedPlugin(server, f"{name}.plugin", plugin,
-                             f"unknown costmap plugin; known: {sorted(COSTMAP_PLUGINS)}")
-    where = f"{server}.{name}"
-    if cls is StaticLayer:
-        return StaticLayer(name, from_params(StaticLayerConfig, sub, server=where))
-    if cls is InflationLayer:
-        return InflationLayer(name, from_params(InflationLayerConfig, sub, server=where))
-    if cls is RangeLayer:
-        return RangeLayer(name, from_params(RangeLayerConfig, sub, server=where))
-    if cls is ObstacleLayer:
-        known = {f.name for f in fields(ObservationSourceConfig)}
-        sources: dict[str, ObservationSourceConfig] = {}
-        for src in str(sub.get("observation_sources", "")).split():
-            sp = dict(sub.get(src, {}) or {})
-            sources[src] = from_params(
-                ObservationSourceConfig, {k: v for k, v in sp.items() if k in known},
-                server=f"{where}.{src}",
-            )
-        plain = {k: v for k, v in sub.items() if k != "sources" and not isinstance(v, dict)}
-        cfg = from_params(ObstacleLayerConfig, plain, server=where, validate=lambda c, s: None)
-        cfg = ObstacleLayerConfig(**{**cfg.__dict__, "sources": sources})
-        cfg.validate(where)
-        return ObstacleLayer(name, cfg)
-    if issubclass(cls, CostmapFilter):
-        return cls(name, from_params(cls.config_class, sub, server=where))
-    return cls(name)  # pragma: no cover
+    layer: Layer = COSTMAP_PLUGINS.create(str(plugin), sub, name,
+                                          PluginContext(server, name, config))
+    return layer
 
 
 def build_costmap(params: Mapping[str, Any] | None = None, name: str = "costmap") -> LayeredCostmap:
@@ -308,9 +323,9 @@ def build_costmap(params: Mapping[str, Any] | None = None, name: str = "costmap"
     config = from_params(CostmapConfig, flat, server=name)
     costmap = LayeredCostmap(config, name)
     for lname in config.plugins:
-        costmap.add_layer(_layer_from_params(lname, params, name))
+        costmap.add_layer(_layer_from_params(lname, params, config, name))
     for fname in config.filters:
-        costmap.add_filter(_layer_from_params(fname, params, name))
+        costmap.add_filter(_layer_from_params(fname, params, config, name))
     return costmap
 
 

@@ -39,14 +39,10 @@ from eddiebot.nav.controllers.checkers import (
 )
 from eddiebot.nav.controllers.dwb import DWBConfig
 from eddiebot.nav.controllers.rpp import RegulatedPurePursuitConfig
-from eddiebot.nav.costmap.filters import CostmapFilter
 from eddiebot.nav.costmap.layered import COSTMAP_PLUGINS, CostmapConfig
 from eddiebot.nav.costmap.layers import (
-    InflationLayerConfig,
     ObservationSourceConfig,
     ObstacleLayerConfig,
-    RangeLayerConfig,
-    StaticLayerConfig,
 )
 from eddiebot.nav.errors import UnsupportedPlugin
 from eddiebot.nav.planners import PLANNER_PLUGINS, PlannerServerConfig
@@ -127,12 +123,12 @@ class _Audit:
             if plugin in kinds:
                 out[name] = kinds[plugin]
             elif isinstance(registry, PluginRegistry):
-                out[name] = self._installed(registry.resolve(plugin, server, f"{name}.plugin"))
+                out[name] = self._config_keys(registry.resolve(plugin, server, f"{name}.plugin"))
         return out
 
-    def _installed(self, entry: PluginType) -> Callable[[str, dict[str, Any]], None]:
-        """A registered or installed plugin's keys: its config's fields, or all kept when it
-        names no config (its own ``from_params`` reads them)."""
+    def _config_keys(self, entry: PluginType) -> Callable[[str, dict[str, Any]], None]:
+        """A registry type's keys: the fields of its config dataclass, or all of them kept
+        when it names none (a plugin from another package: its own factory reads them)."""
         config = entry.config
         if config is None:
             return lambda w, d: None
@@ -140,28 +136,14 @@ class _Audit:
 
 
 def _audit_costmap(a: _Audit, where: str, params: dict[str, Any], server: str) -> None:
-    def layer_keys(cls: type[Any]) -> Callable[[str, dict[str, Any]], None]:
-        return lambda w, d: a.keys(w, d, _fields(cls) | {"plugin"})
-
     def obstacle(w: str, d: dict[str, Any]) -> None:
         sources = _names(d.get("observation_sources", ""))
         nested = {s: (lambda ww, dd: a.keys(ww, dd, _fields(ObservationSourceConfig)))
                   for s in sources}
         a.keys(w, d, (_fields(ObstacleLayerConfig) - {"sources"}) | {"plugin"}, nested)
 
-    kinds: dict[str, Callable[[str, dict[str, Any]], None]] = {}
-    for plugin, cls in COSTMAP_PLUGINS.items():
-        name = cls.__name__
-        if name == "ObstacleLayer":
-            kinds[plugin] = obstacle
-        elif name == "StaticLayer":
-            kinds[plugin] = layer_keys(StaticLayerConfig)
-        elif name == "InflationLayer":
-            kinds[plugin] = layer_keys(InflationLayerConfig)
-        elif name == "RangeLayer":
-            kinds[plugin] = layer_keys(RangeLayerConfig)
-        elif issubclass(cls, CostmapFilter):
-            kinds[plugin] = layer_keys(cls.config_class)
+    # the other layers' keys are their config dataclasses' fields (``_Audit._config_keys``)
+    kinds = {"nav2_costmap_2d::ObstacleLayer": obstacle, "nav2_costmap_2d::VoxelLayer": obstacle}
     default = {"static_layer": "nav2_costmap_2d::StaticLayer",
                "obstacle_layer": "nav2_costmap_2d::ObstacleLayer",
                "inflation_layer": "nav2_costmap_2d::InflationLayer"}
