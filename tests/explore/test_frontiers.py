@@ -22,6 +22,7 @@ from eddiebot.explore import (
     reachable_mask,
     search_frontiers,
 )
+from eddiebot.explore.config import EDDIE_EXPLORE_PARAMS
 from eddiebot.explore.frontiers import UNKNOWN_BLOCKING, mark_swept
 from eddiebot.maps import OccupancyMap
 
@@ -297,3 +298,23 @@ def test_a_visit_is_unproductive_only_when_it_promised_area_and_showed_none() ->
     low = Track(1, (0.0, 0.0), known_at_goal=10.0, expected=0.3, arrived=True)
     low.judge_visit(10.1)
     assert low.visits == 0 and low.idle == 1
+
+
+def test_a_frontier_round_a_corner_is_looked_at_from_where_the_camera_sees_past_it() -> None:
+    # an L of known floor (a maze's first corner): the robot in the upper-left room, the
+    # unknown beyond the corner north of the lower room's east half, behind the wall the
+    # robot faces; a spot near the robot looking along that wall sees a sliver past its end
+    config = ExploreConfig.from_mapping(dict(EDDIE_EXPLORE_PARAMS))
+    d = np.full((100, 200), -1, np.int8)
+    d[20:50, 10:91] = 0  # lower room: x 0.5-4.55, y 1.0-2.5
+    d[50:81, 10:55] = 0  # upper-left room: x 0.5-2.75, y 2.5-4.05
+    d[19, 9:92] = d[81, 9:56] = 100
+    d[19:82, 9] = d[19:50, 91] = 100
+    d[50:82, 55] = 100  # the wall between that room and the unknown beyond the corner
+    g = OccupancyMap(d, RES, (0.0, 0.0, 0.0))
+    (f,) = search_frontiers(g, (1.5, 3.5, 0.0), config).frontiers
+    x, y, yaw = f.viewpoint
+    # from the lower room, east of the corner, looking north-east into the unknown
+    assert x > 2.5 and y < 2.2 and 0.3 < yaw < 1.8
+    assert f.gain > 1.5
+    assert information_gain(g, f.viewpoint, config) > 1.5

@@ -67,6 +67,9 @@ _CLOSER_WEIGHT = 1.5
 _VIEW_CANDIDATES = 10
 _SPOT_SPACING = 0.5
 _COARSE_RAYS = 24
+#: Viewpoint choice: a pose is a frontier's viewpoint only if it shows at least this share
+#: of the most any candidate pose of that frontier shows.
+_GAIN_SHARE = 0.5
 _EIGHT = np.ones((3, 3), dtype=bool)
 _FOUR = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], dtype=bool)
 
@@ -554,8 +557,12 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
                          wrap(bearings - ryaw) + wrap(poses[:, 2] - bearings))
         costs = (config.potential_scale * travels + config.orientation_scale * turns
                  - config.gain_scale * gains)
-        # a pose that shows nothing is no viewpoint, however near
-        j = int(np.argmin(np.where(gains >= config.min_gain, costs, costs + 1e6)))
+        # a pose that shows nothing is no viewpoint, however near; nor is one that shows
+        # little of what another pose shows of the same frontier: the cheapest of those
+        # showing at least _GAIN_SHARE of the best gain (else a near spot that sees a
+        # sliver wins, the robot drives there, and the frontier stays)
+        worth = gains >= max(config.min_gain, _GAIN_SHARE * float(gains.max()))
+        j = int(np.argmin(np.where(worth, costs, costs + 1e6)))
         found.append(Frontier(
             points=pts, size=float(sizes[k - 1]),
             centroid=(float(centroid[0]), float(centroid[1])),

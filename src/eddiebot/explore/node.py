@@ -315,16 +315,9 @@ class ExploreNode(Node):
         self._go_to(frontier, tid, now)
 
     def _goal_for(self, frontier: Frontier, tid: int) -> tuple[float, float, float]:
-        """The frontier's viewpoint; after a visit that showed nothing new (unknown cells the
-        gain counted through may be walls), the frontier's entry: drive up to it."""
-        x, y, yaw = frontier.viewpoint
-        track = self.tracker.tracks.get(tid)
-        if track is not None and track.visits >= 1:
-            ex, ey = frontier.entry
-            if math.hypot(ex - x, ey - y) > 0.1:
-                yaw = math.atan2(ey - y, ex - x)
-            x, y = ex, ey
-        return x, y, yaw
+        """The frontier's viewpoint. After an arrival that showed nothing new, the look
+        memory (`looks`) makes the next search's viewpoint another spot or heading."""
+        return frontier.viewpoint
 
     def _go_to(self, frontier: Frontier, tid: int, now: float) -> None:
         from eddiebot.msgs.nav2_msgs import NavigateToPose
