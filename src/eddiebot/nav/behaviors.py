@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from enum import Enum
+from typing import Any
 
 import numpy.typing as npt
 
@@ -23,8 +24,10 @@ from eddiebot.nav.errors import (
     BehaviorTimedOut,
     CollisionAhead,
     InvalidBehaviorInput,
+    UnsupportedPlugin,
 )
-from eddiebot.nav.params import require
+from eddiebot.nav.params import from_params, require
+from eddiebot.nav.plugins import NoParameters, PluginContext, PluginFactory, registry
 from eddiebot.nav.types import Twist2D, as_pose
 
 
@@ -266,37 +269,56 @@ class AssistedTeleop(_Timed):
 
 
 
-#: ``behavior_plugins`` registry (``pkg/Type`` spellings are normalised to ``pkg::Type``).
-BEHAVIOR_PLUGINS: dict[str, type[_Timed]] = {
-    "nav2_behaviors::Spin": Spin,
-    "nav2_behaviors::BackUp": BackUp,
-    "nav2_behaviors::DriveOnHeading": DriveOnHeading,
-    "nav2_behaviors::Wait": Wait,
-    "nav2_behaviors::AssistedTeleop": AssistedTeleop,
-}
+#: the ``behaviors`` plugin registry (``pkg/Type`` spellings are normalised to ``pkg::Type``);
+#: a factory gets the :class:`BehaviorServerConfig` as ``context.server_config``
+BEHAVIOR_PLUGINS = registry("behaviors")
+
+
+def _server_only(cls: type[_Timed]) -> PluginFactory:
+    """Factory of a behaviour with no parameters of its own: ``cls(server_config)``."""
+
+    def factory(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+        return cls(context.server_config)
+
+    return factory
+
+
+def _drive(cls: type[DriveOnHeading]) -> PluginFactory:
+    """``cls(server_config, DriveOnHeadingConfig)`` from the instance's parameters."""
+
+    def factory(params: dict[str, Any], name: str, context: PluginContext) -> Any:
+        return cls(context.server_config,
+                   from_params(DriveOnHeadingConfig, params, server=context.where))
+
+    return factory
+
+
+BEHAVIOR_PLUGINS.register("nav2_behaviors::Spin", _server_only(Spin), NoParameters,
+                          source="built-in")
+BEHAVIOR_PLUGINS.register("nav2_behaviors::BackUp", _drive(BackUp), DriveOnHeadingConfig,
+                          source="built-in")
+BEHAVIOR_PLUGINS.register("nav2_behaviors::DriveOnHeading", _drive(DriveOnHeading),
+                          DriveOnHeadingConfig, source="built-in")
+BEHAVIOR_PLUGINS.register("nav2_behaviors::Wait", _server_only(Wait), NoParameters,
+                          source="built-in")
+BEHAVIOR_PLUGINS.register("nav2_behaviors::AssistedTeleop", _server_only(AssistedTeleop),
+                          NoParameters, source="built-in")
 
 
 def build_behaviors(params: dict[str, object], server: str = "behavior_server"
-                    ) -> tuple[BehaviorServerConfig, dict[str, _Timed]]:
+                    ) -> tuple[BehaviorServerConfig, dict[str, Any]]:
     """Behaviour server config and ``{name: behaviour}`` from its ``ros__parameters``."""
-    from eddiebot.nav.errors import UnsupportedPlugin
-    from eddiebot.nav.params import from_params
-
     flat = {k: v for k, v in params.items() if not isinstance(v, dict)}
     cfg = from_params(BehaviorServerConfig, flat, server=server)
-    out: dict[str, _Timed] = {}
+    out: dict[str, Any] = {}
     for name in cfg.behavior_plugins:
         sub = params.get(name, {})
-        plugin = str(sub.get("plugin", "")) if isinstance(sub, dict) else ""
-        cls = BEHAVIOR_PLUGINS.get(plugin.replace("/", "::"))
-        if cls is None:
-            raise UnsupportedPlugin(server, f"{name}.plugin", plugin or None,
-                                 f"unknown behaviour plugin; known: {sorted(BEHAVIOR_PLUGINS)}")
-        if issubclass(cls, DriveOnHeading):
-            keys = {k: v for k, v in sub.items() if k != "plugin"} if isinstance(sub, dict) else {}
-            out[name] = cls(cfg, from_params(DriveOnHeadingConfig, keys, server=f"{server}.{name}"))
-        else:
-            out[name] = cls(cfg)
+        sub = sub if isinstance(sub, dict) else {}
+        plugin = str(sub.get("plugin", ""))
+        if not plugin:
+            raise UnsupportedPlugin(server, f"{name}.plugin", None,
+                                    f"missing plugin type; known: {sorted(BEHAVIOR_PLUGINS)}")
+        out[name] = BEHAVIOR_PLUGINS.create(plugin, sub, name, PluginContext(server, name, cfg))
     return cfg, out
 
 

@@ -32,6 +32,7 @@ from eddiebot.nav.errors import UnsupportedPlugin
 __all__ = [
     "ENTRY_POINT_PREFIX",
     "KINDS",
+    "NoParameters",
     "PluginContext",
     "PluginFactory",
     "PluginRegistry",
@@ -52,6 +53,11 @@ KINDS = ("controllers", "progress_checkers", "goal_checkers", "planners", "smoot
 def plugin_key(name: str) -> str:
     """``pkg/Type`` (Humble) and ``pkg::Type`` (Jazzy) name the same plugin."""
     return name.replace("/", "::")
+
+
+@dataclass(frozen=True)
+class NoParameters:
+    """The config of a plugin type that reads no parameters of its own (besides ``plugin``)."""
 
 
 @dataclass(frozen=True)

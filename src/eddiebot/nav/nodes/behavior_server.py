@@ -37,6 +37,7 @@ from eddiebot.nav.errors import (
     BehaviorTimedOut,
     CollisionAhead,
     InvalidBehaviorInput,
+    ParameterError,
 )
 from eddiebot.nav.nodes._common import NavServer, robot_pose, twist_from_msg, twist_to_msg
 from eddiebot.nav.nodes.smoother_server import costmap_from_raw
@@ -96,6 +97,12 @@ class BehaviorServer(NavServer):
                 tree.pop(key, None)
             # Humble spelled the local frame global_frame; Jazzy has both.
             self.config, self.behaviors = build_behaviors(tree, server=self.get_name())
+            for name, beh in self.behaviors.items():
+                if not isinstance(beh, (Spin, DriveOnHeading, Wait, AssistedTeleop)):
+                    raise ParameterError(
+                        self.get_name(), f"{name}.plugin", type(beh).__qualname__,
+                        "a behaviour serves the action of the nav2_behaviors type it extends "
+                        "(Spin, BackUp, DriveOnHeading, Wait or AssistedTeleop)")
             self._cmd_pub = self.create_lifecycle_publisher(Twist, "cmd_vel", 1)
         return self.configure_with(build)
 
@@ -120,7 +127,8 @@ class BehaviorServer(NavServer):
         kinds = {Spin: SpinAction, BackUp: BackUpAction, DriveOnHeading: DriveOnHeadingAction,
                  Wait: WaitAction, AssistedTeleop: AssistedTeleopAction}
         for name, beh in self.behaviors.items():
-            action = kinds[type(beh)]
+            # a plugin extending a built-in behaviour serves that behaviour's action
+            action = next(kinds[c] for c in type(beh).__mro__ if c in kinds)
             self._actions.append(ActionServer(
                 self, action, name, self._executor_for(name, action),
                 cancel_callback=lambda _h: CancelResponse.ACCEPT))

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from eddiebot.nav.amcl import AmclConfig
-from eddiebot.nav.behaviors import BEHAVIOR_PLUGINS, BehaviorServerConfig, DriveOnHeadingConfig
+from eddiebot.nav.behaviors import BEHAVIOR_PLUGINS, BehaviorServerConfig
 from eddiebot.nav.collision_monitor import CollisionMonitorConfig, PolygonConfig
 from eddiebot.nav.controllers import (
     CONTROLLER_PLUGINS,
@@ -233,11 +233,8 @@ def _audit_smoother_server(a: _Audit, params: dict[str, Any]) -> None:
 
 def _audit_behavior_server(a: _Audit, params: dict[str, Any]) -> None:
     server = "behavior_server"
-    kinds = {p: (lambda w, d: a.keys(w, d, {"plugin"})) for p in BEHAVIOR_PLUGINS}
-    for p in ("nav2_behaviors::DriveOnHeading", "nav2_behaviors::BackUp"):
-        kinds[p] = lambda w, d: a.keys(w, d, _fields(DriveOnHeadingConfig) | {"plugin"})
     names = _names(params.get("behavior_plugins", list(BehaviorServerConfig().behavior_plugins)))
-    nested = a.plugins(server, params, names, kinds, {}, BEHAVIOR_PLUGINS, server)
+    nested = a.plugins(server, params, names, {}, {}, BEHAVIOR_PLUGINS, server)
     a.keys(server, params, _node_keys(server) | _fields(BehaviorServerConfig), nested)
 
 
