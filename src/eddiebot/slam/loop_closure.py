@@ -3,7 +3,11 @@
 Candidates: earlier nodes within ``loop_search_maximum_distance`` of the current node that are
 *not* reachable from it through graph edges while staying within that distance (the recent
 chain and anything already linked to it), grouped into runs of consecutive node ids; a run
-counts if it holds at least ``loop_match_minimum_chain_size`` nodes.
+counts if it holds at least ``loop_match_minimum_chain_size`` nodes — or, where nodes lie
+further apart than ``minimum_travel_distance`` (scans sparser than the travel gate, as in logs
+recorded at one scan a metre), if its path is as long as that many nodes would span at the
+travel gate, ``(loop_match_minimum_chain_size - 1) * minimum_travel_distance``. Karto counts
+nodes only, so on sparse scans no run of its default 10 fits in the 3 m search circle.
 
 Verification: a coarse match over the loop search window (``loop_search_space_*``, no
 penalty) must give a response > ``loop_match_minimum_response_coarse`` with x and y variances
@@ -74,14 +78,28 @@ def find_loop_candidates(
     *,
     max_distance: float,
     min_chain_size: int,
+    min_chain_length: float | None = None,
     active: npt.NDArray[np.bool_] | None = None,
 ) -> list[tuple[int, ...]]:
-    """Runs of consecutive earlier node ids near ``current`` and not in ``linked``."""
+    """Runs of consecutive earlier node ids near ``current`` and not in ``linked``.
+
+    A run counts with ``min_chain_size`` nodes, or with fewer whose path (through their
+    ``positions``) is at least ``min_chain_length`` metres long.
+    """
     origin = positions[current]
     d = np.hypot(positions[:current, 0] - origin[0], positions[:current, 1] - origin[1])
     near = d <= max_distance
     if active is not None:
         near &= active[:current]
+
+    def counts(run: list[int]) -> bool:
+        if len(run) >= min_chain_size:
+            return True
+        if min_chain_length is None or len(run) < 2:
+            return False
+        steps = np.diff(positions[run[0] : run[-1] + 1], axis=0)
+        return float(np.hypot(steps[:, 0], steps[:, 1]).sum()) >= min_chain_length
+
     chains: list[tuple[int, ...]] = []
     chain: list[int] = []
     # only the near ids are visited (a run breaks at any gap in them)
@@ -89,11 +107,11 @@ def find_loop_candidates(
         if idx in linked:
             continue
         if chain and idx != chain[-1] + 1:
-            if len(chain) >= min_chain_size:
+            if counts(chain):
                 chains.append(tuple(chain))
             chain = []
         chain.append(idx)
-    if len(chain) >= min_chain_size:
+    if chain and counts(chain):
         chains.append(tuple(chain))
     return chains
 

@@ -336,6 +336,8 @@ class Mapping(ScanMatching):
                 linked,
                 max_distance=cfg.loop_search_maximum_distance,
                 min_chain_size=cfg.loop_match_minimum_chain_size,
+                min_chain_length=(cfg.loop_match_minimum_chain_size - 1)
+                * cfg.minimum_travel_distance,
                 active=self._active_nodes(),
             )
             found: LoopClosure | None = None
