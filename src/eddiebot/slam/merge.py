@@ -11,7 +11,9 @@ pose into one grid; the graphs stay apart. Here a session is merged into the gra
    clustered and the largest cluster wins), or from a given transform (the user's placement).
    Each sampled node is then matched against the current nodes near its placed pose (the
    loop-closure search window and thresholds); every match that agrees with the placement is a
-   `MergeLink`.
+   `MergeLink`. A placement found by search needs two links (one for a single-node session):
+   a featureless corridor can relocalise somewhere in a room, but its scans then do not match
+   the nodes there.
 2. `merge_session` appends the session's nodes (scans, odometry, retired flags) and edges to
    the graph, its poses moved by the transform, adds each link as a loop edge (the links
    were vetted together, so they skip the χ² gate), and re-optimises. A session placed by
@@ -191,14 +193,15 @@ def place_session(
     if transform is None:
         found = _relocalized_transforms(core, other, picks)
         relocalized = len(found)
-        cluster = _largest_cluster(found)
-        if not cluster:
+        cluster_found = _largest_cluster(found)
+        if not cluster_found:
             raise MergeError(
                 f"none of the {len(picks)} sampled nodes of the session relocalised in the "
                 "current map: place it by hand (give its pose) or map where the sessions overlap"
             )
-        guess = _mean_transform(cluster)
+        guess = _mean_transform(cluster_found)
     else:
+        cluster_found = []
         guess = np.asarray(transform, dtype=np.float64).reshape(3).copy()
         if not np.all(np.isfinite(guess)):
             raise MergeError(f"placement {guess.tolist()} is not a finite (x, y, theta)")
@@ -215,6 +218,12 @@ def place_session(
         lk for lk, t in zip(links, implied)
         if any(t is c for c in cluster) and (transform is not None or _agree(t, guess))
     ]
+    if transform is None and len(keep) < min(2, len(picks)):
+        raise MergeError(
+            f"{len(cluster_found)} of {len(picks)} sampled nodes of the session relocalised in "
+            f"the current map, but {len(keep)} matched the nodes near where they placed it: "
+            "not placed (place it by hand, or map where the sessions overlap)"
+        )
     if keep:
         final = _mean_transform([se2_compose(lk.pose, se2_inverse(poses[lk.node])) for lk in keep])
     else:
