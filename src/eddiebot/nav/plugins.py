@@ -116,6 +116,10 @@ class PluginRegistry(Mapping[str, PluginType]):
         self._types[key] = PluginType(key, factory, config, source)
         self._failed.pop(key, None)
 
+    def unregister(self, type_name: str) -> None:
+        """Remove a registered type (an installed one is found again at the next lookup)."""
+        self._types.pop(plugin_key(type_name), None)
+
     def _installed(self) -> dict[str, metadata.EntryPoint]:
         if self._entry_points is None:
             self._entry_points = {plugin_key(ep.name): ep
