@@ -28,7 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import print_table, write_results
 
 COLUMNS = ["world", "seed", "reason", "coverage", "map_agreement", "ate_m", "distance_m",
-           "explore_time_s", "sim_time_s", "wall_time_s", "turning_share", "collisions",
+           "explore_time_s", "sim_time_s", "wall_time_s", "turning_share", "waiting_share",
+           "collisions",
            "returned_home", "frontiers_visited", "frontiers_abandoned"]
 
 

@@ -46,6 +46,8 @@ RETURN_ALLOWANCE = 300.0
 #: SLAM settings for exploring: the frontiers are judged on a map at most 2 s old
 #: (slam_toolbox publishes every 5 s by default).
 SLAM_OVERRIDES: dict[str, Any] = {"map_update_interval": 2.0}
+#: The coverage curve's sampling period (exploring time, s).
+CURVE_PERIOD = 60.0
 #: Without a time limit, exploration stops after this long anyway (sim s).
 DEFAULT_CAP = 3600.0
 
@@ -69,6 +71,12 @@ class ExploreResult:
     home_failure: str = ""
     """Why the robot is not home: the last goal home's failure, or where it ended."""
     turning_share: float = math.nan
+    waiting_share: float = math.nan
+    """Share of the time standing still (neither driving nor turning): between goals,
+    waiting for a plan or a map."""
+    coverage_curve: list[tuple[float, float]] = field(default_factory=list)
+    """(exploring time s, coverage) every ``CURVE_PERIOD`` s, on the map the explore node
+    had then."""
     frontiers_visited: int = 0
     frontiers_abandoned: int = 0
     goals_sent: int = 0
@@ -85,7 +93,8 @@ class ExploreResult:
         """The figures report.json holds (JSON-ready)."""
         keys = ("world", "seed", "reason", "coverage", "map_agreement", "map_agreement_tolerant",
                 "ate_m", "distance_m", "sim_time_s", "explore_time_s", "wall_time_s", "collisions",
-                "returned_home", "home_error_m", "home_failure", "turning_share", "frontiers_visited",
+                "returned_home", "home_error_m", "home_failure", "turning_share", "waiting_share",
+                "frontiers_visited",
                 "frontiers_abandoned", "goals_sent", "reachable_area_m2", "mapped_free_m2",
                 "interrupted")
         out: dict[str, Any] = {}
@@ -93,6 +102,7 @@ class ExploreResult:
             v = getattr(self, k)
             out[k] = None if isinstance(v, float) and math.isnan(v) else v
         out["map_to_world"] = list(self.map_to_world)
+        out["coverage_curve"] = [[round(t, 1), round(c, 4)] for t, c in self.coverage_curve]
         out["abandoned"] = self.abandoned
         out["goals"] = self.goals
         return out
@@ -191,16 +201,19 @@ def _pose_of(msg: Any) -> tuple[float, float, float]:
 
 
 def turning_share(times_s: npt.NDArray[np.float64], poses: npt.NDArray[np.float64],
-                  min_rate: float = 0.2, max_speed: float = 0.05) -> float:
+                  min_rate: float = 0.2, max_speed: float = 0.05, *,
+                  still: bool = False) -> float:
     """Share of the time spent turning in place (|ω| > ``min_rate`` rad/s while moving
-    slower than ``max_speed`` m/s), from poses (N, 3) sampled at ``times_s``."""
+    slower than ``max_speed`` m/s), from poses (N, 3) sampled at ``times_s``; with
+    ``still``, the share standing still instead (|ω| ≤ ``min_rate``, slower than
+    ``max_speed``)."""
     if len(poses) < 2:
         return math.nan
     dt = np.diff(times_s)
     ok = dt > 0
     speed = np.hypot(np.diff(poses[:, 0]), np.diff(poses[:, 1]))[ok] / dt[ok]
     dyaw = np.abs((np.diff(poses[:, 2]) + np.pi) % (2 * np.pi) - np.pi)[ok] / dt[ok]
-    turning = (dyaw > min_rate) & (speed < max_speed)
+    turning = (dyaw <= min_rate if still else dyaw > min_rate) & (speed < max_speed)
     total = float(np.sum(dt[ok]))
     return float(np.sum(dt[ok][turning]) / total) if total > 0 else math.nan
 
@@ -244,9 +257,19 @@ def run_exploration(out_dir: Path, *, world: str = "office", seed: int = 0,
     for n in nodes:
         executor.add_node(n)
     cap = (time_limit or DEFAULT_CAP) + RETURN_ALLOWANCE + 60.0
+    gt = cached_ground_truth(sim.world)
+    area = reachable_free_area(gt.footprint, (start[0], start[1]), ROBOT_RADIUS)
+    next_sample = 0.0
     t0 = time.perf_counter()
     try:
         while explore.state is not ExploreState.DONE:
+            began = explore.started_s
+            if (began is not None and explore.grid is not None
+                    and explore.state is ExploreState.EXPLORING
+                    and context.sim_clock.now_ns() / 1e9 - began >= next_sample):
+                result.coverage_curve.append((next_sample, coverage(
+                    explore.grid, area, gt.footprint, start)))  # type: ignore[arg-type]
+                next_sample += CURVE_PERIOD
             if time.perf_counter() - t0 > wall_timeout_s:
                 explore.stop("wall-clock timeout")
                 break
@@ -274,6 +297,7 @@ def run_exploration(out_dir: Path, *, world: str = "office", seed: int = 0,
     if len(tr) > 1:
         result.distance_m = float(np.sum(np.hypot(np.diff(tr[:, 1]), np.diff(tr[:, 2]))))
         result.turning_share = turning_share(tr[:, 0], tr[:, 1:])
+        result.waiting_share = turning_share(tr[:, 0], tr[:, 1:], still=True)
         result.home_error_m = float(math.hypot(tr[-1, 1] - start[0], tr[-1, 2] - start[1]))
         result.returned_home = bool(explore.returned_home) and result.home_error_m <= HOME_TOLERANCE
         if explore.config.return_to_init and not result.interrupted and not result.returned_home:
@@ -293,8 +317,6 @@ def run_exploration(out_dir: Path, *, world: str = "office", seed: int = 0,
     result.grid = grid
     out_dir.mkdir(parents=True, exist_ok=True)
     slam.save_outputs(out_dir)  # the session, and the map as nav2 map_server files
-    gt = cached_ground_truth(sim.world)
-    area = reachable_free_area(gt.footprint, (start[0], start[1]), ROBOT_RADIUS)
     result.reachable_area_m2 = float(area.sum() * gt.footprint.resolution**2)
     result.coverage = coverage(grid, area, gt.footprint, start)  # type: ignore[arg-type]
     result.mapped_free_m2 = float(np.sum((grid.data >= 0) & (grid.data <= 19)) * grid.resolution**2)

@@ -164,6 +164,11 @@ class ExploreNode(Node):
             self.paused = True
             self._cancel_goal()
 
+    @property
+    def started_s(self) -> float | None:
+        """When exploring began (s, node clock: the look-around), or None before."""
+        return self._started_s
+
     def _now_s(self) -> float:
         return self.get_clock().now_ns() / 1e9
 

@@ -83,6 +83,10 @@ def write_report(result: ExploreResult, out: Path) -> tuple[Path, Path]:
         ("sim time (exploring / in all)", f"{result.explore_time_s:.0f} s / {result.sim_time_s:.0f} s"),
         ("wall time", f"{result.wall_time_s:.0f} s"),
         ("share of the time turning in place", _fmt(result.turning_share, pct=True)),
+        ("share of the time standing still", _fmt(result.waiting_share, pct=True)),
+        ("coverage after exploring 1, 2, 5, 10, 15, 20, 30 min",
+         " / ".join(_fmt(c, pct=True) for t, c in result.coverage_curve
+                    if round(t) in (60, 120, 300, 600, 900, 1200, 1800)) or "n/a"),
         ("collisions", str(result.collisions)),
         ("returned home", f"{result.returned_home} ({_fmt(result.home_error_m, ' m')} from the start)"
          + (f": {result.home_failure}" if result.home_failure else "")),
