@@ -20,6 +20,7 @@ from eddiebot.viz.dashboard.errors import CommandError, RateLimitedError
 
 __all__ = [
     "MAX_COMMAND_BYTES",
+    "SLAM_COMMANDS",
     "VIEWS",
     "Command",
     "GridMeta",
@@ -131,9 +132,16 @@ class Command:
     y1: float = 0.0
     #: keepout: clear every zone instead of painting one
     clear: bool = False
+    #: slam: the action (`SLAM_COMMANDS`), the node a ``move`` drags, the session ``merge`` adds
+    action: str = ""
+    node: int = -1
+    path: str = ""
 
 
-_OPS = {"goal", "initialpose", "teleop", "estop", "cancel", "save_map", "ping", "view", "keepout"}
+_OPS = {"goal", "initialpose", "teleop", "estop", "cancel", "save_map", "ping", "view", "keepout",
+        "slam"}
+#: the ``slam`` command's actions (2D SLAM graph editing, `eddiebot.viz.dashboard.slam_edit`)
+SLAM_COMMANDS = ("interactive", "move", "close_loop", "clear", "merge")
 #: views a connection opens on request (``{"op": "view", "name": ..., "engage": bool}``);
 #: they change what the page receives, never the robot, so a read-only page may open them
 VIEWS = ("tf", "cloud")
@@ -219,6 +227,8 @@ def _parse_op(op: str, obj: dict[str, Any],
                     f"keepout ({x0:.2f}, {y0:.2f})..({x1:.2f}, {y1:.2f}) is outside the map "
                     f"[{xmin:.2f}, {xmax:.2f}] x [{ymin:.2f}, {ymax:.2f}]")
         return Command(op, x=x0, y=y0, x1=x1, y1=y1)
+    if op == "slam":
+        return _parse_slam(obj)
     if op == "view":
         name, engage = obj.get("name"), obj.get("engage")
         if name not in VIEWS:
@@ -227,6 +237,25 @@ def _parse_op(op: str, obj: dict[str, Any],
             raise CommandError("view: 'engage' must be true or false")
         return Command(op, name=str(name), engage=engage)
     return Command(op)
+
+
+def _parse_slam(obj: dict[str, Any]) -> Command:
+    action = obj.get("action")
+    if action not in SLAM_COMMANDS:
+        raise CommandError(f"slam: 'action' must be one of {', '.join(SLAM_COMMANDS)}, got {action!r}")
+    if action == "move":
+        node = obj.get("node")
+        if isinstance(node, bool) or not isinstance(node, int) or node < 0:
+            raise CommandError(f"slam move: 'node' must be a node id (an integer ≥ 0), got {node!r}")
+        x, y = _finite(obj, "x"), _finite(obj, "y")
+        yaw = _finite(obj, "yaw") if "yaw" in obj else 0.0
+        return Command("slam", action="move", node=node, x=x, y=y, yaw=math.remainder(yaw, 2 * math.pi))
+    if action == "merge":
+        path = obj.get("path")
+        if not isinstance(path, str) or not path.strip() or len(path) > 1000 or "\x00" in path:
+            raise CommandError("slam merge: 'path' must be the session file's path")
+        return Command("slam", action="merge", path=path.strip())
+    return Command("slam", action=str(action))
 
 
 @dataclass

@@ -7,7 +7,8 @@ publish directly. The layers are converted by groups, each a module:
 :mod:`~eddiebot.viz.dashboard.grids` (map, costmaps, keepout mask),
 :mod:`~eddiebot.viz.dashboard.robot` (pose, footprint, sensors),
 :mod:`~eddiebot.viz.dashboard.plans` (plans, goal, particles, lookahead),
-:mod:`~eddiebot.viz.dashboard.views` (vSLAM graph, TF view, point clouds) and
+:mod:`~eddiebot.viz.dashboard.views` (vSLAM graph, TF view, point clouds),
+:mod:`~eddiebot.viz.dashboard.slam_edit` (2D SLAM graph and its editing) and
 :mod:`~eddiebot.viz.dashboard.status` (status, log, velocity mux source). This module wires
 them: subscriptions, publishers, timers and the page's commands.
 """
@@ -45,6 +46,7 @@ from eddiebot.viz.dashboard.robot import (
     RobotLayers,
     footprint_from_urdf,
 )
+from eddiebot.viz.dashboard.slam_edit import SlamEditLayers
 from eddiebot.viz.dashboard.status import StatusLayers
 from eddiebot.viz.dashboard.topics import DashboardTopics
 from eddiebot.viz.dashboard.views import MAX_CLOUD_POINTS, MAX_LIVE_POINTS, ViewLayers
@@ -54,7 +56,7 @@ __all__ = ["FOOTPRINT_RADIUS", "GRID_LAYERS", "MAX_CLOUD_POINTS", "MAX_LIVE_POIN
            "DashboardNode", "DashboardTopics", "footprint_from_urdf"]
 
 
-class DashboardNode(GridLayers, RobotLayers, PlanLayers, ViewLayers, StatusLayers):
+class DashboardNode(GridLayers, RobotLayers, PlanLayers, ViewLayers, StatusLayers, SlamEditLayers):
     """Turns topics into dashboard frames and browser commands into topics, actions and calls."""
 
     def __init__(self, hub: Hub, *, context: Context | None = None, name: str = "eddie_dashboard",
@@ -153,6 +155,7 @@ class DashboardNode(GridLayers, RobotLayers, PlanLayers, ViewLayers, StatusLayer
         self._sub(cloud, t.cloud_map, functools.partial(self._on_cloud, "cloud_map"), qos_profile_latched)
         self._sub(cloud, t.points, functools.partial(self._on_cloud, "points"), qos_profile_sensor_data)
         self._sub(grid, t.keepout_mask, self._on_keepout_mask, qos_profile_latched)
+        self._setup_slam_edit()
         self._subscribe_mux()
         try:
             self._mux_params = ParameterClient(self, t.twist_mux)
@@ -181,6 +184,7 @@ class DashboardNode(GridLayers, RobotLayers, PlanLayers, ViewLayers, StatusLayer
         self._replay_unplaced()
         self._poll_mux_params()
         self._send_views(now)
+        self._send_slam_graph()
         self.hub.post("status", text_frame(
             "status", frame=self.display_frame, rates=rates, age=age, problems=dict(self._problems),
             nav_server=self._nav.server_is_ready(), estop=self._estop, mux=self.mux_state(now),

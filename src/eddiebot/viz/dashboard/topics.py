@@ -38,3 +38,5 @@ class DashboardTopics:
     twist_mux: str = "/twist_mux"
     keepout_mask: str = "/keepout_filter_mask"
     keepout_mask_server: str = "/keepout_filter_mask_server/load_map"
+    #: slam_toolbox's node: its graph, editing services and marker feedback live under it
+    slam_namespace: str = "/slam_toolbox"

@@ -23,6 +23,7 @@
     ["particles", "AMCL particles", true, [[COLOURS.particles, "/particle_cloud"]]],
     ["plans", "plans", true, [[COLOURS.plan, "global path"], [COLOURS.local_plan, "local plan"], [COLOURS.lookahead, "lookahead"], [COLOURS.goal, "goal"]]],
     ["footprint", "footprint", true, [[COLOURS.footprint, "URDF"], ["#ffffff", "costmap"]]],
+    ["slam_graph", "SLAM graph", true, [["#3a6bff", "nodes"], ["#2fbf4f", "edges"], ["#ffb000", "staged moves"]]],
     ["graph", "vSLAM graph", true, [["#ff8000", "nodes"], ["#0099ff", "links"], ["#ff0000", "loop closures"]]],
     ["tf", "TF frames", false, [["#f44", "x"], ["#4f4", "y"]]],
   ];
@@ -35,6 +36,9 @@
     drag: null, tilesDrawn: 0, lastError: null, lastAck: null, cursor: null,
     drawn: { particles: 0, graphNodes: 0, loops: 0, tfFrames: 0, gridStep: 0 },
     view3d: null, clouds: {},
+    // 2D SLAM graph editing: the graph (node i at nodes[2i], nodes[2i+1]), interactive mode
+    // as the page last switched it, and the moves staged since (node id → [x, y])
+    slamGraph: null, slamEdit: false, staged: {},
   };
   let ws = null;
   let dirty = true;
@@ -112,6 +116,7 @@
       case "lookahead": state.lookahead = m; break;
       case "footprint": state.footprintPoly = m.pts; break;
       case "tf": state.tf = m.frames; break;
+      case "slam_graph": state.slamGraph = m; $("slam-count").textContent = `${m.count} nodes${state.slamEdit ? ", editing" : ""}`; break;
       case "graph": state.graph = m; $("graph-count").textContent = `${m.nodes} nodes, ${m.loops} loop closures`; break;
       case "path": state.paths[m.name] = m.pts; break;
       case "goal": state.goal = m.pose; state.goalStatus = m.status; showGoal(); break;
@@ -122,7 +127,11 @@
         $("estop").classList.toggle("locked", m.locked);
         $("estop").textContent = m.locked ? "E-STOP ENGAGED — click to release" : "EMERGENCY STOP";
         break;
-      case "ack": state.lastAck = m; if (m.op !== "view") notice(m.msg, false); break;
+      case "ack":
+        state.lastAck = m;
+        if (m.op === "slam") slamAcked(m.action);
+        if (m.op !== "view") notice(m.msg, false);
+        break;
       case "error": state.lastError = m; notice(m.msg, true); break;
       default: break;
     }
@@ -255,6 +264,7 @@
     const px = 1 / state.view.scale;
     if (shown("show-grid")) drawGrid(px);
     if (shown("show-graph") && state.graph) drawGraph(px);
+    if (shown("show-slam_graph") && state.slamGraph) drawSlamGraph(px);
     if (shown("show-particles") && state.particles) drawParticles(px);
     else state.drawn.particles = 0;
     if (shown("show-plans")) {
@@ -378,6 +388,45 @@
     }
     state.drawn.graphNodes = nodes; state.drawn.loops = loops;
   }
+  function drawSlamGraph(px) {
+    const g = state.slamGraph, e = g.edges, n = g.nodes;
+    ctx.strokeStyle = "#2fbf4f"; ctx.lineWidth = 1 * px; ctx.beginPath();
+    for (let i = 0; i + 3 < e.length; i += 4) { ctx.moveTo(e[i], e[i + 1]); ctx.lineTo(e[i + 2], e[i + 3]); }
+    ctx.stroke();
+    const d = Math.max(0.05, (state.slamEdit ? 7 : 4) * px);
+    ctx.fillStyle = "#3a6bff";
+    for (let i = 0; i + 1 < n.length; i += 2) ctx.fillRect(n[i] - d / 2, n[i + 1] - d / 2, d, d);
+    const moves = Object.entries(state.staged);
+    const dr = state.drag && state.drag.kind === "slamnode" ? state.drag : null;
+    if (dr) moves.push([String(dr.node), [dr.x1, dr.y1]]);
+    ctx.strokeStyle = "#ffb000"; ctx.fillStyle = "#ffb000"; ctx.lineWidth = 2 * px;
+    for (const [id, [x, y]] of moves) {
+      const k = 2 * Number(id);
+      if (k + 1 >= n.length) continue;
+      ctx.setLineDash([4 * px, 4 * px]); ctx.beginPath(); ctx.moveTo(n[k], n[k + 1]); ctx.lineTo(x, y); ctx.stroke();
+      ctx.setLineDash([]); ctx.fillRect(x - d / 2, y - d / 2, d, d);
+    }
+    state.drawn.slamNodes = n.length / 2; state.drawn.staged = Object.keys(state.staged).length;
+  }
+  // the graph node within 8 px of a screen point, or -1
+  function slamNodeAt(sx, sy) {
+    const n = state.slamGraph ? state.slamGraph.nodes : [];
+    let best = -1, bestD = 8;
+    for (let i = 0; i + 1 < n.length; i += 2) {
+      const [px, py] = worldToScreen(n[i], n[i + 1]);
+      const dd = Math.hypot(px - sx, py - sy);
+      if (dd <= bestD) { best = i / 2; bestD = dd; }
+    }
+    return best;
+  }
+  function slamAcked(action) {
+    if (action === "interactive") {
+      state.slamEdit = !state.slamEdit; state.staged = {};
+      $("slam-interactive").classList.toggle("active", state.slamEdit);
+    } else if (action === "close_loop" || action === "clear") {
+      state.staged = {};
+    }
+  }
   function drawFrames(px) {
     const len = Math.max(0.2, 25 * px);
     for (const [name, x, y, yaw] of state.tf) {
@@ -455,12 +504,22 @@
   $("estop").addEventListener("click", () => { releaseKeys(false); send({ op: "estop" }); });
   $("save-map").addEventListener("click", () => send({ op: "save_map", name: $("map-name").value.trim() }));
   $("follow").addEventListener("change", (e) => { state.follow = e.target.checked; dirty = true; });
+  $("slam-interactive").addEventListener("click", () => send({ op: "slam", action: "interactive" }));
+  $("slam-close").addEventListener("click", () => send({ op: "slam", action: "close_loop" }));
+  $("slam-clear").addEventListener("click", () => send({ op: "slam", action: "clear" }));
+  $("slam-merge").addEventListener("click", () => {
+    const path = $("slam-session").value.trim();
+    if (path) send({ op: "slam", action: "merge", path }); else notice("merge: give the session file's path", true);
+  });
   document.querySelectorAll("input[type=checkbox]").forEach((c) => c.addEventListener("change", () => { dirty = true; }));
 
   canvas.addEventListener("mousedown", (e) => {
     const [x, y] = screenToWorld(e.offsetX, e.offsetY);
-    const kind = state.mode === "pan" ? "pan" : state.mode;
-    state.drag = { kind, x0: x, y0: y, x1: x, y1: y, sx: e.offsetX, sy: e.offsetY, cx: state.view.cx, cy: state.view.cy };
+    let kind = state.mode === "pan" ? "pan" : state.mode;
+    // in interactive mode a press on a SLAM graph node drags that node
+    const node = kind === "pan" && state.slamEdit && shown("show-slam_graph") ? slamNodeAt(e.offsetX, e.offsetY) : -1;
+    if (node >= 0) kind = "slamnode";
+    state.drag = { kind, node, x0: x, y0: y, x1: x, y1: y, sx: e.offsetX, sy: e.offsetY, cx: state.view.cx, cy: state.view.cy };
     canvas.focus();
     e.preventDefault();
   });
@@ -484,6 +543,14 @@
     state.drag = null;
     if (!d || d.kind === "pan") return;
     if (e.target === canvas) [d.x1, d.y1] = screenToWorld(e.offsetX, e.offsetY);
+    if (d.kind === "slamnode") {
+      if (Math.hypot(d.x1 - d.x0, d.y1 - d.y0) * state.view.scale > 3) {
+        state.staged[d.node] = [d.x1, d.y1];
+        send({ op: "slam", action: "move", node: d.node, x: d.x1, y: d.y1 });
+      }
+      dirty = true;
+      return;
+    }
     if (d.kind === "keepout") {
       if (d.x1 !== d.x0 && d.y1 !== d.y0) send({ op: "keepout", x0: d.x0, y0: d.y0, x1: d.x1, y1: d.y1 });
       setMode(d.kind);
