@@ -46,3 +46,22 @@ def test_a_retry_goes_back_along_the_driven_path_first(node: ExploreNode) -> Non
     assert abs(abs(yaw) - math.pi) < 1e-6  # facing the way the robot came
     node.path = node.path[:5]
     assert node._path_back() is None
+
+
+def test_a_retry_retraces_the_path_driven_while_exploring(node: ExploreNode) -> None:
+    # out: 3 m east, then 2 m north (through a door at x = 3); home so far: 1 m back south,
+    # then 0.6 m off the driven path to the west, where the controller gave up
+    out = [(0.1 * i, 0.0, 0.0) for i in range(31)] + [(3.0, 0.1 * i, 0.0) for i in range(1, 21)]
+    node.path = list(out)
+    node._outbound = len(out)
+    node.path += [(3.0, 2.0 - 0.1 * i, 0.0) for i in range(1, 11)] + [(2.4, 1.0, 0.0)]
+    points = node._retrace(2.0)
+    # from the driven path's point nearest the robot, (3, 1), towards the start, 1 m apart,
+    # each facing the way home along it
+    assert [p[:2] for p in points] == [pytest.approx(p, abs=0.11) for p in ((3.0, 0.0), (2.0, 0.0))]
+    assert abs(math.remainder(points[0][2] + math.pi / 2, 2 * math.pi)) < 1e-6
+    assert abs(abs(points[1][2]) - math.pi) < 1e-6
+    assert len(node._retrace(4.0)) == 4
+    # far from the driven path: nothing to retrace
+    node.path.append((1.5, 1.5, 0.0))
+    assert node._retrace(2.0) == []

@@ -42,7 +42,7 @@ __all__ = ["ExploreResult", "coverage", "explore_description", "reachable_free_a
 #: The robot counts as home within this distance of its start (m, ground truth).
 HOME_TOLERANCE = 0.35
 #: Time allowed to come home after exploring stops (sim s).
-RETURN_ALLOWANCE = 300.0
+RETURN_ALLOWANCE = 480.0
 #: SLAM settings for exploring: the frontiers are judged on a map at most 2 s old
 #: (slam_toolbox publishes every 5 s by default).
 SLAM_OVERRIDES: dict[str, Any] = {"map_update_interval": 2.0}

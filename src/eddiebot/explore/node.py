@@ -9,10 +9,12 @@ look-around at the start is the behaviour server's ``spin`` (one full turn: the 
 sees 57°). With no frontier left, or after ``time_limit``, the robot is sent back to where
 it started when ``return_to_init``, through ``navigate_to_pose`` (via a pose facing the start
 when the map does not know the start's floor as free); a failed goal home is tried again,
-up to three attempts, each after a recovery (both costmaps cleared through
-``clear_entirely_*``, the behaviour server's ``backup``, a 5 s wait) and by way of the point
-of its own path 1.5 m back, and the last failure's reason is kept (`home_failure`). `stop` cancels everything at once and never sends the
-robot home (Ctrl-C).
+up to four attempts, each after a recovery (both costmaps cleared through
+``clear_entirely_*``, the behaviour server's ``backup``, a 5 s wait) and by way of the path
+the robot drove while exploring, retraced from its point nearest the robot towards the
+start (2, 4, 6 m of it: through a door it drove through the other way), and the last
+failure's reason is kept (`home_failure`). `stop` cancels everything at once and never
+sends the robot home (Ctrl-C).
 
 Where the camera has looked from, and which way, is remembered (`looks`): the Kinect's
 no-return beams are NaN and clear nothing, so a viewpoint gains nothing along a direction
@@ -53,14 +55,20 @@ _LOOK_TURN = 0.15
 #: After an arrival the next plan waits for a map made since, at most this long (s).
 _MAP_WAIT_S = 10.0
 #: Attempts at getting home (each after a recovery but the first) before giving up.
-_HOME_ATTEMPTS = 3
+_HOME_ATTEMPTS = 4
 #: The recovery between attempts backs up this far (m) at this speed (m/s), as the
 #: recovery subtree of Nav2's navigate_to_pose tree.
 _BACKUP_DISTANCE = 0.30
 _BACKUP_SPEED = 0.15
 #: ... and then waits this long (s, node clock) before the next attempt.
 _RECOVERY_WAIT_S = 5.0
-#: Attempts after the first go first to the point of the driven path this far back (m).
+#: Attempts after the first retrace the path driven while exploring, from its point nearest
+#: the robot (when within _RETRACE_NEAR m) towards the start: this many metres more each
+#: attempt, by way of points _RETRACE_STEP m apart. Away from it, they go first to the point of
+#: the robot's own path _PATH_BACK m back.
+_RETRACE_LENGTH = 2.0
+_RETRACE_STEP = 1.0
+_RETRACE_NEAR = 1.0
 _PATH_BACK = 1.5
 #: A start whose floor the map does not know as free is approached from this far, facing it.
 _STAGING_DISTANCE = 1.2
@@ -137,6 +145,8 @@ class ExploreNode(Node):
         self.path: list[tuple[float, float, float]] = []
         """The robot's positions (map frame, m) and times (s), every 0.1 m."""
         self._home_attempts = 0
+        self._outbound = 0
+        """Points of ``path`` driven while exploring (before the way home)."""
         self.home_failure = ""
         """Why the last goal home failed ("" once home)."""
         self.recoveries = 0
@@ -378,6 +388,7 @@ class ExploreNode(Node):
     def _finish(self, reason: str, pose: tuple[float, float, float]) -> None:
         self._cancel_goal()
         self.finish_reason = reason
+        self._outbound = len(self.path)
         self.get_logger().info(f"exploration finished: {reason}")
         if not self.config.return_to_init or self.initial_pose is None:
             self.state = ExploreState.DONE
@@ -395,16 +406,22 @@ class ExploreNode(Node):
         assert self.initial_pose is not None
         self._home_attempts += 1
         goals: list[tuple[float, float, float]] = []
-        back = self._path_back() if self._home_attempts > 1 else None
-        if back is not None:  # away from what stopped the last attempt, where it has driven
-            goals.append(back)
+        if self._home_attempts > 1:
+            # through what stopped the last attempt the way the robot came while exploring
+            # (it drove there, the other way); else away from it, where it has driven
+            goals = self._retrace((self._home_attempts - 1) * _RETRACE_LENGTH)
+            back = self._path_back() if not goals else None
+            if back is not None:
+                goals.append(back)
         staging = self._staging_pose()
         if staging is not None:
             goals.append(staging)
         goals.append(self.initial_pose)
         x, y, _ = self.initial_pose
+        via = len(goals) - 1 - (staging is not None)
         self.get_logger().info(f"returning to the start ({x:.2f}, {y:.2f}), attempt "
                                f"{self._home_attempts} of {_HOME_ATTEMPTS}"
+                               + (f" by way of {via} points of the driven path" if via else "")
                                + (" via a pose facing it" if staging is not None else ""))
         self._home_leg(goals)
 
@@ -475,6 +492,35 @@ class ExploreNode(Node):
             self._send(self._backup, goal, done)
         else:
             done(None)
+
+    def _retrace(self, length: float) -> list[tuple[float, float, float]]:
+        """Points ``_RETRACE_STEP`` m apart along the path driven while exploring, from its
+        point nearest the robot towards the start, ``length`` m of it, each facing the way
+        home along it; empty when that path passes no nearer than ``_RETRACE_NEAR`` m."""
+        if not self.path:
+            return []
+        outbound = self.path[:self._outbound] if self._outbound else self.path
+        if len(outbound) < 2:
+            return []
+        x, y, _ = self.path[-1]
+        pts = np.asarray([(px, py) for px, py, _ in outbound])
+        near = np.hypot(pts[:, 0] - x, pts[:, 1] - y)
+        i = int(np.argmin(near))
+        if near[i] > _RETRACE_NEAR:
+            return []
+        out: list[tuple[float, float, float]] = []
+        travelled = since = 0.0
+        for k in range(i, 0, -1):
+            (x0, y0), (x1, y1) = pts[k], pts[k - 1]
+            step = math.hypot(x1 - x0, y1 - y0)
+            travelled += step
+            since += step
+            if since >= _RETRACE_STEP or k == 1:
+                out.append((float(x1), float(y1), math.atan2(y1 - y0, x1 - x0)))
+                since = 0.0
+            if travelled >= length:
+                break
+        return out
 
     def _path_back(self) -> tuple[float, float, float] | None:
         """The point of the robot's own path ``_PATH_BACK`` m (along it) before where it
