@@ -62,6 +62,23 @@ def rpe_by_distance(
     return _summary(trans, rot)
 
 
+def revisit_error(
+    est: FloatArray, ref: FloatArray, near: float = 3.0, apart: float = 30.0
+) -> dict[str, float]:
+    """Relative pose error of revisits: pairs within ``near`` m of each other on ``ref`` but at
+    least ``apart`` m apart along its path — the pairs only a closed loop gets right."""
+    step = np.hypot(*np.diff(ref[:, :2], axis=0).T)
+    s = np.concatenate([[0.0], np.cumsum(step)])
+    ii, jj = np.triu_indices(len(s), k=1)
+    gap = np.hypot(ref[jj, 0] - ref[ii, 0], ref[jj, 1] - ref[ii, 1])
+    keep = (s[jj] - s[ii] >= apart) & (gap <= near)
+    trans, rot = _pair_errors(est, ref, ii[keep], jj[keep])
+    out = _summary(trans, rot)
+    if trans.size:
+        out["trans_p95_m"] = float(np.percentile(trans, 95))
+    return out
+
+
 def _summary(trans: FloatArray, rot: FloatArray) -> dict[str, float]:
     if trans.size == 0:
         return {"pairs": 0}
