@@ -93,8 +93,6 @@ def test_unknown_and_inert_keys(tmp_path: Path) -> None:
     node = _launch(context, params)
     try:
         assert node.startup_warnings == [
-            "ignored: lifelong_iou_match (eddiebot's lifelong mode retires a node when "
-            "lifelong_node_overlap of its cells is seen again, not by Karto's lifelong scores)",
             "ignored: yaw_covariance_scale (no ~/pose topic is published)",
             "ignored: use_lifecycle_manager (the node is not a lifecycle node: it starts active)",
             "unknown parameter: minimum_travle_distance (neither slam_toolbox's nor eddiebot's; "

@@ -118,14 +118,24 @@ class SlamConfig:
     position_covariance_scale: float = 1.0
     yaw_covariance_scale: float = 1.0
     use_lifecycle_manager: bool = False
+    # --- lifelong mode (slam_toolbox's LifelongSlamToolbox; eddiebot.slam.mapper.lifelong)
     lifelong_search_use_tree: bool = False
+    """Score every node near a new one (true), or only those linked to it through the graph
+    within that distance (false)."""
     lifelong_minimum_score: float = 0.1
+    """Bounding-box IoU with the new scan below which a node is not re-scored."""
     lifelong_iou_match: float = 0.85
-    lifelong_node_removal_score: float = 0.04
-    lifelong_overlap_score_scale: float = 0.06
-    lifelong_constraint_multiplier: float = 0.08
+    """IoU above which a node with fewer than three edges is removed outright."""
+    lifelong_node_removal_score: float = 0.10
+    """A node whose score (1 when added) drops below this is marginalised out."""
+    lifelong_overlap_score_scale: float = 0.5
+    """Score taken off a node per new scan, times its overlap with the new scan."""
+    lifelong_constraint_multiplier: float = 0.05
+    """Score kept per edge beyond two (nodes that loop closures lean on decay slower)."""
     lifelong_nearby_penalty: float = 0.001
+    """Score taken off a re-scored node for being near the new scan at all."""
     lifelong_candidates_scale: float = 0.03
+    """Read and range-checked as upstream, where its only use is commented out."""
     # --- eddiebot's own
     optimizer: str = "isam2"
     """``isam2`` (incremental, every node) or ``levenberg_marquardt`` (batch, on loop closure)."""
@@ -271,8 +281,6 @@ class SlamConfig:
     """Range (m) beyond which beams leave no hit in the occupancy grid (cut there, clearing
     up to it), when shorter than ``max_laser_range`` (which still bounds scan matching): a
     depth camera's far returns are too coarse for the map; 0 = ``max_laser_range``."""
-    lifelong_node_overlap: float = 0.9
-    """Lifelong mode retires an old node when this share of its cells is seen by a newer one."""
     max_odometry_jump: float = 1.0
     """Largest odometry translation (m) between two consecutive scans the core is given that
     is taken as motion; a larger change (a wheel-odometry reset, a bad sample) is not
@@ -358,6 +366,10 @@ class SlamConfig:
             raise ConfigError(
                 f"parameter 'map_start_pose' must be [x, y, theta], got {list(out.map_start_pose)}"
             )
+        for name in _LIFELONG_PARAMETERS[1:]:
+            value = getattr(out, name)
+            if not 0.0 <= value <= 1.0:  # upstream exits on these (checkIsNotNormalized)
+                raise ConfigError(f"parameter '{name}' must be in [0, 1], got {value}")
         for name in ("max_odometry_jump", "max_odometry_jump_heading"):
             value = getattr(out, name)
             if not math.isfinite(value) or value < 0:
@@ -493,12 +505,9 @@ def _if_not_one(why: str) -> _Rule:
     return lambda _config, value: why if value != 1.0 else None
 
 
-def _lifelong(config: SlamConfig, _value: Any) -> str:
+def _lifelong(config: SlamConfig, _value: Any) -> str | None:
     if config.mode == "lifelong":
-        return (
-            "eddiebot's lifelong mode retires a node when lifelong_node_overlap of its cells "
-            "is seen again, not by Karto's lifelong scores"
-        )
+        return None
     return f"read in lifelong mode only, and mode is {config.mode}"
 
 

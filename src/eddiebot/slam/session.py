@@ -18,6 +18,7 @@ mismatch raises `SessionVersionError`, anything else wrong `SessionError`.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import json
 import os
@@ -45,9 +46,19 @@ _KINDS = [EdgeKind.ODOMETRY, EdgeKind.SCAN_MATCH, EdgeKind.LOOP]
 def save_session(core: SlamCore, path: str | os.PathLike[str]) -> Path:
     """Write the core's graph and scans to ``path`` atomically; returns the path."""
     target = Path(path)
-    nodes = core.nodes
     poses = core.node_poses()  # first: folds in nodes still pending
-    edges = core.graph.edges
+    # nodes lifelong mode marginalised out are left behind, their edges with them
+    gone = set(core.graph.removed_nodes)
+    keep = [k for k in range(len(core.nodes)) if k not in gone]
+    new_id = {old: new for new, old in enumerate(keep)}
+    nodes = [core.nodes[k] for k in keep]
+    poses = poses[keep]
+    dropped = set(core.graph.removed_edges)
+    edges = [
+        dataclasses.replace(e, i=new_id[e.i], j=new_id[e.j])
+        for k, e in enumerate(core.graph.edges)
+        if k not in dropped
+    ]
     lengths = np.array([n.scan.ranges.size for n in nodes], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
     arrays: dict[str, Any] = {

@@ -10,9 +10,12 @@ to publish. Modes are strategies composed into the core, not subclasses:
   rolling buffer of the last localised scans; the graph is never extended; without a pose,
   or when the map stops supporting it, the scan is searched for over the whole map
   (`eddiebot.slam.mapper.localization`);
-* ``lifelong``: mapping on top of a loaded session; an older node whose scan is covered by a
-  new node's (overlap >= ``lifelong_node_overlap``) is retired: it stays in the pose graph as
-  a constraint but no longer renders into the map or serves as a match reference.
+* ``lifelong``: mapping on top of a loaded session; each new node re-scores the older nodes
+  its scan overlaps with slam_toolbox's ``lifelong_*`` scores (`eddiebot.slam.mapper.lifelong`),
+  and a node whose score falls below ``lifelong_node_removal_score`` leaves the map, the match
+  and loop searches and memory at once, and the pose graph by marginalisation (in batches of
+  ten): unlike upstream, which deletes the node with its edges, its edges are replaced by
+  edges between its neighbours carrying what they said (`PoseGraph.marginalize`).
 
 Which scans are processed: the first, then any whose *sensor* pose moved at least
 ``minimum_travel_distance`` **or** turned at least ``minimum_travel_heading`` since the last

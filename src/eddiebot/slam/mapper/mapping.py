@@ -1,5 +1,5 @@
 """Mapping and lifelong mode: nodes and odometry edges, slip recovery, links between odometry
-chains, loop closures, and the retirement of superseded nodes."""
+chains, loop closures, and the removal of depreciated nodes (lifelong)."""
 
 
 from __future__ import annotations
@@ -9,13 +9,14 @@ import math
 
 import numpy as np
 
-from eddiebot.geometry import se2_compose, wrap_angle
+from eddiebot.geometry import wrap_angle
 from eddiebot.slam.loop_closure import (
     LoopClosure,
     find_loop_candidates,
     near_linked_nodes,
     verify_loop,
 )
+from eddiebot.slam.mapper.lifelong import ScanBox, rescore, scan_box, scan_boxes
 from eddiebot.slam.mapper.matching import ScanMatching
 from eddiebot.slam.mapper.measurement import (
     _NO_HEADING_VARIANCE,
@@ -36,11 +37,10 @@ from eddiebot.slam.mapper.results import (
 from eddiebot.slam.mapper.se2_rows import _between1, _compose1, _compose_rows, _inverse1
 from eddiebot.slam.pose_graph import EdgeKind
 from eddiebot.slam.scan import Scan, scan_points
-from eddiebot.slam.scan_matcher import (
-    MatchResult,
-    build_correlation_grid,
-    score_pose,
-)
+from eddiebot.slam.scan_matcher import MatchResult
+
+_MARGINALIZE_BATCH = 10
+"""Fewest retired nodes marginalised together (each batch restarts iSAM2 once)."""
 
 
 class Mapping(ScanMatching):
@@ -140,7 +140,7 @@ class Mapping(ScanMatching):
         self.graph.optimize(full=loop_closed)
         final = self.graph.pose(idx)
         if self.mode == "lifelong":
-            self._retire_superseded(idx)
+            self._evaluate_node_depreciation(idx)
         st.last_pose = final
         st.last_processed_odom = odom.copy()
         st.map_to_odom = _compose1(final, _inverse1(odom))
@@ -399,24 +399,94 @@ class Mapping(ScanMatching):
         return closed
 
 
-    def _retire_superseded(self, idx: int) -> None:
+    def _evaluate_node_depreciation(self, idx: int) -> None:
+        """slam_toolbox's ``evaluateNodeDepreciation``: re-score the older nodes near new node
+        ``idx`` (`eddiebot.slam.mapper.lifelong`); a node whose score falls below
+        ``lifelong_node_removal_score`` leaves the map and the match and loop searches at
+        once, and the pose graph by marginalisation (`_remove_depreciated`)."""
         cfg = self.config
+        params = self._lifelong_params
         new_pts = self._world_points(idx)
         if new_pts.shape[0] == 0:
             return
-        here = self._reference_position(idx)
-        recent = set(self._state.running)
-        lo, hi = new_pts.min(axis=0) - 0.5, new_pts.max(axis=0) + 0.5
-        grid = build_correlation_grid(
-            new_pts, (lo[0], lo[1], hi[0], hi[1]), cfg.resolution, cfg.resolution, 1
+        pose = self.graph.pose(idx)
+        new_box = scan_box(new_pts, _compose1(pose, self.sensor_offset))
+        positions = self._positions()
+        active = self._active_nodes()
+        if params.search_use_tree:
+            d = positions - positions[idx]
+            near = np.flatnonzero(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] <= new_box.radius**2)
+            candidates = [int(j) for j in near]
+        else:
+            candidates = sorted(
+                near_linked_nodes(idx, positions, self.graph.adjacent, new_box.radius)
+            )
+        # the newest nodes may still get odometry span edges: they stay until those are in
+        protect = max(cfg.scan_buffer_size, cfg.odometry_span_nodes + 1)
+        adjacent = self.graph.adjacent
+        nodes = self.nodes
+        # upstream re-scores a node only with IoU >= lifelong_minimum_score and two edges, and
+        # leaves the newest scan_buffer_size nodes and nodes 0 and 1 as they are
+        cands = [
+            j for j in candidates
+            if active[j] and idx - j >= protect and j > 1
+            and len(adjacent(j)) >= 2 and nodes[j].points.shape[0]
+        ]
+        if cands:
+            self._rescore(idx, new_box, cands)
+        # each batch restarts iSAM2 (cost ~ the graph): batches of a tenth of it keep that a
+        # constant share of the work per removed node
+        if len(self._depreciated) >= max(_MARGINALIZE_BATCH, self.graph.live_nodes // 10):
+            self._remove_depreciated()
+
+    def _rescore(self, idx: int, new_box: ScanBox, cands: list[int]) -> None:
+        """Upstream's ``computeScores`` for candidates ``cands`` of new node ``idx``."""
+        poses = self.graph.poses
+        world, _ = self._reference(cands, poses)
+        counts = np.array([self.nodes[j].points.shape[0] for j in cands], dtype=np.int64)
+        sensors = _compose_rows(poses[cands], self.sensor_offset)[:, :2]
+        scored, scores = rescore(
+            self._lifelong_params,
+            new_box,
+            scan_boxes(world, counts, sensors),
+            world,
+            counts,
+            np.array([len(self.graph.adjacent(j)) for j in cands], dtype=np.int64),
+            np.array([self.lifelong_scores.get(j, 1.0) for j in cands]),
         )
-        for j, node in enumerate(self.nodes[:idx]):
-            if node.retired or j in recent or node.points.shape[0] == 0:
-                continue
-            if np.hypot(*(self._reference_position(j) - here)) > cfg.minimum_travel_distance:
-                continue
-            sensor = se2_compose(self.graph.pose(j), self.sensor_offset)
-            if score_pose(node.points, sensor, grid) >= cfg.lifelong_node_overlap:
-                node.retired = True
-                if j < self._active.shape[0]:
-                    self._active[j] = False
+        removal = self._lifelong_params.node_removal_score
+        for j, score in zip(np.asarray(cands)[scored].tolist(), scores[scored].tolist()):
+            if score < removal:
+                self._retire(j)
+            else:
+                self.lifelong_scores[j] = score
+
+    def _retire(self, j: int) -> None:
+        """Take node ``j`` out of the map and the searches; queue it for marginalisation."""
+        self.nodes[j].retired = True
+        self._active_nodes()[j] = False
+        self.lifelong_scores.pop(j, None)
+        old = self._rasterized.pop(j, None)
+        if old is not None:
+            self._cast(j, old, -1)
+        self._depreciated.append(j)
+
+    def _remove_depreciated(self) -> None:
+        """Marginalise the retired nodes out of the pose graph and free their scans."""
+        if not self._depreciated:
+            return
+        self._flush_spans()
+        removed, self._depreciated = self._depreciated, []
+        self.graph.marginalize(removed)
+        for j in removed:
+            node = self.nodes[j]
+            empty = np.zeros(0)
+            self.nodes[j] = NodeRecord(
+                Scan(empty, empty, node.scan.range_min, node.scan.range_max, node.scan.stamp_ns),
+                np.zeros((0, 2)),
+                node.odom_pose,
+                retired=True,
+            )
+            for cache in (self._ref_cache, self._pos_cache, self._normal_cache):
+                cache.pop(j, None)
+        self.removed_nodes += len(removed)

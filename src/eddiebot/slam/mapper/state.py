@@ -19,6 +19,7 @@ from eddiebot.slam.config import SlamConfig
 from eddiebot.slam.loop_closure import (
     LoopClosure,
 )
+from eddiebot.slam.mapper.lifelong import LifelongParams
 from eddiebot.slam.mapper.measurement import matcher_params
 from eddiebot.slam.mapper.results import FloatArray, NodeRecord, SlamWarning
 from eddiebot.slam.mapper.se2_rows import _between1, _compose1, _inverse1, _wrap1
@@ -101,6 +102,12 @@ class MapperState:
         self._bary_local = np.zeros((0, 2))
         self._normal_cache: dict[int, FloatArray] = {}
         self._active = np.zeros(0, dtype=bool)
+        self._lifelong_params = LifelongParams.from_config(self.config)
+        self.lifelong_scores: dict[int, float] = {}
+        """Lifelong scores of the nodes re-scored so far (the rest have 1)."""
+        self._depreciated: list[int] = []  # retired, waiting to be marginalised
+        self.removed_nodes = 0
+        """Nodes lifelong mode marginalised out of the pose graph."""
         self.odometry_jumps = 0
         """Odometry jumps beyond `max_odometry_jump` / `max_odometry_jump_heading` re-anchored."""
         self.nonfinite_range_scans = 0

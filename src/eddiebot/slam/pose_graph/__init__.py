@@ -48,6 +48,11 @@ same gated iSAM2 path in node order (node k placed from a non-robust edge to an 
 and polishes the result with Levenberg–Marquardt on the accepted edges. ``gate_probability=None``
 turns all this off: the kernel alone (in batch annealed from 1000σ down to ``kernel_width``).
 
+``marginalize`` removes nodes for good (lifelong mapping): each node's accepted edges are
+replaced by relative-pose edges between its neighbours carrying their Schur complement
+(exact for a node inside a chain, a chain sparsification of the dense factor beyond;
+``marginal.py``); the node keeps its last pose but leaves the estimate and the solvers.
+
 ``half_chi2`` reports ½ Σ eᵀ Ω e with every kernel removed (the figure the g2o benchmarks
 quote), whatever optimiser produced the estimate.
 """

@@ -102,6 +102,8 @@ class PoseGraphCore:
         self._stale = False  # iSAM2 holds a newer estimate than _p (fetched on demand)
         self._edges: list[Edge] = []
         self._adjacency: list[set[int]] = []
+        self._removed: set[int] = set()  # marginalised nodes (`PoseGraph.marginalize`)
+        self._dropped: set[int] = set()  # their edges, replaced by marginal edges
         self._rejected: set[int] = set()
         self._held: list[int] = []
         self._trusted: set[int] = set()
@@ -147,8 +149,8 @@ class PoseGraphCore:
         params.setFactorization(self.factorization.upper())
         self._isam = gtsam.ISAM2(params)
         self._isam_keys = set()
-        self._pending_nodes = list(range(self._n))
-        self._pending_edges = list(range(len(self._edges)))
+        self._pending_nodes = [k for k in range(self._n) if k not in self._removed]
+        self._pending_edges = [k for k in range(len(self._edges)) if k not in self._dropped]
 
     def add_node(self, pose: npt.ArrayLike) -> int:
         """Add a node with an initial estimate (map frame); returns its id."""
@@ -176,6 +178,8 @@ class PoseGraphCore:
         n = self._n
         if not (0 <= i < n and 0 <= j < n) or i == j:
             raise ValueError(f"edge ({i}, {j}) needs two distinct existing nodes (have {n})")
+        if i in self._removed or j in self._removed:
+            raise ValueError(f"edge ({i}, {j}) touches a marginalised node")
         edge = Edge(
             int(i),
             int(j),
@@ -226,8 +230,24 @@ class PoseGraphCore:
 
     @property
     def edges(self) -> list[Edge]:
-        """Every edge, in insertion order (rejected ones included)."""
+        """Every edge, in insertion order (rejected and marginalised ones included)."""
         return list(self._edges)
+
+    @property
+    def removed_nodes(self) -> list[int]:
+        """Nodes marginalised out (`PoseGraph.marginalize`): their pose is frozen where it
+        was, they have no edges, and no edge can be added to them."""
+        return sorted(self._removed)
+
+    @property
+    def removed_edges(self) -> list[int]:
+        """Indices into `edges` of the edges marginalised nodes took with them."""
+        return sorted(self._dropped)
+
+    @property
+    def live_nodes(self) -> int:
+        """Nodes in the graph that were not marginalised."""
+        return self._n - len(self._removed)
 
     @property
     def rejected(self) -> list[int]:
@@ -284,7 +304,8 @@ class PoseGraphCore:
     def _values(self, nodes: Iterable[int]) -> gtsam.Values:
         values = gtsam.Values()
         for k in nodes:
-            values.insert(k, _pose2(self._p[k]))
+            if k not in self._removed:
+                values.insert(k, _pose2(self._p[k]))
         return values
 
     def _store(self, estimate: gtsam.Values, contiguous: bool = False) -> None:
@@ -296,7 +317,7 @@ class PoseGraphCore:
         self._p[keys] = arr
 
     def _is_out(self, k: int) -> bool:
-        return k in self._rejected or k in self._held
+        return k in self._rejected or k in self._held or k in self._dropped
 
     def _inliers(self) -> list[Edge]:
         return [e for k, e in enumerate(self._edges) if not self._is_out(k)]

@@ -3,6 +3,8 @@ node-by-node sweep and the final consistency pass)."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import gtsam
 import numpy as np
 import numpy.typing as npt
@@ -17,6 +19,7 @@ from eddiebot.slam.pose_graph.edges import (
     chi2_quantile,
 )
 from eddiebot.slam.pose_graph.gate import GatedPoseGraph
+from eddiebot.slam.pose_graph.marginal import marginal_edges
 
 
 class PoseGraph(GatedPoseGraph):
@@ -117,7 +120,9 @@ class PoseGraph(GatedPoseGraph):
                 graph.add(self._edge_factor(k))
                 if self._edges[k].kind is EdgeKind.LOOP:
                     self._note_closure(k)
-        new = [n for n in self._pending_nodes if n not in self._isam_keys]
+        new = [
+            n for n in self._pending_nodes if n not in self._isam_keys and n not in self._removed
+        ]
         self._isam_update(graph, self._values(new))
         self._isam_keys.update(new)
         self._stale = True
@@ -228,7 +233,9 @@ class PoseGraph(GatedPoseGraph):
         for width in widths:
             graph = gtsam.NonlinearFactorGraph()
             graph.add(self._prior())
-            for e in self._edges:
+            for k, e in enumerate(self._edges):
+                if k in self._dropped:
+                    continue
                 graph.add(
                     gtsam.BetweenFactorPose2(e.i, e.j, _pose2(e.measurement), self._noise(e, width))
                 )
@@ -245,11 +252,13 @@ class PoseGraph(GatedPoseGraph):
         anchor: list[int] = [-1] * n
         by_last: list[list[int]] = [[] for _ in range(n)]
         for k, e in enumerate(self._edges):
+            if k in self._dropped:
+                continue
             last = max(e.i, e.j)
             by_last[last].append(k)
             if not e.robust and anchor[last] < 0:
                 anchor[last] = k
-        if any(a < 0 for a in anchor[1:]):
+        if any(a < 0 for k, a in enumerate(anchor) if k and k not in self._removed):
             return False
         sub = PoseGraph(
             optimizer="isam2",
@@ -268,6 +277,10 @@ class PoseGraph(GatedPoseGraph):
         )
         order: list[int] = []
         for node in range(n):
+            if node in self._removed:
+                sub.add_node(self._p[node])
+                sub._removed.add(node)  # a placeholder keeping the ids aligned
+                continue
             if node == 0:
                 sub.add_node(self._p[0])
             else:
@@ -389,9 +402,71 @@ class PoseGraph(GatedPoseGraph):
         if not self._n:
             return 0.0
         self._sync()
-        edges = self._edges if include_rejected else self._inliers()
+        edges = (
+            [e for k, e in enumerate(self._edges) if k not in self._dropped]
+            if include_rejected else self._inliers()
+        )
         graph = self._graph(edges, robust=False, prior=False)
         return float(graph.error(self._values(range(self._n))))
+
+    def marginalize(self, nodes: Iterable[int]) -> int:
+        """Remove ``nodes`` from the graph, keeping what their edges said about the rest.
+
+        Each node in turn (ascending) is linearised at the current estimate and eliminated:
+        its accepted edges are replaced by relative-pose edges between its neighbours
+        carrying the Schur complement (`eddiebot.slam.pose_graph.marginal`: exact for a node
+        with two neighbours, a chain sparsification beyond); its held and rejected edges go
+        without replacement. The node keeps its last pose (`pose` still answers) but leaves
+        the estimate, the solvers and `neighbours`. iSAM2 restarts once, from the current
+        estimate, after the whole batch. Node 0 (the anchor) cannot be removed. Returns the
+        number of edges added.
+        """
+        todo = sorted({int(k) for k in nodes} - self._removed)
+        if not todo:
+            return 0
+        for k in todo:
+            if not 0 < k < self._n:
+                raise ValueError(f"cannot marginalise node {k} (have {self._n}; node 0 is the anchor)")
+        self.optimize()
+        self._sync()
+        added = 0
+        touching: dict[int, list[int]] = {}
+        for k, e in enumerate(self._edges):
+            if k not in self._dropped:
+                touching.setdefault(e.i, []).append(k)
+                touching.setdefault(e.j, []).append(k)
+        for node in todo:
+            ks = [k for k in touching.get(node, []) if k not in self._dropped]
+            kept = [self._edges[k] for k in ks if not self._is_out(k)]
+            ends = {node} | {e.i for e in kept} | {e.j for e in kept}
+            replacement = marginal_edges(node, kept, {n: self._p[n].copy() for n in ends})
+            for k in ks:
+                self._drop_edge(k)
+            for other in self._adjacency[node]:
+                self._adjacency[other].discard(node)
+            self._adjacency[node] = set()
+            self._removed.add(node)
+            for m in replacement:
+                self.add_edge(m.i, m.j, m.measurement, m.covariance, kind=m.kind)
+                k_new = len(self._edges) - 1
+                touching.setdefault(m.i, []).append(k_new)
+                touching.setdefault(m.j, []).append(k_new)
+                added += 1
+        if self.optimizer == "isam2" and not self._isam_broken:
+            self._restart_isam()
+        return added
+
+    def _drop_edge(self, k: int) -> None:
+        """Take edge k out of the graph for good (its node was marginalised)."""
+        self._dropped.add(k)
+        self._rejected.discard(k)
+        if k in self._held:
+            self._held.remove(k)
+        self._trusted.discard(k)
+        self._due.discard(k)
+        self._tested.pop(k, None)
+        self._info_cache.pop(k, None)
+        self._dormant.get(self._last_end(k), set()).discard(k)
 
     def set_poses(self, poses: npt.ArrayLike) -> None:
         """Replace every estimate (e.g. after loading a session) and restart iSAM2 from them."""
