@@ -1,8 +1,10 @@
 """Navigation core benchmarks: planners, controllers, local costmap update, AMCL.
 
-Run: ``.venv/bin/python benchmarks/bench_nav.py [--repeat N]``. Prints a table and writes
-``benchmarks/results/nav.json``. Each case is warmed up once (numba compilation, cached
-kernels) and then timed ``--repeat`` times; the median is the figure of record.
+Run: ``.venv/bin/python benchmarks/bench_nav.py [--repeat N] [--only PREFIX,...]``. Prints a
+table and writes ``benchmarks/results/nav.json`` (with ``--only``, only the cases whose names
+start with one of the prefixes run, and their rows replace those of the existing file). Each
+case is warmed up once (numba compilation, cached kernels) and then timed ``--repeat`` times;
+the median is the figure of record.
 """
 
 from __future__ import annotations
@@ -30,7 +32,13 @@ from eddiebot.nav.controllers import (
     RegulatedPurePursuitController,
 )
 from eddiebot.nav.costmap import LayeredCostmap, build_costmap, scan_observation
+from eddiebot.nav.params import from_params
 from eddiebot.nav.planners import NavfnConfig, NavfnPlanner, ThetaStarPlanner
+from eddiebot.nav.planners.smac import (
+    SmacPlanner2D,
+    SmacPlannerHybrid,
+    SmacPlannerHybridConfig,
+)
 from eddiebot.nav.types import Twist2D, path_length
 
 RESULTS = Path(__file__).resolve().parent / "results" / "nav.json"
@@ -133,7 +141,14 @@ def timeit(fn: Callable[[], object], repeat: int) -> dict[str, float]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--repeat", type=int, default=15)
+    ap.add_argument("--only", default="",
+                    help="comma-separated case-name prefixes (e.g. smac_,navfn_)")
     args = ap.parse_args()
+    prefixes = tuple(p for p in args.only.split(",") if p)
+
+    def want(name: str) -> bool:
+        return not prefixes or name.startswith(prefixes)
+
     rows: dict[str, dict[str, object]] = {}
     ref_before = machine_reference_ms()
 
@@ -142,24 +157,45 @@ def main() -> int:
         start = (0.3, 0.3, 0.0)
         goal = (n * RES - 0.3, n * RES - 0.3, 0.0)
         straight = math.hypot(goal[0] - start[0], goal[1] - start[1])
+        # Smac at Nav2's defaults (Hybrid: a circular robot, 72 bins, 0.4 m turning radius)
         for name, planner in (
             (f"navfn_{n}", NavfnPlanner(NavfnConfig())),
             (f"navfn_astar_{n}", NavfnPlanner(NavfnConfig(use_astar=True))),
             (f"theta_star_{n}", ThetaStarPlanner()),
+            (f"smac_2d_{n}", SmacPlanner2D()),
+            (f"smac_hybrid_{n}", SmacPlannerHybrid()),
+            (f"smac_hybrid_rs_{n}", SmacPlannerHybrid(from_params(
+                SmacPlannerHybridConfig, {"motion_model_for_search": "REEDS_SHEPP"}))),
         ):
-            if name == "theta_star_1000" and args.repeat > 3:
+            if not want(name):
+                continue
+            if name in ("theta_star_1000", "smac_hybrid_rs_1000") and args.repeat > 3:
                 reps = 3
             else:
                 reps = args.repeat
-            path = planner.create_plan(start, goal, cm.master)
             r = timeit(lambda p=planner, c=cm, s=start, g=goal: p.create_plan(s, g, c.master), reps)
+            # after the warm-up: a first call that loads the compiled kernels can use up Smac's
+            # max_planning_time before smoothing
+            path = planner.create_plan(start, goal, cm.master)
             r["path_length_m"] = path_length(path)
+            if hasattr(planner, "last_iterations"):
+                r["expansions"] = int(planner.last_iterations)
             r["straight_line_m"] = straight
             r["map_cells"] = f"{n}x{n}"
             rows[name] = r
 
     # Controllers on a 3 m x 3 m rolling local costmap (upstream sample size) with obstacles.
     rng = np.random.default_rng(1)
+    _others(args.repeat, rng, rows, want)
+    _report(rows, ref_before, prefixes)
+    return 0
+
+
+def _others(repeat: int, rng: np.random.Generator, rows: dict[str, dict[str, object]],
+            want: Callable[[str], bool]) -> None:
+    """Controllers, local costmap update and AMCL (all or none of them)."""
+    if not any(want(n) for n in ("rpp_cycle", "dwb_cycle", "local_costmap_scan", "amcl_update")):
+        return
     lc = local_costmap(3)
     ranges, a0, inc = kinect_scan(rng)
     lc.layer("obstacle_layer").add_observation(
@@ -182,7 +218,7 @@ def main() -> int:
     vel = Twist2D(0.3, 0.0, 0.2)
     for name, ctrl in (("rpp_cycle", rpp), ("dwb_cycle", dwb)):
         r = timeit(lambda c=ctrl: c.compute_velocity_commands(pose, vel, path, lc, 0.05),
-                   args.repeat * 10)
+                   repeat * 10)
         r["costmap"] = "3x3 m @ 0.05"
         rows[name] = r
 
@@ -199,7 +235,7 @@ def main() -> int:
         ol.add_observation("scan", scan_observation(ranges, a0, inc, 0.45, 10.0, (x, 0.0, 0.6, 0.0)))
         lc5.update_map((x, 0.0, 0.0))
 
-    r = timeit(costmap_update, args.repeat * 10)
+    r = timeit(costmap_update, repeat * 10)
     r["costmap"] = "5x5 m @ 0.05 (100x100), obstacle + inflation"
     rows["local_costmap_scan"] = r
 
@@ -214,10 +250,16 @@ def main() -> int:
         odom[0] += 0.3
         amcl.update(odom, scan, -math.pi, 2 * math.pi / 360, 0.05, 8.0)
 
-    r = timeit(amcl_update, args.repeat)
+    r = timeit(amcl_update, repeat)
     r["particles_after"] = int(amcl.particles.shape[0])
     rows["amcl_update"] = r
+    for name in [n for n in rows if not want(n)]:
+        del rows[name]
 
+
+def _report(rows: dict[str, dict[str, object]], ref_before: float,
+            prefixes: tuple[str, ...]) -> None:
+    """Print the table and write the results file (merging into it with ``--only``)."""
     print(f"{'case':<22} {'median ms':>10} {'p90 ms':>8} {'cpu ms':>8} {'target ms':>10}  notes")
     for name, r in rows.items():
         tgt = TARGETS.get(name)
@@ -225,12 +267,22 @@ def main() -> int:
                  if k2 not in ("median_ms", "p90_ms", "min_ms", "cpu_median_ms", "n")}
         note = ", ".join(f"{k2}={v:.2f}" if isinstance(v, float) else f"{k2}={v}"
                          for k2, v in notes.items())
-        print(f"{name:<22} {r['median_ms']:>10.2f} {r['p90_ms']:>8.2f} {r['cpu_median_ms']:>8.2f} "
+        print(f"{name:<22} {r['median_ms']:>10.2f} {r['p90_ms']:>8.2f} "
+              f"{r['cpu_median_ms']:>8.2f} "
               f"{(f'<= {tgt:g}' if tgt else '-'):>10}  {note}")
     ref_after = machine_reference_ms()
     print(f"machine reference loop: {ref_before:.1f} ms before, {ref_after:.1f} ms after "
           "(about 9.5 ms when the machine is idle)")
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    if prefixes and RESULTS.exists():
+        # rows of a partial run carry their own date and machine yardstick
+        for r in rows.values():
+            r["measured"] = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+            r["machine_reference_ms"] = (ref_before + ref_after) / 2
+        old = json.loads(RESULTS.read_text())
+        merged = dict(old.get("results", {}))
+        merged.update(rows)
+        rows = merged
     doc = {
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
         "machine": {"platform": platform.platform(), "processor": platform.processor(),
@@ -241,7 +293,6 @@ def main() -> int:
     }
     RESULTS.write_text(json.dumps(doc, indent=2) + "\n")
     print(f"wrote {RESULTS}")
-    return 0
 
 
 if __name__ == "__main__":
