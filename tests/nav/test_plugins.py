@@ -43,12 +43,14 @@ from eddiebot.nav.types import Twist2D
 
 
 class StraightController:
-    """Turns towards the plan's last pose at k_theta * heading error; drives at speed unless
-    the cell lookahead m ahead is lethal."""
+    """Turns towards the plan's last pose at k_theta * heading error (at most max_wz); drives
+    at speed unless the cell lookahead m ahead is lethal; within goal_radius of the last pose
+    it only turns to that pose's yaw."""
 
-    def __init__(self, name, speed, k_theta, lookahead, period):
+    def __init__(self, name, speed, k_theta, lookahead, period, goal_radius, max_wz):
         self.name, self.speed, self.k_theta = name, speed, k_theta
         self.lookahead, self.period = lookahead, period
+        self.goal_radius, self.max_wz = goal_radius, max_wz
         self.plan = np.zeros((1, 3))
 
     @classmethod
@@ -58,7 +60,8 @@ class StraightController:
             raise ParameterError(context.server, f"{name}.speed", speed, "must be > 0")
         return cls(name, speed, float(params.get("k_theta", 1.0)),
                    float(params.get("lookahead", 0.5)),
-                   1.0 / context.server_config.controller_frequency)
+                   1.0 / context.server_config.controller_frequency,
+                   float(params.get("goal_radius", 0.1)), float(params.get("max_wz", 10.0)))
 
     def set_plan(self, path):
         self.plan = np.asarray(path, dtype=float)
@@ -73,12 +76,17 @@ class StraightController:
         if path is not None:
             self.set_plan(path)
         x, y, th = (float(v) for v in pose)
-        gx, gy = self.plan[-1, :2]
-        err = math.remainder(math.atan2(gy - y, gx - x) - th, 2.0 * math.pi)
-        ahead = costmap.master.cost_at_world(x + self.lookahead * math.cos(th),
-                                             y + self.lookahead * math.sin(th))
-        vx = 0.0 if ahead >= LETHAL_OBSTACLE else self.speed
-        return Twist2D(vx, 0.0, self.k_theta * err)
+        gx, gy, gyaw = self.plan[-1]
+        if math.hypot(gx - x, gy - y) <= self.goal_radius:
+            err = math.remainder(gyaw - th, 2.0 * math.pi)
+            vx = 0.0
+        else:
+            err = math.remainder(math.atan2(gy - y, gx - x) - th, 2.0 * math.pi)
+            ahead = costmap.master.cost_at_world(x + self.lookahead * math.cos(th),
+                                                 y + self.lookahead * math.sin(th))
+            vx = 0.0 if ahead >= LETHAL_OBSTACLE else self.speed
+        wz = max(-self.max_wz, min(self.max_wz, self.k_theta * err))
+        return Twist2D(vx, 0.0, wz)
 
 
 class StraightLinePlanner:
@@ -194,6 +202,19 @@ my_pkg::Missing = {mod}_not_installed:GoalChecker
 '''
 
 
+def install_package(site: Path) -> str:
+    """Write the plugin module and its ``*.dist-info`` (``METADATA``, ``entry_points.txt``)
+    into directory ``site``, as pip leaves an installed package; the module's unique name."""
+    mod = f"my_nav_plugins_{uuid.uuid4().hex[:8]}"
+    site.mkdir(parents=True, exist_ok=True)
+    (site / f"{mod}.py").write_text(PLUGIN_SOURCE)
+    dist = site / f"{mod}-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {mod}\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text(textwrap.dedent(ENTRY_POINTS).format(mod=mod))
+    return mod
+
+
 @dataclass(frozen=True)
 class Installed:
     module: str
@@ -204,14 +225,8 @@ class Installed:
 def installed(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[Installed]:
     """A distribution installed into a directory on ``sys.path``: its module and its
     ``*.dist-info`` with ``entry_points.txt``, as pip leaves them."""
-    mod = f"my_nav_plugins_{uuid.uuid4().hex[:8]}"
     site = tmp_path / "site-packages"
-    site.mkdir()
-    (site / f"{mod}.py").write_text(PLUGIN_SOURCE)
-    dist = site / f"{mod}-1.0.dist-info"
-    dist.mkdir()
-    (dist / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {mod}\nVersion: 1.0\n")
-    (dist / "entry_points.txt").write_text(textwrap.dedent(ENTRY_POINTS).format(mod=mod))
+    mod = install_package(site)
     monkeypatch.syspath_prepend(str(site))
     plugins.clear_entry_point_cache()
     yield Installed(mod, site)
@@ -362,3 +377,24 @@ def test_audit_keeps_an_installed_plugins_keys(installed: Installed) -> None:
     doc["controller_server"]["ros__parameters"]["goal_checker"] = {"plugin": "my_pkg::Missing"}
     with pytest.raises(UnsupportedPlugin, match="ModuleNotFoundError"):
         audit_nav2_params(doc)
+
+
+def test_eddie_nav_exits_non_zero_naming_a_broken_plugin(
+        installed: Installed, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from eddiebot.cli.main import main
+    from eddiebot.maps import OccupancyMap, save_map
+
+    room = save_map(OccupancyMap(data=np.zeros((40, 60), dtype=np.int8), resolution=0.05),
+                    tmp_path / "room")
+    params = tmp_path / "nav2.yaml"
+    params.write_text("controller_server:\n  ros__parameters:\n"
+                      "    controller_plugins: [FollowPath]\n"
+                      "    FollowPath:\n      plugin: my_pkg::StraightController\n"
+                      "    goal_checker:\n      plugin: my_pkg::Missing\n")
+    code = main(["nav", "--map", str(room), "--world", "office", "--params", str(params),
+                 "--run-dir", str(tmp_path / "run")])
+    err = capsys.readouterr().err.splitlines()
+    assert code == 2
+    assert err[-1].startswith("eddie: error: controller_server: parameter 'goal_checker.plugin'")
+    assert f"No module named '{installed.module}_not_installed'" in err[-1]
+    assert sum("my_pkg::Missing" in line for line in err) == 1
