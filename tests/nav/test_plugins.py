@@ -183,7 +183,7 @@ ENTRY_POINTS = '''
 my_pkg::StraightController = {mod}:StraightController
 
 [eddiebot.nav.planners]
-my_pkg::StraightLinePlanner = {mod}:StraightLinePlanner
+my_pkg.StraightLinePlanner = {mod}:StraightLinePlanner
 
 [eddiebot.nav.costmap_layers]
 my_pkg::BoxLayer = {mod}:BoxLayer

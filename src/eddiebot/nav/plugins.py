@@ -10,7 +10,8 @@ module that defines them) and finds a user's own types in two ways:
   ``progress_checkers``, ``goal_checkers``, ``planners``, ``smoothers``, ``behaviors``,
   ``costmap_layers``), named by the type and pointing at the plugin class, e.g. in
   ``pyproject.toml``: ``[project.entry-points."eddiebot.nav.controllers"]
-  "my_pkg::StraightController" = "my_pkg.control:StraightController"``.
+  "my_pkg.StraightController" = "my_pkg.control:StraightController"`` (an entry point's
+  ``pkg.Type`` is the type ``pkg::Type``, which packaging tools accept with a warning).
 
 Entry points are read when a type is first asked for and loaded only then. A factory (or an
 entry point's class's ``from_params`` classmethod) is called as ``factory(params, name,
@@ -122,7 +123,8 @@ class PluginRegistry(Mapping[str, PluginType]):
 
     def _installed(self) -> dict[str, metadata.EntryPoint]:
         if self._entry_points is None:
-            self._entry_points = {plugin_key(ep.name): ep
+            # packaging recommends entry-point names of [\w.-]+: ``pkg.Type`` is ``pkg::Type``
+            self._entry_points = {plugin_key(ep.name).replace(".", "::"): ep
                                   for ep in metadata.entry_points(group=self.group)}
         return self._entry_points
 
