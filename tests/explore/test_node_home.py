@@ -65,3 +65,26 @@ def test_a_retry_retraces_the_path_driven_while_exploring(node: ExploreNode) -> 
     # far from the driven path: nothing to retrace
     node.path.append((1.5, 1.5, 0.0))
     assert node._retrace(2.0) == []
+
+
+def test_a_goal_failed_for_want_of_the_robot_pose_keeps_its_frontier(node: ExploreNode) -> None:
+    from types import SimpleNamespace
+
+    from eddiebot.explore.frontiers import Frontier
+
+    sent: list = []
+    node._send = lambda client, goal, on_result: sent.append(on_result)  # type: ignore[method-assign]
+    node.grid = OccupancyMap(np.zeros((40, 40), np.int8), 0.05)
+    f = Frontier(points=np.zeros((1, 2)), size=1.0, centroid=(1.5, 1.5), entry=(1.0, 1.0),
+                 viewpoint=(1.0, 1.0, 0.0), distance=1.0, gain=2.0, turn=0.0, cost=0.0)
+
+    def fail(code: int) -> None:
+        node._go_to(f, 7, 0.0)
+        sent[-1](SimpleNamespace(status=6, result=SimpleNamespace(error_code=code)))
+
+    fail(102)  # FollowPath's TF_ERROR: the pose was lost, not the way
+    fail(202)  # ComputePathToPose's TF_ERROR
+    assert len(node.blacklist) == 0 and node.transient_failures == 2
+    assert node._resume_at is not None  # planning again after a pause
+    fail(105)  # failed to make progress: the frontier is given up (for now)
+    assert len(node.blacklist) == 1 and node.blacklist.contains((1.5, 1.5))

@@ -44,6 +44,10 @@ from eddiebot.maps import OccupancyMap, map_from_msg
 __all__ = ["ExploreNode", "ExploreState", "GoalRecord"]
 
 _SUCCEEDED, _CANCELED, _ABORTED = 4, 5, 6
+#: Failures that say nothing about the goal: the robot's pose was not to be had (FollowPath's
+#: and ComputePathToPose's TF_ERROR). The frontier is kept and planned again after a pause.
+_TRANSIENT_CODES = frozenset({102, 202})
+_TRANSIENT_PAUSE_S = 2.0
 #: A kept target's goal is re-sent when its viewpoint moved this far (the frontier changed), m.
 _RESEND_DISTANCE = 0.5
 #: A frontier whose arrivals promised little is abandoned after this many times
@@ -154,6 +158,8 @@ class ExploreNode(Node):
         self.avoid: list[tuple[float, float]] = []
         """Goal spots given up for no progress; later goals keep ``avoid_radius`` from them."""
         self.retries = 0
+        self.transient_failures = 0
+        """Goals failed for want of the robot's pose (TF), not blamed on their frontier."""
         self.create_timer(0.1, self._tick)
 
     # -- inputs -------------------------------------------------------------------------------
@@ -372,6 +378,12 @@ class ExploreNode(Node):
                 track = self.tracker.tracks.get(tid)
                 if track is not None:
                     track.arrived = True
+            elif code in _TRANSIENT_CODES:
+                record.outcome = f"failed ({status}, code {code}), kept"
+                self.transient_failures += 1
+                self.get_logger().info(f"navigation failed (code {code}: no robot pose); "
+                                       f"planning again in {_TRANSIENT_PAUSE_S:.0f} s")
+                self._resume_at = (self._now_s() + _TRANSIENT_PAUSE_S, lambda: None)
             else:
                 record.outcome = f"failed ({status}, code {code})"
                 self._abandon(frontier.centroid, f"navigation failed (status {status}, code {code})",
