@@ -18,6 +18,7 @@ import pytest
 
 from eddiebot.nav import plugins
 from eddiebot.nav.behaviors import build_behaviors
+from eddiebot.nav.bt import BehaviorTreeFactory, TreeError
 from eddiebot.nav.controllers import SimpleGoalChecker, build_controller_server
 from eddiebot.nav.cost_values import FREE_SPACE, LETHAL_OBSTACLE
 from eddiebot.nav.costmap import build_costmap
@@ -167,6 +168,14 @@ class GentleSpin(Spin):
                            min_rotational_vel=min(cap, context.server_config.min_rotational_vel)))
 
 
+class Fragile:
+    """A plugin whose configure fails with an error no parameter check foresaw."""
+
+    @classmethod
+    def from_params(cls, params, name, context):
+        return params.get("mode").upper()
+
+
 def make_progress_checker(params, name, context):
     """A plain factory function (no class): a checker that never times out."""
     class Patient:
@@ -190,6 +199,10 @@ my_pkg::BoxLayer = {mod}:BoxLayer
 
 [eddiebot.nav.smoothers]
 my_pkg::DecimatingSmoother = {mod}:DecimatingSmoother
+my_pkg::Fragile = {mod}:Fragile
+
+[eddiebot.nav.bt_nodes]
+broken_nodes = {mod}_not_installed:register_bt_nodes
 
 [eddiebot.nav.behaviors]
 my_pkg::GentleSpin = {mod}:GentleSpin
@@ -398,3 +411,21 @@ def test_eddie_nav_exits_non_zero_naming_a_broken_plugin(
     assert err[-1].startswith("eddie: error: controller_server: parameter 'goal_checker.plugin'")
     assert f"No module named '{installed.module}_not_installed'" in err[-1]
     assert sum("my_pkg::Missing" in line for line in err) == 1
+
+
+def test_installed_plugin_failing_to_configure_is_named(installed: Installed) -> None:
+    with pytest.raises(UnsupportedPlugin) as exc:
+        build_smoother("fragile", {"plugin": "my_pkg::Fragile"})
+    assert str(exc.value) == (
+        f"smoother_server: parameter 'fragile.plugin' = 'my_pkg::Fragile': entry point "
+        f"'my_pkg::Fragile' = '{installed.module}:Fragile' (group 'eddiebot.nav.smoothers'): "
+        f"failed to configure: AttributeError: 'NoneType' object has no attribute 'upper'")
+
+
+def test_bt_node_entry_point_failing_to_import_is_named(installed: Installed) -> None:
+    with pytest.raises(TreeError) as exc:
+        BehaviorTreeFactory().load_plugin("broken_nodes")
+    assert str(exc.value) == (
+        f"plugin_lib_names: entry point 'broken_nodes' = "
+        f"'{installed.module}_not_installed:register_bt_nodes' (group 'eddiebot.nav.bt_nodes') "
+        f"failed to load: ModuleNotFoundError: No module named '{installed.module}_not_installed'")

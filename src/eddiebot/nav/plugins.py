@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from importlib import metadata
 from typing import Any, Protocol
 
-from eddiebot.nav.errors import UnsupportedPlugin
+from eddiebot.nav.errors import NavError, UnsupportedPlugin
 
 __all__ = [
     "ENTRY_POINT_PREFIX",
@@ -109,7 +109,7 @@ class PluginRegistry(Mapping[str, PluginType]):
 
     # -- registration -------------------------------------------------------------------------
     def register(self, type_name: str, factory: PluginFactory, config: type[Any] | None = None,
-                 source: str = "registered") -> None:
+                 source: str = "registered with register()") -> None:
         """Add (or replace) type ``type_name``; ``factory(params, name, context)`` builds it."""
         if not callable(factory):
             raise TypeError(f"{self.kind} plugin {type_name!r}: factory {factory!r} is not callable")
@@ -193,9 +193,19 @@ class PluginRegistry(Mapping[str, PluginType]):
     def create(self, type_name: str, params: Mapping[str, Any], name: str,
                context: PluginContext) -> Any:
         """Build instance ``name`` of ``type_name`` from its parameter block."""
-        entry = self.resolve(type_name, context.server, f"{name}.plugin")
+        key = f"{name}.plugin"
+        entry = self.resolve(type_name, context.server, key)
         sub = {k: v for k, v in params.items() if k != "plugin"}
-        return entry.factory(sub, name, context)
+        if entry.source == "built-in":
+            return entry.factory(sub, name, context)
+        try:
+            return entry.factory(sub, name, context)
+        except NavError:
+            raise
+        except Exception as exc:  # a user's plugin failing to configure stops the bring-up
+            raise UnsupportedPlugin(
+                context.server, key, type_name,
+                f"{entry.source}: failed to configure: {type(exc).__name__}: {exc}") from None
 
 
 _REGISTRIES: dict[str, PluginRegistry] = {kind: PluginRegistry(kind) for kind in KINDS}

@@ -155,7 +155,12 @@ class BehaviorTreeFactory:
 
         for ep in entry_points(group=BT_NODE_ENTRY_POINT_GROUP):
             if ep.name == lib:
-                fn = ep.load()
+                try:
+                    fn = ep.load()
+                except Exception as exc:  # any failure importing user code is reported
+                    raise TreeError(f"plugin_lib_names: entry point {ep.name!r} = {ep.value!r} "
+                                    f"(group {BT_NODE_ENTRY_POINT_GROUP!r}) failed to load: "
+                                    f"{type(exc).__name__}: {exc}") from None
                 break
         if fn is None:
             try:
