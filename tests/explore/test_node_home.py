@@ -88,3 +88,26 @@ def test_a_goal_failed_for_want_of_the_robot_pose_keeps_its_frontier(node: Explo
     assert node._resume_at is not None  # planning again after a pause
     fail(105)  # failed to make progress: the frontier is given up (for now)
     assert len(node.blacklist) == 1 and node.blacklist.contains((1.5, 1.5))
+
+
+def test_a_goal_given_up_for_no_progress_is_replaced_by_one_away_from_its_spot(
+        node: ExploreNode) -> None:
+    from types import SimpleNamespace
+
+    d = np.full((100, 200), -1, np.int8)  # a known room, its east side unknown
+    d[20:80, 10:100] = 0
+    d[20, 10:100] = d[79, 10:100] = 100
+    d[20:80, 10] = 100
+    node.grid = OccupancyMap(d, 0.05)
+    node._send = lambda client, goal, on_result: None  # type: ignore[method-assign]
+    pose = (1.0, 2.5, 0.0)
+    node._explore(pose, 0.0)
+    first = node.goals[-1].viewpoint
+    node._goal_handle = SimpleNamespace(cancel_goal_async=lambda: None)
+    node._explore(pose, 1.0)  # the robot gets no closer ...
+    assert len(node.goals) == 1
+    node._explore(pose, 1.0 + node.config.progress_timeout + 1.0)  # ... for progress_timeout
+    assert node.goals[0].outcome == "no progress"
+    assert len(node.goals) == 2  # a new goal at once, away from the spot given up
+    again = node.goals[-1].viewpoint
+    assert math.dist(again[:2], first[:2]) > node.config.avoid_radius

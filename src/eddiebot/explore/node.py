@@ -272,21 +272,7 @@ class ExploreNode(Node):
 
     def _explore(self, pose: tuple[float, float, float], now: float) -> None:
         assert self.grid is not None
-        swept = mark_swept(self.grid, [(x, y) for x, y, _ in self.path], self.config.robot_radius)
-        search = search_frontiers(swept, pose, self.config, avoid=self.avoid, looked=self.looks)
-        self.last_search = search
-        self.searches += 1
-        known = float(np.count_nonzero(self.grid.data >= 0)) * self.grid.resolution**2
-        ids = self.tracker.update([f.centroid for f in search.frontiers],
-                                  [f.size for f in search.frontiers])
-        for f, tid in zip(search.frontiers, ids, strict=True):
-            track = self.tracker.tracks[tid]
-            track.judge_visit(known)
-            if ((track.visits >= self.config.max_visits
-                 or track.idle >= _IDLE_VISITS * self.config.max_visits)
-                    and not self.blacklist.contains(f.centroid)):
-                self._abandon(f.centroid, f"unproductive: reached {track.idle} times, "
-                                          "nothing new seen")
+        # a goal given up for no progress first: the search below then avoids its spot
         if self._target is not None and self._goal_handle is not None:
             goal = self.goals[-1].viewpoint
             if self._progress.update(math.hypot(goal[0] - pose[0], goal[1] - pose[1]), now):
@@ -305,6 +291,21 @@ class ExploreNode(Node):
                 self.avoid.append((goal[0], goal[1]))
                 self.goals[-1].outcome = "no progress"
                 self._cancel_goal()
+        swept = mark_swept(self.grid, [(x, y) for x, y, _ in self.path], self.config.robot_radius)
+        search = search_frontiers(swept, pose, self.config, avoid=self.avoid, looked=self.looks)
+        self.last_search = search
+        self.searches += 1
+        known = float(np.count_nonzero(self.grid.data >= 0)) * self.grid.resolution**2
+        ids = self.tracker.update([f.centroid for f in search.frontiers],
+                                  [f.size for f in search.frontiers])
+        for f, tid in zip(search.frontiers, ids, strict=True):
+            track = self.tracker.tracks[tid]
+            track.judge_visit(known)
+            if ((track.visits >= self.config.max_visits
+                 or track.idle >= _IDLE_VISITS * self.config.max_visits)
+                    and not self.blacklist.contains(f.centroid)):
+                self._abandon(f.centroid, f"unproductive: reached {track.idle} times, "
+                                          "nothing new seen")
         if self._target is not None and self._target not in ids:
             self._target = None  # its frontier is gone: explored on the way
             if self.goals:
