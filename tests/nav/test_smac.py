@@ -381,3 +381,39 @@ def test_smoother_shortens_2d_path(wall_map) -> None:
     smooth = planner_2d().create_plan((1.0, 2.5, 0.0), (4.0, 2.5, 0.0), wall_map.master)
     assert path_length(smooth) < path_length(raw) - 0.01
     assert_clear(smooth, wall_map)
+
+
+def test_built_from_nav2_parameters() -> None:
+    from eddiebot.nav.planners import build_planners
+
+    planners = build_planners({
+        "planner_plugins": ["GridBased", "Hybrid"],
+        "GridBased": {"plugin": "nav2_smac_planner/SmacPlanner2D", "tolerance": 0.2,
+                      "smoother": {"max_iterations": 500}},
+        "Hybrid": {"plugin": "nav2_smac_planner::SmacPlannerHybrid",
+                   "motion_model_for_search": "REEDS_SHEPP", "minimum_turning_radius": 0.3,
+                   "smoother": {"w_smooth": 0.4, "do_refinement": False}},
+    })
+    two_d, hyb = planners["GridBased"], planners["Hybrid"]
+    assert isinstance(two_d, SmacPlanner2D) and isinstance(hyb, SmacPlannerHybrid)
+    assert two_d.config.tolerance == 0.2 and two_d.config.smoother.max_iterations == 500
+    assert hyb.config.motion_model_for_search == "REEDS_SHEPP"
+    assert hyb.config.smoother.w_smooth == 0.4 and not hyb.config.smoother.do_refinement
+    with pytest.raises(ParameterError) as err:
+        build_planners({"planner_plugins": ["GridBased"],
+                        "GridBased": {"plugin": "nav2_smac_planner::SmacPlannerHybrid",
+                                      "motion_model_for_search": "STATE_LATICE"}})
+    assert err.value.key == "motion_model_for_search"
+    assert "planner_server.GridBased" in str(err.value)
+
+
+def test_configure_from_layered_costmap() -> None:
+    cm = _slot_map(0.4)
+    pl = hybrid()
+    pl.configure_from_costmap(cm)
+    # inflation at the circumscribed radius (hypot(0.4, 0.1) = 0.412 m), inscribed 0.1 m
+    expected = int(252 * math.exp(-5.0 * (math.hypot(0.4, 0.1) - 0.1)))
+    assert pl.possible_collision_cost == pytest.approx(expected, abs=1)
+    circ = make_costmap(np.zeros((40, 40), dtype=np.int8), robot_radius=0.2)
+    pl.configure_from_costmap(circ)
+    assert pl.use_radius

@@ -161,6 +161,8 @@ class PlannerServer(NavServer):
         assert self.host is not None and self.costmap is not None
         planner = get_planner(self.planners, planner_id or next(iter(self.planners)))
         self.host.update()
+        if hasattr(planner, "configure_from_costmap"):  # footprint-aware (SmacPlannerHybrid)
+            planner.configure_from_costmap(self.costmap)
         path = planner.create_plan(np.asarray(start), np.asarray(goal), self.costmap.master)
         return np.asarray(path, dtype=np.float64).reshape(-1, 3)
 

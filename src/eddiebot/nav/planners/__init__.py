@@ -21,6 +21,12 @@ from eddiebot.nav.costmap.costmap2d import Costmap2D
 from eddiebot.nav.errors import InvalidPlanner, ParameterError
 from eddiebot.nav.params import from_params, require
 from eddiebot.nav.planners.navfn import NavfnConfig, NavfnPlanner
+from eddiebot.nav.planners.smac import (
+    SmacPlanner2D,
+    SmacPlanner2DConfig,
+    SmacPlannerHybrid,
+    SmacPlannerHybridConfig,
+)
 from eddiebot.nav.planners.theta_star import ThetaStarConfig, ThetaStarPlanner
 from eddiebot.nav.plugins import PluginContext, PluginFactory, plugin_key, registry
 
@@ -49,6 +55,8 @@ def register_planner(type_name: str, cls: type[Any], config_cls: type[Any]) -> N
 
 register_planner("nav2_navfn_planner::NavfnPlanner", NavfnPlanner, NavfnConfig)
 register_planner("nav2_theta_star_planner::ThetaStarPlanner", ThetaStarPlanner, ThetaStarConfig)
+register_planner("nav2_smac_planner::SmacPlanner2D", SmacPlanner2D, SmacPlanner2DConfig)
+register_planner("nav2_smac_planner::SmacPlannerHybrid", SmacPlannerHybrid, SmacPlannerHybridConfig)
 
 
 @dataclass(frozen=True)

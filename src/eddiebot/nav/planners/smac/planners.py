@@ -20,7 +20,7 @@ import math
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -76,6 +76,8 @@ class SmacPlanner2DConfig:
     use_final_approach_orientation: bool = False
     max_planning_time: float = 2.0
     smoother: Any = field(default_factory=SmacSmootherConfig)
+    #: sections of the plugin's parameters read into their own config (``smoother.*``)
+    NESTED: ClassVar[dict[str, type]] = {"smoother": SmacSmootherConfig}
 
     def validate(self, server: str = "planner_server") -> None:
         require(self.tolerance >= 0.0, server, "tolerance", self.tolerance, "must be >= 0")
@@ -122,6 +124,8 @@ class SmacPlannerHybridConfig:
     debug_visualizations: bool = False
     motion_model_for_search: str = "DUBIN"
     smoother: Any = field(default_factory=SmacSmootherConfig)
+    #: sections of the plugin's parameters read into their own config (``smoother.*``)
+    NESTED: ClassVar[dict[str, type]] = {"smoother": SmacSmootherConfig}
 
     def validate(self, server: str = "planner_server") -> None:
         m = self.motion_model_for_search
