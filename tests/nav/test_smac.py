@@ -417,3 +417,20 @@ def test_configure_from_layered_costmap() -> None:
     circ = make_costmap(np.zeros((40, 40), dtype=np.int8), robot_radius=0.2)
     pl.configure_from_costmap(circ)
     assert pl.use_radius
+
+
+def test_params_audit_keeps_the_smoother_block() -> None:
+    from eddiebot.nav.nodes.params_audit import audit_nav2_params
+
+    doc = {"planner_server": {"ros__parameters": {
+        "planner_plugins": ["GridBased"],
+        "GridBased": {"plugin": "nav2_smac_planner::SmacPlannerHybrid",
+                      "minimum_turning_radius": 0.3, "foo": 1,
+                      "smoother": {"max_iterations": 500, "w_smoth": 0.3}},
+    }}}
+    audit = audit_nav2_params(doc)
+    kept = audit.supported["planner_server"]["ros__parameters"]["GridBased"]
+    assert kept["smoother"] == {"max_iterations": 500}
+    assert kept["minimum_turning_radius"] == 0.3
+    assert "ignored: planner_server.GridBased.foo" in audit.warnings
+    assert "ignored: planner_server.GridBased.smoother.w_smoth" in audit.warnings

@@ -126,13 +126,18 @@ class _Audit:
                 out[name] = self._config_keys(registry.resolve(plugin, server, f"{name}.plugin"))
         return out
 
+    def _section_keys(self, config: type[Any]) -> Callable[[str, dict[str, Any]], None]:
+        return lambda w, d: self.keys(w, d, _fields(config))
+
     def _config_keys(self, entry: PluginType) -> Callable[[str, dict[str, Any]], None]:
         """A registry type's keys: the fields of its config dataclass, or all of them kept
         when it names none (a plugin from another package: its own factory reads them)."""
         config = entry.config
         if config is None:
             return lambda w, d: None
-        return lambda w, d: self.keys(w, d, _fields(config) | {"plugin"})
+        # sections a config reads into their own dataclass (SmacPlanner*'s ``smoother``)
+        nested = {k: self._section_keys(c) for k, c in getattr(config, "NESTED", {}).items()}
+        return lambda w, d: self.keys(w, d, _fields(config) | {"plugin"}, nested)
 
 
 def _audit_costmap(a: _Audit, where: str, params: dict[str, Any], server: str) -> None:
