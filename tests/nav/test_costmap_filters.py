@@ -1,5 +1,6 @@
 """Costmap filters' cores: keepout costs (also through a frame transform and with the lethal
-override), speed limits in percent and m/s, the binary state, and the parameter names."""
+override), speed limits in percent and m/s, the binary state, the parameter names, and
+switching filters on and off (``toggle_filter``)."""
 
 from __future__ import annotations
 
@@ -200,3 +201,68 @@ def test_unknown_master_cells_take_the_mask() -> None:
     cm.update_map((0.5, 0.5, 0.0))
     # Nav2's rule: a known mask value replaces NO_INFORMATION in the master
     assert int((cm.master.data == NO_INFORMATION).sum()) == 0
+
+
+# --- toggle_filter -------------------------------------------------------------------------------
+def test_keepout_switched_off_clears_the_zone_and_on_paints_it_again() -> None:
+    cm = _costmap({"keepout": {"plugin": "nav2_costmap_2d::KeepoutFilter"}},
+                  plugins=["static_layer"])
+    static = np.zeros((80, 80), dtype=np.int8)
+    static[25, 45] = 100  # a map obstacle inside the zone stays lethal throughout
+    cm.set_static_map(OccupancyMap(static, RES))
+    f = cm.layer("keepout")
+    assert isinstance(f, KeepoutFilter)
+    f.set_mask(_mask(100, (40, 20, 50, 30)))  # x 2.0..2.5, y 1.0..1.5
+    cm.update_map((0.5, 0.5, 0.0))
+    d = cm.master.data
+    assert int((d[20:30, 40:50] == LETHAL_OBSTACLE).sum()) == 100
+    assert f.set_enabled(False) == "Disabled" and not f.filter_enabled
+    cm.update_map((0.5, 0.5, 0.0))
+    d = cm.master.data
+    assert int((d == LETHAL_OBSTACLE).sum()) == 1 and d[25, 45] == LETHAL_OBSTACLE
+    # switched off it sits the updates out; a new mask meanwhile draws nothing
+    f.set_mask(_mask(100, (0, 0, 10, 10)))
+    cm.update_map((0.5, 0.5, 0.0))
+    assert int((cm.master.data == LETHAL_OBSTACLE).sum()) == 1
+    assert f.set_enabled(True) == "Enabled" and f.filter_enabled
+    cm.update_map((0.5, 0.5, 0.0))
+    d = cm.master.data
+    assert int((d == LETHAL_OBSTACLE).sum()) == 101 and (d[0:10, 0:10] == LETHAL_OBSTACLE).all()
+    # the same request twice changes nothing
+    assert f.set_enabled(True) == "Enabled"
+    cm.update_map((0.5, 0.5, 0.0))
+    assert int((cm.master.data == LETHAL_OBSTACLE).sum()) == 101
+
+
+def test_keepout_configured_off_draws_nothing_until_switched_on() -> None:
+    cm = _costmap({"keepout": {"plugin": "nav2_costmap_2d::KeepoutFilter", "enabled": False}})
+    f = cm.layer("keepout")
+    assert isinstance(f, KeepoutFilter) and not f.filter_enabled
+    f.set_mask(_mask(100, (40, 20, 50, 30)))
+    cm.update_map((0.5, 0.5, 0.0))
+    assert int((cm.master.data == LETHAL_OBSTACLE).sum()) == 0
+    f.set_enabled(True)
+    cm.update_map((0.5, 0.5, 0.0))
+    assert int((cm.master.data == LETHAL_OBSTACLE).sum()) == 100
+
+
+def test_speed_and_binary_filters_switched_off_read_nothing() -> None:
+    cm = _costmap({"speed": {"plugin": "nav2_costmap_2d::SpeedFilter"},
+                   "binary": {"plugin": "nav2_costmap_2d::BinaryFilter"}})
+    speed, binary = cm.layer("speed"), cm.layer("binary")
+    assert isinstance(speed, SpeedFilter) and isinstance(binary, BinaryFilter)
+    binary.pending.clear()
+    speed.set_mask(_mask(40, (0, 0, 40, 80)), CostmapFilterInfo(SPEED_FILTER_PERCENT, 0.0, 1.0))
+    binary.set_mask(_mask(100, (0, 0, 40, 80)), CostmapFilterInfo(BINARY_FILTER, 0.0, 1.0))
+    cm.update_map((1.0, 1.0, 0.0))  # in both zones: 40 %, state flipped
+    assert cm.speed_limit_changes() == [SpeedLimit(True, 40.0)] and binary.pending == [True]
+    binary.pending.clear()
+    assert speed.set_enabled(False) == "Disabled" and binary.set_enabled(False) == "Disabled"
+    cm.update_map((3.0, 1.0, 0.0))  # out of both zones, but switched off: nothing changes
+    assert cm.speed_limit_changes() == [] and binary.pending == [] and binary.state is True
+    assert speed.speed_limit == 40.0
+    speed.set_enabled(True)
+    binary.set_enabled(True)
+    cm.update_map((3.0, 1.0, 0.0))
+    assert cm.speed_limit_changes() == [SpeedLimit(True, NO_SPEED_LIMIT)]
+    assert binary.pending == [False]

@@ -1,6 +1,7 @@
 """Costmap filters end to end: the info server's message, a keepout mask making the planner
 route around a corridor, a speed mask limiting what the controller commands (percent and
-m/s), a binary filter flipping as the robot drives through its zone, Nav2's tutorial
+m/s), a binary filter flipping as the robot drives through its zone, ``toggle_filter``
+switching a keepout zone off and on, Nav2's tutorial
 parameters taken without warnings, and unusable masks refused with the file named."""
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from eddiebot.msgs.geometry_msgs import Twist
 from eddiebot.msgs.nav2_msgs import ComputePathToPose, CostmapFilterInfo, SpeedLimit
 from eddiebot.msgs.nav_msgs import OccupancyGrid
 from eddiebot.msgs.std_msgs import Bool
+from eddiebot.msgs.std_srvs import SetBool
 from eddiebot.nav.cost_values import LETHAL_OBSTACLE
 from eddiebot.nav.nodes._common import pose_stamped
 from eddiebot.nav.nodes.costmap_filters import (
@@ -143,6 +145,44 @@ def test_keepout_mask_blocks_a_corridor_and_the_plan_goes_around(
     ox, oy = lm.origin_x + (ii + 0.5) * RES, lm.origin_y + (jj + 0.5) * RES
     zone = (ox > 0.7) & (ox < 1.3) & (oy > -1.0) & (oy < 1.0)
     assert zone.sum() >= 12 * 39  # the zone's cells inside the 3 m window (walls add others)
+
+
+def test_toggle_filter_switches_the_keepout_zone_off_and_on(
+        make_stack: Any, nav_stub_params: Any, tmp_path: Path) -> None:
+    doc = nav_stub_params()
+    add_filter_masks(doc, keepout=_mask_file(tmp_path, "keepout", 100, (2.7, 0.0, 3.3, 2.0),
+                                             mode="trinary"))
+    stack = make_stack(servers=("map_server", "planner_server", "controller_server"), params=doc,
+                       start=(2.0, 1.0, 0.0))
+    _with_filters(stack, doc)
+    m = stack.nodes["planner_server"].costmap.master
+    i, j = m.world_to_map(3.0, 1.0)
+
+    def toggle(costmap: str, on: bool) -> Any:
+        client = stack.probe.create_client(SetBool, f"/{costmap}/keepout_filter/toggle_filter")
+        return wait_for(stack, client.call_async(SetBool.Request(data=on)))
+
+    assert m.data[j, i] == LETHAL_OBSTACLE and _plan(stack, 5.0, 1.0)[:, 1].max() > 4.0
+    res = toggle("global_costmap", False)
+    assert (res.success, res.message) == (True, "Disabled")
+    # the zone is gone from the global costmap at once, and the plan takes the corridor
+    assert m.data[j, i] < LETHAL_OBSTACLE
+    assert _plan(stack, 5.0, 1.0)[:, 1].max() < 2.0
+    lm = stack.nodes["controller_server"].costmap.master
+
+    def local_zone_lethal() -> int:
+        """Lethal cells in the zone (odom = map - (2, 1)) clear of the room's walls."""
+        jj, ii = np.nonzero(lm.data == LETHAL_OBSTACLE)
+        ox, oy = lm.origin_x + (ii + 0.5) * RES, lm.origin_y + (jj + 0.5) * RES
+        return int(((ox > 0.7) & (ox < 1.3) & (oy > -0.85) & (oy < 0.95)).sum())
+
+    assert local_zone_lethal() == 12 * 36  # the local costmap's filter is its own
+    assert toggle("local_costmap", False).message == "Disabled"
+    stack.spin(0.5)
+    assert local_zone_lethal() == 0
+    res = toggle("global_costmap", True)
+    assert (res.success, res.message) == (True, "Enabled")
+    assert m.data[j, i] == LETHAL_OBSTACLE and _plan(stack, 5.0, 1.0)[:, 1].max() > 4.0
 
 
 # --- speed -----------------------------------------------------------------------------------

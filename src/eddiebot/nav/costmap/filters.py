@@ -151,6 +151,20 @@ class CostmapFilter(Layer):
     def active(self) -> bool:
         return self.mask is not None
 
+    # --- toggle_filter ---------------------------------------------------------------------
+    @property
+    def filter_enabled(self) -> bool:
+        """Whether the filter is switched on (``enabled``, then ``toggle_filter``)."""
+        return self.enabled
+
+    def set_enabled(self, enabled: bool) -> str:
+        """``CostmapFilter::enableCallback``, served on ``<filter>/toggle_filter``
+        (``std_srvs/SetBool``): switch the filter on or off at run time; returns the service's
+        message, ``Enabled`` or ``Disabled``. A switched-off filter reads nothing: a speed
+        filter publishes no new limit and a binary filter keeps its state, as Nav2's."""
+        self.enabled = bool(enabled)
+        return "Enabled" if enabled else "Disabled"
+
     # --- geometry --------------------------------------------------------------------------
     def _to_mask_frame(self, wx: npt.NDArray[np.floating], wy: npt.NDArray[np.floating]
                        ) -> tuple[npt.NDArray[np.floating], npt.NDArray[np.floating]]:
@@ -216,6 +230,7 @@ class KeepoutFilter(CostmapFilter):
         self._mask_costs: npt.NDArray[np.uint8] | None = None
         self._pose_lethal = False
         self._last_pose_lethal = False
+        self._on = self.config.enabled
 
     def info_problem(self, info: CostmapFilterInfo) -> str:
         # Nav2 reads any type here and only warns about base/multiplier
@@ -236,8 +251,34 @@ class KeepoutFilter(CostmapFilter):
     def lethal_override_cost(self) -> int:
         return int(np.clip(self.config.lethal_override_cost, FREE_SPACE, MAX_NON_OBSTACLE))
 
+    @property
+    def filter_enabled(self) -> bool:
+        return self._on
+
+    def set_enabled(self, enabled: bool) -> str:
+        """As :meth:`CostmapFilter.set_enabled`; a switch redraws the zone's area in the next
+        update, so switching off clears the zone from the costmap (Nav2's filter only stops
+        drawing it: the zone lingers until the master is reset there) and switching on paints
+        it at once."""
+        enabled = bool(enabled)
+        if enabled != self._on:
+            self._on = enabled
+            self._new_mask = self.mask is not None
+            self.enabled = True  # take part in the next update, which redraws the area
+        return "Enabled" if enabled else "Disabled"
+
     def update_bounds(self, robot_x: float, robot_y: float, robot_yaw: float, bounds: Bounds) -> None:
         super().update_bounds(robot_x, robot_y, robot_yaw, bounds)
+        if not self._on:  # switched off: clear the zone once, then sit the updates out
+            if self.mask is not None and self._new_mask:
+                if not self._tf_ok:
+                    return
+                x0, y0, x1, y1 = self.mask_bounds()
+                touch(bounds, x0, y0)
+                touch(bounds, x1, y1)
+                self._new_mask = False
+            self.enabled = False
+            return
         if self.mask is None or not self._tf_ok:
             return
         self._last_pose_lethal = self._pose_lethal
@@ -258,7 +299,7 @@ class KeepoutFilter(CostmapFilter):
         self._new_mask = False
 
     def update_costs(self, master: Costmap2D, i0: int, j0: int, i1: int, j1: int) -> None:
-        if not self.enabled or self.mask is None or self._mask_costs is None or not self._tf_ok:
+        if not self._on or self.mask is None or self._mask_costs is None or not self._tf_ok:
             return
         if i1 <= i0 or j1 <= j0:
             return

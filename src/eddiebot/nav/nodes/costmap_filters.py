@@ -12,7 +12,10 @@ filters' topics inside a costmap, and the bring-up of the servers from a paramet
   on their node: subscribe to ``filter_info_topic``, then to the info's mask topic, hand each
   filter the costmap-frame -> mask-frame transform before an update, and publish
   ``nav2_msgs/SpeedLimit`` on ``speed_limit_topic`` (the controller server takes it) and
-  ``std_msgs/Bool`` on ``binary_state_topic`` after it.
+  ``std_msgs/Bool`` on ``binary_state_topic`` after it. Each filter is switched on and off
+  at run time by ``std_srvs/SetBool`` on ``/<costmap>/<filter>/toggle_filter`` (Nav2's
+  ``<filter name>/toggle_filter`` in the costmap node's namespace, e.g.
+  ``/global_costmap/keepout_filter/toggle_filter``); the costmap is updated at once.
 - :func:`filter_server_sections` finds the servers a parameters file asks for (sections
   named ``*filter_mask_server`` with a ``yaml_filename`` and the ``*costmap_filter_info_server``
   sections pointing at their topics); :func:`add_filter_masks` adds a keepout or speed mask
@@ -172,6 +175,7 @@ class FilterHost:
         self._mask_subs: dict[str, Any] = {}
         self._mask_frames: dict[str, str] = {}
         self._pubs: dict[str, Any] = {}
+        self._services: list[Any] = []
         self._tf_failed: set[str] = set()
         self._tf_seen: set[str] = set()
 
@@ -183,8 +187,11 @@ class FilterHost:
         from eddiebot.msgs.nav2_msgs import CostmapFilterInfo as InfoMsg
         from eddiebot.msgs.nav2_msgs import SpeedLimit
         from eddiebot.msgs.std_msgs import Bool
+        from eddiebot.msgs.std_srvs import SetBool
 
         for f in self.filters:
+            self._services.append(self.node.create_service(
+                SetBool, self.toggle_service(f.name), self._toggle_cb(f)))
             topic = f.config.filter_info_topic
             if not topic:
                 self.node.get_logger().warning(
@@ -205,7 +212,23 @@ class FilterHost:
             self.node.destroy_subscription(sub)
         for pub in self._pubs.values():
             self.node.destroy_publisher(pub)
-        self._info_subs, self._mask_subs, self._pubs = {}, {}, {}
+        for srv in self._services:
+            self.node.destroy_service(srv)
+        self._info_subs, self._mask_subs, self._pubs, self._services = {}, {}, {}, []
+
+    def toggle_service(self, filter_name: str) -> str:
+        """The ``toggle_filter`` service of the filter named ``filter_name``."""
+        return f"/{self.costmap.name}/{filter_name}/toggle_filter"
+
+    def _toggle_cb(self, f: CostmapFilter) -> Callable[[Any, Any], Any]:
+        def callback(request: Any, response: Any) -> Any:
+            response.message = f.set_enabled(bool(request.data))
+            response.success = True
+            self.node.get_logger().info(f"{type(f).__name__} {f.name}: {response.message}")
+            if self.on_mask is not None:  # the costmap shows the switch without waiting
+                self.on_mask()
+            return response
+        return callback
 
     def _info_cb(self, f: CostmapFilter) -> Callable[[Any], None]:
         from eddiebot.msgs.nav_msgs import OccupancyGrid
