@@ -209,7 +209,8 @@ def _scan(pose: np.ndarray, stamp_ns: int) -> Scan:
     return Scan(raycast(ROOM, pose, SCAN_ANGLES, 12.0), SCAN_ANGLES.copy(), 0.05, 12.0, stamp_ns)
 
 
-def test_second_pass_does_not_double_the_graph(tmp_path) -> None:
+@pytest.mark.parametrize("use_tree", [False, True])
+def test_second_pass_does_not_double_the_graph(tmp_path, use_tree: bool) -> None:
     truth = loop_path()
     odom = drifting_odometry(truth)
     first = SlamCore(CONFIG)
@@ -220,7 +221,10 @@ def test_second_pass_does_not_double_the_graph(tmp_path) -> None:
     t0 = (len(truth) + 10) * 100_000_000
     passes = {}
     for mode in ("mapping", "lifelong"):
-        core = load_session(path, mode=mode)
+        config = SlamConfig.from_parameters(
+            {**CONFIG.to_parameters(), "mode": mode, "lifelong_search_use_tree": use_tree}
+        )
+        core = load_session(path, config)
         core.start_at(first.node_poses()[0])
         for k, (p, o) in enumerate(zip(truth, odom)):
             core.process(_scan(p, t0 + k * 100_000_000), o)
