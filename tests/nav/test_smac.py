@@ -3,6 +3,7 @@ obstacles, footprints, Dubins / Reeds-Shepp motion, unknown space and typed fail
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -11,6 +12,7 @@ from navtest_helpers import make_costmap
 
 from eddiebot.maps import OccupancyMap
 from eddiebot.nav.costmap import build_costmap
+from eddiebot.nav.costmap.costmap2d import Costmap2D
 from eddiebot.nav.errors import (
     GoalOccupied,
     NoValidPath,
@@ -123,6 +125,101 @@ def test_node2d_travel_cost(cost: int, straight: bool) -> None:
     assert status == S.FOUND
     assert (cells.tolist() == [[0, 1], [1, 1], [2, 1]]) == straight
     assert len(cells) == 3
+
+
+def _island() -> np.ndarray:
+    grid = np.zeros((100, 100), dtype=np.uint8)
+    grid[40:61, 40:61] = 254
+    return grid
+
+
+def test_a_star_2d_matches_upstream() -> None:
+    # test_a_star.cpp test_a_star_2d: 100x100 with a lethal island, (20, 20) -> (80, 80),
+    # no tolerance: 82 cells, all free; 2414 expansions upstream (ties in the queue break
+    # differently here, hence the 2 % band)
+    grid = _island()
+    status, cells, its = S.astar_2d(grid, 20, 20, 80.0, 80.0, 2.0, False, 0.0, 10000, 10, 5000,
+                                    120.0)
+    assert status == S.FOUND and len(cells) == 82
+    assert abs(its - 2414) <= 0.02 * 2414
+    assert all(grid[y, x] == 0 for x, y in cells)
+    # an occupied goal with a liberal tolerance (20 cells): 21 cells, all free
+    status, cells, _ = S.astar_2d(grid, 20, 20, 50.0, 50.0, 2.0, False, 20.0, 10000, 10, 5000,
+                                  120.0)
+    assert status == S.FOUND and len(cells) == 21
+    assert all(grid[y, x] == 0 for x, y in cells)
+
+
+def _upstream_hybrid(**kw: object) -> SmacPlannerHybrid:
+    # test_a_star.cpp's SearchInfo in Nav2 parameters: 0.1 m cells, turning radius 8 cells,
+    # lookup table 401 cells, tolerance 10 cells, 10000 iterations, 10 on approach
+    params = {"change_penalty": 0.1, "non_straight_penalty": 1.1,
+              "minimum_turning_radius": 0.8, "retrospective_penalty": 0.015,
+              "analytic_expansion_ratio": 3.5, "cost_penalty": 1.7, "max_iterations": 10000,
+              "tolerance": 1.0, "max_on_approach_iterations": 10, "allow_unknown": False,
+              "lookup_table_size": 40.1, "max_planning_time": 120.0, "smooth_path": False}
+    params.update(kw)
+    return hybrid(**params)
+
+
+def test_a_star_hybrid_matches_upstream() -> None:
+    # test_a_star.cpp test_a_star_se2: (10, 10, bin 0) -> (80, 80, bin 40) round the island,
+    # analytic expansion within 20 cells: more than 2000 expansions, 63 ± 2 poses, each step
+    # under 2.1 cells, all on free cells
+    cm = Costmap2D(100, 100, 0.1, 0.0, 0.0, 0)
+    cm.data[:] = _island()
+    pl = _upstream_hybrid(analytic_expansion_max_length=2.0)
+    pl.create_plan((1.0, 1.0, 0.0), (8.0, 8.0, 40 * 2 * math.pi / 72), cm)
+    raw = pl.last_raw_path
+    assert pl.last_iterations > 2000
+    assert abs(len(raw) - 63) <= 2
+    assert (np.hypot(*np.diff(raw[:, :2], axis=0).T) < 2.1 * 0.1).all()
+    assert all(cm.get_cost(*cm.world_to_map(x, y)) == 0 for x, y, _ in raw)
+
+
+def test_a_star_reeds_shepp_straight_back_matches_upstream() -> None:
+    # test_a_star.cpp test_a_star_analytic_expansion (Reeds-Shepp, reverse_penalty 0): from
+    # (80, 0) to (20, 0) facing +x is one straight reverse, heading 0 all along
+    pl = _upstream_hybrid(motion_model_for_search="REEDS_SHEPP", change_penalty=0.0,
+                          analytic_expansion_max_length=200.0)
+    pl.config = dataclasses.replace(pl.config, reverse_penalty=0.0)  # below Nav2's documented 1
+    pl.create_plan((8.0, 0.0, 0.0), (2.0, 0.0, 0.0), Costmap2D(100, 100, 0.1, 0.0, 0.0, 0))
+    assert np.abs(pl.last_raw_path[:, 2]).max() < 1e-3
+    assert pl.last_reversing[1:].all()
+
+
+_SQUARE = np.array([[[-10.0, 10.0], [10.0, 10.0], [10.0, -10.0], [-10.0, -10.0]]])  # cells
+
+
+@pytest.mark.parametrize(("default", "block", "lethal", "x", "y", "hit", "cost"), [
+    # test_collision_checker.cpp test_footprint_at_pose_with_movement: a 2 x 2 m footprint
+    # (0.1 m cells) inside a 21 x 21 cell patch of cost 128 in a lethal map
+    (254, True, (), 50, 50, False, 128), (254, True, (), 50, 49, True, 128),
+    (254, True, (), 50, 52, True, 128), (254, True, (), 11, 11, True, 254),
+    # test_point_and_line_cost: cost 128 everywhere, two lethal cells
+    (128, False, ((62, 50), (39, 60)), 50, 50, False, 128),
+    (128, False, ((62, 50), (39, 60)), 49, 50, True, 128),
+    (128, False, ((62, 50), (39, 60)), 52, 50, True, 128),
+    (128, False, ((62, 50), (39, 60)), 39, 60, True, 254),
+])
+def test_footprint_collision_matches_upstream(default: int, block: bool, lethal: tuple, x: int,
+                                              y: int, hit: bool, cost: int) -> None:
+    grid = np.full((100, 100), default, dtype=np.uint8)
+    if block:
+        grid[40:61, 40:61] = 128
+    for cx, cy in lethal:
+        grid[cy, cx] = 254
+    assert S._in_collision(grid, float(x), float(y), 0, False, False, 0.0, _SQUARE) == (hit, cost)
+
+
+def test_point_collision_matches_upstream() -> None:
+    # test_collision_checker.cpp test_world_to_map: a point robot reports its cell's cost
+    grid = np.zeros((100, 100), dtype=np.uint8)
+    assert S._in_collision(grid, 50.0, 50.0, 0, False, True, 0.0, _SQUARE) == (False, 0)
+    grid[50, 50] = 200
+    assert S._in_collision(grid, 50.0, 50.0, 0, False, True, 0.0, _SQUARE) == (False, 200)
+    grid[50, 50] = 253
+    assert S._in_collision(grid, 50.0, 50.0, 0, False, True, 0.0, _SQUARE)[0]
 
 
 # --- curves -------------------------------------------------------------------------------
