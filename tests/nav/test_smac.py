@@ -475,7 +475,9 @@ def test_smoother_block_is_read() -> None:
 def test_smoother_shortens_2d_path(wall_map) -> None:
     raw = planner_2d(smoother={"max_iterations": 0}).create_plan(
         (1.0, 2.5, 0.0), (4.0, 2.5, 0.0), wall_map.master)
-    smooth = planner_2d().create_plan((1.0, 2.5, 0.0), (4.0, 2.5, 0.0), wall_map.master)
+    # a generous time budget: the smoother gets what the search leaves of it
+    smooth = planner_2d(max_planning_time=60.0).create_plan((1.0, 2.5, 0.0), (4.0, 2.5, 0.0),
+                                                            wall_map.master)
     assert path_length(smooth) < path_length(raw) - 0.01
     assert_clear(smooth, wall_map)
 
@@ -531,3 +533,16 @@ def test_params_audit_keeps_the_smoother_block() -> None:
     assert kept["minimum_turning_radius"] == 0.3
     assert "ignored: planner_server.GridBased.foo" in audit.warnings
     assert "ignored: planner_server.GridBased.smoother.w_smoth" in audit.warnings
+
+
+def test_hybrid_smoothing_keeps_end_poses_and_turning_radius(wall_map) -> None:
+    pl = hybrid(max_planning_time=60.0)
+    start, goal = (1.0, 2.5, math.pi / 2), (4.0, 2.5, -math.pi / 2)
+    path = pl.create_plan(start, goal, wall_map.master)
+    assert path_length(path) < path_length(pl.last_raw_path)
+    assert_clear(path, wall_map)
+    # the boundary curves restore the start heading (the search's is its bin's) and end on
+    # the goal's
+    assert path[0, 2] == pytest.approx(math.pi / 2, abs=1e-6)
+    assert path[-2, 2] == pytest.approx(-math.pi / 2, abs=0.2)
+    assert _curvatures(path).max() <= 1.02 / 0.4

@@ -10,7 +10,6 @@ reports the time limit as "no valid path"; it is a time-out here).
 Differences from upstream kept on purpose: SmacPlanner2D's poses lie at cell centres
 (upstream's at cell corners); every pose carries the heading of its segment, the last one the
 goal's yaw (or the final approach's with ``use_final_approach_orientation``); the Hybrid
-smoother does not re-fit Dubins boundary curves at the ends of the path; the Hybrid
 ``lookup_table_size`` window is evaluated on demand (same values as upstream's table).
 """
 
@@ -453,7 +452,7 @@ class SmacPlannerHybrid:
         if cfg.smooth_path and its > 1:
             remaining = cfg.max_planning_time - (time.perf_counter() - t0)
             out = smooth_path(out, grid, costmap.origin_x, costmap.origin_y, res, cfg.smoother,
-                              False, remaining)
+                              False, remaining, rho * res)
         out[-1, 2] = g[2]
         return out
 

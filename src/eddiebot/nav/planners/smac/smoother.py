@@ -8,7 +8,11 @@ MAX_NON_OBSTACLE (unknown excepted) ends it with the previous sweep's path; a ru
 ``do_refinement`` the result is smoothed again ``refinement_num`` times. Non-holonomic
 paths are smoothed per direction of travel (split at cusps); segments of 10 poses or fewer
 are left as they are. Headings are then re-derived from the positions (reversed on a
-reversing segment).
+reversing segment). On a non-holonomic path that converged, each segment's ends are then
+re-fitted to its original end poses (``enforceStart/EndBoundaryConditions``): of the Dubins
+curves from the end pose to the path point one turning radius, one diameter, half a
+circumference and a whole circumference along, the shortest that stays off INSCRIBED cells
+(and is at most twice the path it replaces) replaces those poses.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import numpy.typing as npt
 from numba import njit
 
 from eddiebot.nav.params import require
+from eddiebot.nav.planners.smac.curves import curve_path, curve_sample
 from eddiebot.nav.planners.smac.search import _now
 
 
@@ -103,11 +108,11 @@ def _segments(xy: npt.NDArray[np.float64], yaw: npt.NDArray[np.float64], holonom
 
 
 def _orientations(xy: npt.NDArray[np.float64], yaw: npt.NDArray[np.float64], holonomic: bool
-                  ) -> None:
-    """``updateApproximatePathOrientations`` (in place)."""
+                  ) -> bool:
+    """``updateApproximatePathOrientations`` (in place); whether the segment reverses."""
     n = xy.shape[0]
     if n < 3:
-        return
+        return False
     reversing = False
     d = xy[2] - xy[1]
     theta = math.atan2(d[1], d[0])
@@ -119,12 +124,73 @@ def _orientations(xy: npt.NDArray[np.float64], yaw: npt.NDArray[np.float64], hol
             continue
         th = math.atan2(dy, dx) + (math.pi if reversing else 0.0)
         yaw[i] = math.remainder(th, 2 * math.pi)
+    return reversing
+
+
+def _expansion(a: npt.NDArray[np.float64], b: npt.NDArray[np.float64], n: int,
+               original_length: float, grid: npt.NDArray[np.uint8], ox: float, oy: float,
+               res: float, radius: float) -> tuple[npt.NDArray[np.float64], float] | None:
+    """``findBoundaryExpansion``: the Dubins curve a -> b sampled at n + 1 poses and its
+    length; None when longer than twice the original or on an INSCRIBED (or worse) cell."""
+    kinds, lengths, d = curve_path(a[0], a[1], a[2], b[0], b[1], b[2], radius, False)
+    if d > 2.0 * original_length:
+        return None
+    pts = np.empty((n + 1, 3))
+    h, w = grid.shape
+    length = 0.0
+    for i in range(n + 1):
+        x, y, th, _ = curve_sample(a[0], a[1], a[2], kinds, lengths, radius, i / n)
+        mx, my = math.floor((x - ox) / res), math.floor((y - oy) / res)
+        if not (0 <= mx < w and 0 <= my < h) or grid[my, mx] >= 253:
+            return None
+        if i:
+            length += math.hypot(x - pts[i - 1, 0], y - pts[i - 1, 1])
+        pts[i] = (x, y, math.remainder(th, 2 * math.pi))
+    return (pts, length) if length > 0.0 else None
+
+
+def _enforce_boundary(seg: npt.NDArray[np.float64], pose: npt.NDArray[np.float64],
+                      at_start: bool, reversing: bool, grid: npt.NDArray[np.uint8], ox: float,
+                      oy: float, res: float, radius: float) -> None:
+    """``enforceStartBoundaryConditions`` / ``enforceEndBoundaryConditions`` (in place)."""
+    n = seg.shape[0]
+    order = np.arange(n) if at_start else np.arange(n - 1, -1, -1)
+    targets = [radius, 2.0 * radius, math.pi * radius, 2.0 * math.pi * radius]
+    best: tuple[float, int, npt.NDArray[np.float64]] | None = None
+    dist = 0.0
+    k = 0
+    last = seg[order[0], :2]
+    for j, idx in enumerate(order):
+        dist += float(np.hypot(*(seg[idx, :2] - last)))
+        last = seg[idx, :2]
+        if dist < targets[k]:
+            continue
+        if j > 0:
+            far = seg[idx]
+            outward = at_start != reversing
+            a, b = (pose, far) if outward else (far, pose)
+            found = _expansion(a, b, j, dist, grid, ox, oy, res, radius)
+            if found is not None and (best is None or found[1] < best[0]):
+                best = (found[1], j, found[0])
+        k += 1
+        if k == len(targets):
+            break
+    if best is None:
+        return
+    _, j, pts = best
+    if reversing:
+        pts = pts[::-1]
+    if at_start:
+        seg[:j + 1] = pts
+    else:
+        seg[n - 1 - j:] = pts
 
 
 def smooth_path(path: npt.NDArray[np.float64], grid: npt.NDArray[np.uint8], origin_x: float,
                 origin_y: float, resolution: float, config: SmacSmootherConfig, holonomic: bool,
-                max_time: float) -> npt.NDArray[np.float64]:
-    """Smoothed copy of ``path`` (N, 3) on costmap ``grid`` within ``max_time`` seconds."""
+                max_time: float, min_turning_radius: float = 0.0) -> npt.NDArray[np.float64]:
+    """Smoothed copy of ``path`` (N, 3) on costmap ``grid`` within ``max_time`` seconds
+    (``min_turning_radius`` in metres: the boundary curves of a non-holonomic path)."""
     out = np.array(path, dtype=np.float64, copy=True)
     if config.max_iterations == 0 or out.shape[0] < 3:
         return out
@@ -141,9 +207,13 @@ def smooth_path(path: npt.NDArray[np.float64], grid: npt.NDArray[np.uint8], orig
                                    config.tolerance, deadline)
             if not ok:
                 break
-        _orientations(seg, yaw, holonomic)
-        out[a:b + 1, :2] = seg
-        out[a:b + 1, 2] = yaw
+        reversing = _orientations(seg, yaw, holonomic)
+        piece = np.column_stack([seg, yaw])
+        if not holonomic and ok and min_turning_radius > 0.0:
+            for at_start, pose in ((True, out[a].copy()), (False, out[b].copy())):
+                _enforce_boundary(piece, pose, at_start, reversing, grid, origin_x, origin_y,
+                                  resolution, min_turning_radius)
+        out[a:b + 1] = piece
     return out
 
 
