@@ -524,7 +524,7 @@ def _optimize_components(rtabmap: Rtabmap, poses: dict[int, NDArray[np.float64]]
     mem = rtabmap.memory
     remaining = set(poses)
     out = dict(poses)
-    links = [GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information)
+    links = [GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information, lk.switchable)
              for lk in mem.unique_links()]
     while remaining:
         root = min(remaining)

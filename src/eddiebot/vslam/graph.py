@@ -9,6 +9,16 @@ gtsam Levenberg–Marquardt (`GtsamPoseGraph`).
 Everything the core needs is `PoseGraphOptimizer.optimize` and `optimized_link_errors` (the
 `RGBD/OptimizeMaxError` residuals). Poses and link transforms are 4×4 (m); informations are 6×6
 in (x, y, z, roll, pitch, yaw).
+
+`Optimizer/Robust` (both optimisers' `robust`): every switchable link (a loop closure, not
+odometry) becomes a Vertigo switchable constraint, as upstream adds them with g2o or GTSAM: a
+switch variable s (starting at 1, clamped to [0, 1], with a prior of 1 at σ = 1) scales the
+closure's whitened residual and is optimised with the poses, so a closure the rest of the
+graph contradicts is switched off (s → 0) instead of bending the map. gtsam's Python wrapper
+has no Vertigo factor: `switchable_between` is a `CustomFactor` with the analytic Jacobians.
+(gtsam's DCS kernel, the closed form of the switch for the current poses, was tried: from a
+dead-reckoned guess 0.5 m off it switched off every true closure of a second lap, where the
+joint optimisation of the switches closes them.)
 """
 
 from __future__ import annotations
@@ -31,10 +41,12 @@ __all__ = [
     "LinkError",
     "LinkLike",
     "PoseGraphOptimizer",
+    "add_switchable",
     "discard_links",
     "link_errors",
     "make_optimizer",
     "optimized_link_errors",
+    "switchable_between",
 ]
 
 F64 = NDArray[np.float64]
@@ -45,6 +57,10 @@ _INFO_IGNORED = 1e-4
 _MIN_VARIANCE = 1e-6  # (1 mm)², (1 mrad)²: floor of link variances in the incremental graph
 # anchor of the incremental graph's root (as `eddiebot.slam.pose_graph.PoseGraph`'s node 0)
 _PRIOR_NOISE = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-4, 1e-4, 1e-5]))
+#: Vertigo's switch prior (upstream: a switch starting at 1, prior 1 with σ = 1)
+_SWITCH_PRIOR = gtsam.noiseModel.Isotropic.Sigma(1, 1.0)
+#: keys of switch variables (gtsam symbol 's'), above every node id
+_SWITCH_KEY_BASE = gtsam.symbol("s", 0)
 _RELINEARIZE_THRESHOLD = 0.01  # iSAM2 relinearisation of the incremental graph (m or rad)
 
 
@@ -56,6 +72,8 @@ class GraphLink:
     to_id: int
     transform: F64
     information: F64
+    #: a loop closure, which `Optimizer/Robust` may switch off (odometry links: False)
+    switchable: bool = False
 
 
 class LinkLike(Protocol):
@@ -69,6 +87,8 @@ class LinkLike(Protocol):
     def transform(self) -> F64: ...
     @property
     def information(self) -> F64: ...
+    @property
+    def switchable(self) -> bool: ...
 
 
 class LinkError(NamedTuple):
@@ -99,15 +119,19 @@ class GtsamPoseGraph:
 
     With `three_dof` and `incremental` (the default) every call is delegated to an
     `IncrementalPose2Graph` (gtsam iSAM2); otherwise each call
-    re-solves the whole graph with Levenberg–Marquardt.
+    re-solves the whole graph with Levenberg–Marquardt. `robust`: `Optimizer/Robust`.
     """
 
     def __init__(self, three_dof: bool, epsilon: float = 1e-5, *,
-                 incremental: bool = True) -> None:
+                 incremental: bool = True, robust: bool = False) -> None:
         self.three_dof = three_dof
         self.epsilon = epsilon
+        self.robust = robust
+        self.switches: dict[tuple[int, int], float] = {}
+        """Under `robust`: each switchable link's (from_id, to_id) switch after the last
+        batch solve (1 = kept, 0 = switched off)."""
         self.incremental: IncrementalPose2Graph | None = (
-            IncrementalPose2Graph(epsilon) if three_dof and incremental else None
+            IncrementalPose2Graph(epsilon, robust=robust) if three_dof and incremental else None
         )
 
     def optimize(
@@ -145,10 +169,17 @@ class GtsamPoseGraph:
         else:
             fixed = gtsam.noiseModel.Isotropic.Sigma(6, _FIXED_SIGMA)
             graph.add(gtsam.PriorFactorPose3(root_id, _pose3(poses[root_id]), fixed))
+        switch_keys: dict[tuple[int, int], int] = {}
         for lk in link_list:
             if lk.from_id not in component:
                 continue
             noise = self._noise(lk.information)
+            if self.robust and lk.switchable:
+                key = _SWITCH_KEY_BASE + len(switch_keys)
+                switch_keys[(lk.from_id, lk.to_id)] = key
+                add_switchable(graph, values, lk.from_id, lk.to_id, lk.transform, noise, key,
+                               self.three_dof)
+                continue
             if self.three_dof:
                 graph.add(gtsam.BetweenFactorPose2(lk.from_id, lk.to_id,
                                                    _pose2(lk.transform), noise))
@@ -159,7 +190,9 @@ class GtsamPoseGraph:
         params.setMaxIterations(max(1, iterations))
         params.setRelativeErrorTol(self.epsilon)
         result = gtsam.LevenbergMarquardtOptimizer(graph, values, params).optimize()
-        keys = list(result.keys())
+        all_keys = result.keys()
+        keys = [k for k in all_keys if k < _SWITCH_KEY_BASE]
+        self.switches = {pair: _clamped(result.atVector(k)) for pair, k in switch_keys.items()}
         out: dict[int, F64] = {}
         if self.three_dof:
             xyt = gtsam.utilities.extractPose2(result)
@@ -212,8 +245,11 @@ class IncrementalPose2Graph:
     """
 
     def __init__(self, epsilon: float = 1e-5,
-                 relinearize_threshold: float = _RELINEARIZE_THRESHOLD) -> None:
+                 relinearize_threshold: float = _RELINEARIZE_THRESHOLD, *,
+                 robust: bool = False) -> None:
         self.epsilon = epsilon
+        self.robust = robust
+        """`Optimizer/Robust`: loop closures switchable (DCS kernel)."""
         self.relinearize_threshold = relinearize_threshold
         """iSAM2 relinearises a pose whose update exceeds this (m or rad); read when the iSAM2
         graph is (re)built."""
@@ -223,7 +259,8 @@ class IncrementalPose2Graph:
         """How often an iSAM2 update failed and the graph was re-solved in batch."""
         self.removed_links = 0
         """Links taken out by `remove_links` (closures rejected after optimisation)."""
-        self._batch = GtsamPoseGraph(True, epsilon, incremental=False)
+        self._batch = GtsamPoseGraph(True, epsilon, incremental=False, robust=robust)
+        self._next_switch = _SWITCH_KEY_BASE
         self.reset()
 
     def reset(self) -> None:
@@ -440,6 +477,7 @@ class IncrementalPose2Graph:
             pending = left
         loop = False
         added: list[tuple[tuple[int, int, int], LinkLike]] = []
+        positions: list[int] = []  # each added link's factor among the new factors
         for key, lk in fresh:
             i, j = self._index.get(lk.from_id), self._index.get(lk.to_id)
             if i is None or j is None or i == j:
@@ -448,14 +486,21 @@ class IncrementalPose2Graph:
             info = np.asarray(lk.information, dtype=np.float64)
             sub = info[_IDX_POSE2[:, None], _IDX_POSE2]
             noise = gtsam.noiseModel.Gaussian.Covariance(_floored_covariance(sub))
-            factors.add(gtsam.BetweenFactorPose2(lk.from_id, lk.to_id,
-                                                 _pose2(np.asarray(lk.transform)), noise))
+            if self.robust and lk.switchable:
+                add_switchable(factors, values, lk.from_id, lk.to_id, lk.transform, noise,
+                               self._next_switch, True)
+                self._next_switch += 1
+            else:
+                factors.add(gtsam.BetweenFactorPose2(lk.from_id, lk.to_id,
+                                                     _pose2(np.asarray(lk.transform)), noise))
+            positions.append(factors.size() - 1)  # (a switchable link's factor is its last)
             added.append((key, lk))
         if new_ids:
             self._grow_nodes(new_ids, poses)
         result = isam.update(factors, values)
         indices = list(result.getNewFactorsIndices())
-        self._add_links(added, indices[len(indices) - len(added):])
+        first = factors.size() - len(indices)  # (the root's prior, if any, is among them)
+        self._add_links(added, [indices[k - first] for k in positions])
         # extra relinearisation rounds for the first closure after a stretch without any;
         # while closures come every call, each update relinearises anyway
         for _ in range(4 if loop and not self._closing else 0):
@@ -535,11 +580,76 @@ class IncrementalPose2Graph:
         self._n_links = last
 
 
-def make_optimizer(force_3dof: bool, epsilon: float = 1e-5) -> PoseGraphOptimizer:
-    """The back end for `Reg/Force3DoF`: incremental SE(2) if true, batch Pose3 otherwise."""
+def make_optimizer(force_3dof: bool, epsilon: float = 1e-5,
+                   robust: bool = False) -> PoseGraphOptimizer:
+    """The back end for `Reg/Force3DoF`: incremental SE(2) if true, batch Pose3 otherwise;
+    `robust`: `Optimizer/Robust`."""
     if force_3dof:
-        return IncrementalPose2Graph(epsilon)
-    return GtsamPoseGraph(False, epsilon)
+        return IncrementalPose2Graph(epsilon, robust=robust)
+    return GtsamPoseGraph(False, epsilon, robust=robust)
+
+
+def add_switchable(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, from_id: int,
+                   to_id: int, transform: F64, noise: gtsam.noiseModel.Base, switch_key: int,
+                   three_dof: bool) -> None:
+    """A Vertigo switchable constraint: the switch variable `switch_key` (initial 1) with its
+    prior, then the link's factor scaled by the switch (`switchable_between`)."""
+    values.insert(switch_key, np.array([1.0]))
+    graph.add(gtsam.PriorFactorVector(switch_key, np.array([1.0]), _SWITCH_PRIOR))
+    graph.add(switchable_between(from_id, to_id, switch_key, transform, noise, three_dof))
+
+
+def switchable_between(from_id: int, to_id: int, switch_key: int, transform: F64,
+                       noise: gtsam.noiseModel.Base, three_dof: bool) -> gtsam.CustomFactor:
+    """Vertigo's `BetweenFactorSwitchableLinear`: s · (gtsam BetweenFactor's error), s the
+    switch clamped to [0, 1] (Vertigo's `SwitchVariableLinear` clamps on retract; here the
+    value is clamped where used, and its Jacobian stays the unscaled error so a switch pushed
+    past a bound can come back)."""
+    if three_dof:
+        measured2 = _pose2(np.asarray(transform, dtype=np.float64))
+
+        def error2(this: gtsam.CustomFactor, v: gtsam.Values,
+                   jacobians: list[NDArray[np.float64]] | None) -> NDArray[np.float64]:
+            a, b = v.atPose2(from_id), v.atPose2(to_id)
+            s = _clamped(v.atVector(switch_key))
+            ha, hb = np.zeros((3, 3), order="F"), np.zeros((3, 3), order="F")
+            hx = a.between(b, ha, hb)
+            hm1, hm2 = np.zeros((3, 3), order="F"), np.zeros((3, 3), order="F")
+            delta = measured2.between(hx, hm1, hm2)
+            hlog = np.zeros((3, 3), order="F")
+            e = np.asarray(gtsam.Pose2.Logmap(delta, hlog), dtype=np.float64)
+            if jacobians is not None:
+                d = hlog @ hm2
+                jacobians[0] = s * (d @ ha)
+                jacobians[1] = s * (d @ hb)
+                jacobians[2] = e.reshape(3, 1)
+            return s * e
+
+        return gtsam.CustomFactor(noise, [from_id, to_id, switch_key], error2)
+    measured3 = _pose3(np.asarray(transform, dtype=np.float64))
+
+    def error3(this: gtsam.CustomFactor, v: gtsam.Values,
+               jacobians: list[NDArray[np.float64]] | None) -> NDArray[np.float64]:
+        a, b = v.atPose3(from_id), v.atPose3(to_id)
+        s = _clamped(v.atVector(switch_key))
+        ha, hb = np.zeros((6, 6), order="F"), np.zeros((6, 6), order="F")
+        hx = a.between(b, ha, hb)
+        hm1, hm2 = np.zeros((6, 6), order="F"), np.zeros((6, 6), order="F")
+        delta = measured3.between(hx, hm1, hm2)
+        hlog = np.zeros((6, 6), order="F")
+        e = np.asarray(gtsam.Pose3.Logmap(delta, hlog), dtype=np.float64)
+        if jacobians is not None:
+            d = hlog @ hm2
+            jacobians[0] = s * (d @ ha)
+            jacobians[1] = s * (d @ hb)
+            jacobians[2] = e.reshape(6, 1)
+        return s * e
+
+    return gtsam.CustomFactor(noise, [from_id, to_id, switch_key], error3)
+
+
+def _clamped(switch: NDArray[np.float64]) -> float:
+    return min(max(float(switch[0]), 0.0), 1.0)
 
 
 def _floored_covariance(information: F64) -> F64:

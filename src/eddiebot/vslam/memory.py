@@ -57,6 +57,11 @@ class Link:
     transform: F64
     information: F64
 
+    @property
+    def switchable(self) -> bool:
+        """A loop closure (any link but odometry's), which `Optimizer/Robust` may switch off."""
+        return self.type not in _ODOMETRY_LINK_TYPES
+
     def inverse(self) -> Link:
         """The same constraint seen from the other end."""
         from eddiebot.vslam.transforms import se3_inverse

@@ -118,7 +118,8 @@ class OdometryFrames:
                     g = GraphLink(offset + lk.from_id, offset + lk.to_id, lk.transform,
                                   lk.information)
                 else:
-                    g = GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information)
+                    g = GraphLink(lk.from_id, lk.to_id, lk.transform, lk.information,
+                                  lk.switchable)
                 entry = moved[key] = (lk, g)
             out.append(entry[1])
         return out_poses, out

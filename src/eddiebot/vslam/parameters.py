@@ -243,6 +243,10 @@ class RtabmapParameters:
     # --- optimiser ---
     optimizer_iterations: int = _p("Optimizer/Iterations", 20, "")
     optimizer_epsilon: float = _p("Optimizer/Epsilon", 1e-5, "")
+    optimizer_robust: bool = _p(
+        "Optimizer/Robust", False,
+        "loop closures as Vertigo switchable constraints, switched off when the graph "
+        "contradicts them; RGBD/OptimizeMaxError is then ignored")
 
     def __post_init__(self) -> None:
         for strategy_name, value in (

@@ -21,6 +21,12 @@ from eddiebot.vslam.rtabmap.state import F64, RtabmapState
 class GraphUpdate(RtabmapState):
     """Optimises the graph and rejects a change whose links the optimum strains too much."""
 
+    @property
+    def _optimize_max_error(self) -> float:
+        """`RGBD/OptimizeMaxError`, ignored (0) under `Optimizer/Robust`: a wrong closure is
+        switched off by the optimiser instead of rejected after it."""
+        return 0.0 if self.params.optimizer_robust else self.params.rgbd_optimize_max_error
+
     def _incremental(self) -> IncrementalPose2Graph | None:
         inner = (self.optimizer.incremental if isinstance(self.optimizer, GtsamPoseGraph)
                  else self.optimizer)
@@ -56,7 +62,7 @@ class GraphUpdate(RtabmapState):
         poses, links, root = self._whole_graph(current)
         sigma = self.params.rgbd_odom_heading_sigma
         optimized = self.optimizer.optimize(poses, links, root, self.params.optimizer_iterations)
-        thr = self.params.rgbd_optimize_max_error
+        thr = self._optimize_max_error
         if thr > 0 and new_links:
             ids, lin, ang = optimized_link_errors(self.optimizer, optimized, links)
             if _worst_link_error(ids, lin, ang, sigma) > thr:
@@ -123,7 +129,7 @@ class GraphUpdate(RtabmapState):
 
         if not g.extend(poses, links, root, root_pose, self.params.optimizer_iterations, whole):
             return None
-        thr = self.params.rgbd_optimize_max_error
+        thr = self._optimize_max_error
         if thr > 0 and new_links:
             ids, lin, ang = g.link_error_ratios()
             if _worst_link_error(ids, lin, ang, sigma) > thr:
