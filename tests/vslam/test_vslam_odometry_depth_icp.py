@@ -68,8 +68,13 @@ def test_icp_recovers_a_planar_motion_in_a_room_corner(truth_xyt):
     assert r.ok and r.free_axis is None  # two walls at right angles fix x, y and yaw
     lin, ang = _pose_error(b, r.transform)
     assert lin < 0.005 and ang < 0.1
-    sd = np.sqrt(np.diag(r.covariance)[[0, 1, 5]])
-    assert np.all(sd < 0.005)
+    # upstream's RegistrationIcp covariance: translation variance v / 10, rotation v / 100
+    # (v from the correspondences' scatter), which covers the error without being loose
+    var = np.diag(r.covariance)
+    np.testing.assert_allclose(var[3:], var[:3] / 10.0)
+    sd = np.sqrt(var[[0, 1, 5]])
+    assert np.all(sd[:2] < 0.01) and sd[2] < np.radians(0.3)
+    assert lin < sd[0] and np.radians(ang) < sd[2]
     # a correction beyond Icp/MaxTranslation is refused, not returned
     tight = IcpSettings(**{**SETTINGS.__dict__, "max_translation": 0.02})
     assert not icp_register(ref, new, guess, tight).ok
@@ -97,7 +102,8 @@ def test_single_wall_leaves_the_shift_along_it_to_the_guess():
     cov = r.covariance
     assert cov[0, 0] >= 0.99 * guess_var  # says so: the guess's variance there
     assert cov[1, 1] < 1e-4 and cov[5, 5] < 1e-5
-    assert cov[0, 0] > 100 * cov[1, 1]
+    # the fit's own variance (as across the wall) plus the guess's along the wall
+    assert cov[0, 0] == pytest.approx(guess_var + cov[1, 1], rel=0.02)
     # Icp/PointToPlaneLowComplexityStrategy 0 rejects such geometry
     reject = IcpSettings(**{**SETTINGS.__dict__, "low_complexity_strategy": 0})
     assert not icp_register(ref, new, guess, reject).ok

@@ -20,9 +20,12 @@ normals at each iteration (a second wall outside the overlap constrains nothing)
 free translation stays at the guess (the visual result or the motion prediction) and the
 covariance says so: along that axis it is the guess's variance, not the fit's.
 
-Covariance (x, y, z in the odometry frame's axes at the pose, rotation about the pose):
-σ² (JᵀJ)⁻¹ of the final correspondences, σ² the residual variance (floored at (1 mm)²: the
-Kinect's depth quantisation at 1 m is coarser), on the axes the fit constrains.
+Covariance as upstream's `RegistrationIcp` (`util3d::computeVarianceAndCorrespondences`):
+v = 2.1981 · the median squared distance of the final correspondences (a robust estimate of
+their variance), v / 10 on x, y, z and v / 100 on the rotations, so what the links claim is
+the scatter of the points after the fit, not the fit's own σ² (JᵀJ)⁻¹, which treats thousands
+of correlated points as independent and claimed 5–12× less than the error on real frames
+(ICL-NUIM, TUM fr1/desk). Along a free translation the guess's variance is added.
 """
 
 from __future__ import annotations
@@ -46,11 +49,14 @@ __all__ = [
     "IcpSettings",
     "ScanCloud",
     "ScanMap",
+    "correspondence_variance",
     "depth_cloud",
     "estimate_normals",
+    "icp_covariance",
     "icp_register",
     "make_scan",
     "normals_complexity",
+    "registration_covariance",
     "voxel_filter",
 ]
 
@@ -88,6 +94,7 @@ class IcpSettings:
     min_complexity: float = 0.02
     low_complexity_strategy: int = 1
     force_3dof: bool = False
+    reciprocal_correspondences: bool = True
 
     @classmethod
     def from_parameters(cls, p: RtabmapParameters) -> IcpSettings:
@@ -99,6 +106,7 @@ class IcpSettings:
             p.icp_correspondence_ratio, p.icp_point_to_plane, p.icp_point_to_plane_k,
             p.icp_point_to_plane_radius, p.icp_point_to_plane_min_complexity,
             p.icp_point_to_plane_low_complexity_strategy, p.reg_force_3dof,
+            p.icp_reciprocal_correspondences,
         )
 
 
@@ -420,29 +428,66 @@ def icp_register(target: ScanCloud, source: ScanCloud, guess: F64, settings: Icp
     if settings.max_rotation > 0 and rotation_angle(correction) > settings.max_rotation:
         return IcpResult(None, correspondences=n_ok, ratio=ratio, complexity=complexity,
                          reason="rotation correction too large", iterations=it)
-    r, jac = _linearise(src[ok], target.points[idx[ok]], target.normals[idx[ok]], t[:3, 3],
-                        settings.point_to_plane, axes)
-    dof = basis.shape[1]
-    sigma2 = max(float(r @ r) / max(r.size - dof, 1), _RESIDUAL_VARIANCE_FLOOR)
-    jb = jac @ basis
-    info = jb.T @ jb
-    vals, vecs = np.linalg.eigh(info)
-    inv_vals = np.where(vals > 1e-12 * max(float(vals[-1]), 1e-300),
-                        1.0 / np.maximum(vals, 1e-300), LOST_VARIANCE / sigma2)
-    cov_b = sigma2 * (vecs * inv_vals) @ vecs.T
-    cov_k = basis @ cov_b @ basis.T
+    cov = icp_covariance(_variance_distances(source, target, t, src, dist, idx, ok, settings))
     if free_axis is not None:
         g = huge_covariance() if guess_covariance is None else np.asarray(guess_covariance)
         var_free = float(free_axis @ g[:3, :3] @ free_axis)
         fk = (np.array([free_axis[0], free_axis[1], 0.0]) if k == 3
               else np.concatenate([free_axis, np.zeros(3)]))
-        cov_k = cov_k + var_free * np.outer(fk, fk)
-    cov = np.diag([sigma2, sigma2, sigma2, _ANGULAR_VARIANCE_FLOOR, _ANGULAR_VARIANCE_FLOOR,
-                   _ANGULAR_VARIANCE_FLOOR]).astype(np.float64)
-    cov[np.ix_(axes, axes)] = np.minimum(cov_k, LOST_VARIANCE)
-    for i in range(3, 6):
-        cov[i, i] = max(cov[i, i], _ANGULAR_VARIANCE_FLOOR)
+        cov_k = cov[np.ix_(axes, axes)] + var_free * np.outer(fk, fk)
+        cov[np.ix_(axes, axes)] = np.minimum(cov_k, LOST_VARIANCE)
     return IcpResult(t, cov, n_ok, ratio, complexity, free_axis, "", it)
+
+
+def _variance_distances(source: ScanCloud, target: ScanCloud, t: F64, src: F64, dist: F64,
+                        idx: NDArray[np.intp], ok: NDArray[np.bool_],
+                        settings: IcpSettings) -> F64:
+    """The correspondences upstream's variance is taken over: with
+    `Icp/ReciprocalCorrespondences` only pairs that are each other's nearest point; with
+    `Icp/PointToPlane` only pairs whose normals differ by less than `Icp/MaxRotation`."""
+    keep = np.flatnonzero(ok)
+    matched = idx[keep]
+    if settings.reciprocal_correspondences:
+        _, back = cKDTree(src).query(target.points[matched])
+        mutual = back == keep
+        keep, matched = keep[mutual], matched[mutual]
+    if settings.point_to_plane and settings.max_rotation > 0:
+        n_src = source.normals[keep] @ t[:3, :3].T
+        cos = np.sum(n_src * target.normals[matched], axis=1)
+        aligned = cos > math.cos(settings.max_rotation)
+        keep = keep[aligned]
+    return np.asarray(dist[keep], dtype=np.float64)
+
+
+def registration_covariance(target: ScanCloud, source: ScanCloud, transform: F64,
+                            settings: IcpSettings, tree: cKDTree | None = None) -> F64:
+    """`icp_covariance` of `source` registered into `target`'s frame at `transform` (the
+    correspondences within `Icp/MaxCorrespondenceDistance`, filtered as `icp_register`'s)."""
+    src = source.points @ transform[:3, :3].T + transform[:3, 3]
+    dist, idx = (tree or cKDTree(target.points)).query(
+        src, distance_upper_bound=settings.max_correspondence_distance)
+    ok = np.isfinite(dist)
+    return icp_covariance(_variance_distances(source, target, transform, src, dist, idx, ok,
+                                              settings))
+
+
+def correspondence_variance(distances: F64) -> float:
+    """Upstream's `computeVarianceAndCorrespondences`: 2.1981 · the median squared
+    correspondence distance (m²; for Gaussian residuals the variance, robust to outliers),
+    floored at `_RESIDUAL_VARIANCE_FLOOR` · 10 so that the translation's variance stays at
+    least (1 mm)²."""
+    d = np.asarray(distances, dtype=np.float64)
+    if d.size == 0:
+        return LOST_VARIANCE
+    d2 = np.sort(d * d)
+    return max(2.1981 * float(d2[d2.size >> 1]), 10.0 * _RESIDUAL_VARIANCE_FLOOR)
+
+
+def icp_covariance(distances: F64) -> F64:
+    """6×6 covariance of an ICP registration as upstream's `RegistrationIcp` sets it: the
+    correspondence variance / 10 on x, y, z, / 100 on roll, pitch, yaw."""
+    var = correspondence_variance(distances) / 10.0
+    return np.diag([var, var, var, var / 10.0, var / 10.0, var / 10.0]).astype(np.float64)
 
 
 @njit(cache=True)

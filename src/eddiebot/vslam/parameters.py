@@ -103,6 +103,9 @@ class RtabmapParameters:
         "Icp/CorrespondenceRatio", 0.1,
         "accept when this share of the new cloud's points has a correspondence (upstream "
         "divides by the larger cloud)")
+    icp_reciprocal_correspondences: bool = _p(
+        "Icp/ReciprocalCorrespondences", True,
+        "the registration's variance counts only pairs that are each other's nearest point")
     icp_point_to_plane: bool = _p("Icp/PointToPlane", False, "else point to point")
     icp_point_to_plane_k: int = _p("Icp/PointToPlaneK", 5, "neighbours per normal")
     icp_point_to_plane_radius: float = _p("Icp/PointToPlaneRadius", 0.0, "m, 0 = use K")

@@ -7,11 +7,15 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.closure_check import closure_mahalanobis
-from eddiebot.vslam.depth_icp import IcpResult, icp_register, make_scan
+from eddiebot.vslam.depth_icp import (
+    IcpResult,
+    icp_register,
+    make_scan,
+    registration_covariance,
+)
 from eddiebot.vslam.memory import Link, LinkType, Node
 from eddiebot.vslam.records import _Verification
 from eddiebot.vslam.registration.pipeline import register
@@ -99,14 +103,7 @@ class LoopVerification(MapOutputs):
         result = icp_register(target, source, guess, self._icp)
         if result.transform is None:
             return result
-        # upstream's RegistrationIcp covariance: 2.1981 · median squared correspondence
-        # distance / 10 on every axis, the rotation's a tenth of that
-        t = result.transform
-        moved = source.points @ t[:3, :3].T + t[:3, 3]
-        dist, _ = cKDTree(target.points).query(
-            moved, distance_upper_bound=self._icp.max_correspondence_distance)
-        dist = dist[np.isfinite(dist)]
-        if dist.size == 0:
-            return result
-        var = max(2.1981 * float(np.median(dist**2)) / 10.0, 1e-9)
-        return replace(result, covariance=np.diag([var, var, var, var / 10, var / 10, var / 10]))
+        # upstream's RegistrationIcp covariance on every axis (no free-axis term: a closure
+        # along a wall keeps the fit's variance there, as before)
+        covariance = registration_covariance(target, source, result.transform, self._icp)
+        return replace(result, covariance=covariance)
