@@ -546,3 +546,11 @@ def test_hybrid_smoothing_keeps_end_poses_and_turning_radius(wall_map) -> None:
     assert path[0, 2] == pytest.approx(math.pi / 2, abs=1e-6)
     assert path[-2, 2] == pytest.approx(-math.pi / 2, abs=0.2)
     assert _curvatures(path).max() <= 1.02 / 0.4
+
+
+def test_hybrid_tolerance_ends_near_an_occupied_goal(wall_map) -> None:
+    pl = hybrid(tolerance=0.5)
+    path = pl.create_plan((1.0, 2.5, 0.0), (2.5, 2.5, 0.0), wall_map.master)
+    assert_clear(path, wall_map)
+    end = path[-1]
+    assert 0.0 < math.hypot(end[0] - 2.5, end[1] - 2.5) <= 0.5

@@ -11,6 +11,8 @@ Differences from upstream kept on purpose: SmacPlanner2D's poses lie at cell cen
 (upstream's at cell corners); every pose carries the heading of its segment, the last one the
 goal's yaw (or the final approach's with ``use_final_approach_orientation``); the Hybrid
 ``lookup_table_size`` window is evaluated on demand (same values as upstream's table).
+``debug_visualizations`` is accepted; no ``unsmoothed_plan``, ``expansions`` or footprint
+marker topics are published (``last_raw_path`` holds the unsmoothed plan).
 """
 
 from __future__ import annotations
@@ -473,7 +475,8 @@ class SmacPlannerHybrid:
             remaining = cfg.max_planning_time - (time.perf_counter() - t0)
             out = smooth_path(out, grid, costmap.origin_x, costmap.origin_y, res, cfg.smoother,
                               False, remaining, rho * res)
-        out[-1, 2] = g[2]
+        if abs(out[-1, 0] - g[0]) < 1e-9 and abs(out[-1, 1] - g[1]) < 1e-9:
+            out[-1, 2] = g[2]  # the goal's exact yaw, not its bin's
         return out
 
     def _obstacle_heuristic(self, grid: np.ndarray, gx: float, gy: float) -> np.ndarray:
