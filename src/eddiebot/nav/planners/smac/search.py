@@ -44,11 +44,16 @@ def _now() -> float:
 
 
 @njit(cache=True)
-def _push(hk: np.ndarray, hv: np.ndarray, size: int, key: float, val: int
-          ) -> tuple[np.ndarray, np.ndarray, int]:
-    if size == hk.shape[0]:
-        hk = np.concatenate((hk, np.empty(hk.shape[0])))
-        hv = np.concatenate((hv, np.empty(hv.shape[0], dtype=np.int64)))
+def _grow(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The heap's arrays, doubled when full (call before :func:`_push`)."""
+    if size < hk.shape[0]:
+        return hk, hv
+    return (np.concatenate((hk, np.empty(hk.shape[0]))),
+            np.concatenate((hv, np.empty(hv.shape[0], dtype=np.int64))))
+
+
+@njit(cache=True)
+def _push(hk: np.ndarray, hv: np.ndarray, size: int, key: float, val: int) -> int:
     i = size
     hk[i] = key
     hv[i] = val
@@ -59,7 +64,7 @@ def _push(hk: np.ndarray, hv: np.ndarray, size: int, key: float, val: int
         hk[p], hk[i] = hk[i], hk[p]
         hv[p], hv[i] = hv[i], hv[p]
         i = p
-    return hk, hv, size + 1
+    return size + 1
 
 
 @njit(cache=True)
@@ -104,6 +109,13 @@ def astar_2d(grid: np.ndarray, sx: int, sy: int, gx: float, gy: float, cost_pena
     t0 = _now()
     h, w = grid.shape
     n = h * w
+    # per-cell travel factor 1 + cost_penalty·cost/252; -1 where the cell cannot be entered
+    fac = np.empty(n)
+    flat = grid.ravel()
+    for i in range(n):
+        c = flat[i]
+        fac[i] = 1.0 + cost_penalty * c / 252.0 if (c < INSCRIBED or (c == UNKNOWN and
+                                                                   allow_unknown)) else -1.0
     g = np.full(n, np.inf)
     parent = np.full(n, -1, dtype=np.int64)
     visited = np.zeros(n, dtype=np.bool_)
@@ -113,7 +125,9 @@ def astar_2d(grid: np.ndarray, sx: int, sy: int, gx: float, gy: float, cost_pena
     start = sy * w + sx
     goal = int(gy) * w + int(gx)
     g[start] = 0.0
-    hk, hv, size = _push(hk, hv, size, 0.0, start)
+    if size == hk.shape[0]:
+        hk, hv = _grow(hk, hv, size)
+    size = _push(hk, hv, size, 0.0, start)
     best_h = np.inf
     best_i = -1
     iterations = 0
@@ -155,11 +169,10 @@ def astar_2d(grid: np.ndarray, sx: int, sy: int, gx: float, gy: float, cost_pena
             m = my * w + mx
             if visited[m]:
                 continue
-            c = grid[my, mx]
-            if not ((c == UNKNOWN and allow_unknown) or c < INSCRIBED):
+            fm = fac[m]
+            if fm < 0.0:
                 continue
-            step = sqrt2 if k >= 4 else 1.0
-            gc = g[cur] + step * (1.0 + cost_penalty * c / 252.0)
+            gc = g[cur] + (sqrt2 * fm if k >= 4 else fm)
             if gc < g[m]:
                 g[m] = gc
                 parent[m] = cur
@@ -167,7 +180,9 @@ def astar_2d(grid: np.ndarray, sx: int, sy: int, gx: float, gy: float, cost_pena
                 if hh < best_h:
                     best_h = hh
                     best_i = m
-                hk, hv, size = _push(hk, hv, size, gc + hh, m)
+                if size == hk.shape[0]:
+                    hk, hv = _grow(hk, hv, size)
+                size = _push(hk, hv, size, gc + hh, m)
     if status != FOUND and best_h < tolerance and status != TIMED_OUT:
         end = best_i
         status = FOUND
@@ -240,7 +255,9 @@ def obstacle_heuristic(grid: np.ndarray, goal_x: float, goal_y: float, cost_pena
     size = 0
     s = gy * sw + gx
     dist[s] = 0.0
-    hk, hv, size = _push(hk, hv, size, 0.0, s)
+    if size == hk.shape[0]:
+        hk, hv = _grow(hk, hv, size)
+    size = _push(hk, hv, size, 0.0, s)
     sqrt2 = math.sqrt(2.0)
     while size > 0:
         cur, size = _pop(hk, hv, size)
@@ -269,7 +286,9 @@ def obstacle_heuristic(grid: np.ndarray, goal_x: float, goal_y: float, cost_pena
                 nc = dist[cur] + step * (1.0 + cost_penalty * c / 252.0)
             if nc < dist[m]:
                 dist[m] = nc
-                hk, hv, size = _push(hk, hv, size, nc, m)
+                if size == hk.shape[0]:
+                    hk, hv = _grow(hk, hv, size)
+                size = _push(hk, hv, size, nc, m)
     out = dist.reshape(sh, sw)
     if downsample:
         out = out * 2.0
@@ -493,7 +512,9 @@ def hybrid_astar(
     npar[0] = -1
     nvalid[0] = 1
     count = 1
-    hk, hv, size = _push(hk, hv, size, 0.0, 0)
+    if size == hk.shape[0]:
+        hk, hv = _grow(hk, hv, size)
+    size = _push(hk, hv, size, 0.0, 0)
     best_h = np.inf
     best_slot = -1
     iterations = 0
@@ -644,7 +665,9 @@ def hybrid_astar(
                 if hh < best_h:
                     best_h = hh
                     best_slot = slot
-                hk, hv, size = _push(hk, hv, size, gc + hh, slot)
+                if size == hk.shape[0]:
+                    hk, hv = _grow(hk, hv, size)
+                size = _push(hk, hv, size, gc + hh, slot)
     if status != FOUND and status != TIMED_OUT and best_h < tolerance:
         end = best_slot
         status = FOUND
