@@ -288,7 +288,7 @@ def _ratios_reference(d, rot, info):
 
 
 def test_link_error_ratios_equal_the_row_reduction_form():
-    from eddiebot.vslam.graph import _ratios
+    from eddiebot.vslam.graph_links import _ratios
 
     rng = np.random.default_rng(9)
     n = 5000
