@@ -25,12 +25,33 @@ Runs:
   must be reached another way (there is none) or aborted with a typed reason within 60 s.
   The house with its door at (7.0, 2.0–2.9) closed has another way, through the hall.
 
+* ``unreachable`` (with ``static``: sent after its goals): a goal deep inside an obstacle and,
+  where the world has one, a goal in a room behind closed doors; ``unknown`` (SLAM map only):
+  a goal reachable in the world but deepest in the SLAM map's unknown space. Expected: aborted
+  with an error code within 60 s of sim time, without contact (``passed``).
+
+Maps (``--maps``, static runs): ``truth``, the footprint map above, and ``slam``, the map the
+SLAM node makes first on the demo's scripted drive (`eddiebot.demo.mapping.run_mapping` along
+``SLAM_ROUTES``: the office and the warehouse), saved as map_server files and served instead.
+The SLAM map's frame is the robot's start pose: AMCL starts at the identity there, goals are
+drawn and judged in the world and sent in the map frame. With ``slam`` (or ``--slam-goals``)
+random goals are drawn only where the SLAM map is known with ≥ 0.35 m clearance, so both maps
+get the same goals.
+
+Controllers (``--controllers``, static runs): the controller the navigator's trees call
+``FollowPath`` — ``rpp`` (config/nav2.yaml), ``dwb`` (config/nav2.yaml's DWB section) or
+``mppi`` (Nav2 Jazzy's sample section with Eddie's limits, `MPPI_EDDIE`) — on the same goals.
+Each goal's time is reported beside an oracle time: the reference length at the
+controller's desired speed (0.4 m/s for all three).
+
 Collisions are the simulator's contacts (the robot's own motion blocked by an obstacle or a
 person); contacts with a person near are counted apart.
 
     .venv/bin/python benchmarks/bench_nav_worlds.py                      # everything
     .venv/bin/python benchmarks/bench_nav_worlds.py --goals 5 --worlds office maze --runs static
     .venv/bin/python benchmarks/bench_nav_worlds.py --runs door
+    .venv/bin/python benchmarks/bench_nav_worlds.py --worlds office --goals 6 \
+        --runs static unreachable unknown --maps truth slam --controllers rpp mppi dwb
 
 Prints a table per run and writes ``benchmarks/results/nav_worlds.json`` (``--out`` to change).
 """
@@ -180,9 +201,8 @@ class PathGraph:
         return float(np.sum(np.hypot(np.diff(xy[:, 0]), np.diff(xy[:, 1]))))
 
 
-def sample_goals(space: FreeSpace, start: tuple[float, float], n: int, seed: int,
-                 min_step: float = 1.0) -> list[tuple[float, float, float]]:
-    """``n`` seeded random goals, reachable from ``start`` (see the module docstring)."""
+def start_component(space: FreeSpace, start: tuple[float, float]) -> np.ndarray:
+    """Cells of free space eroded by the robot radius plus one cell connected to ``start``."""
     reach = space.clearance > ROBOT_RADIUS + space.resolution
     labels, _ = ndimage.label(reach, structure=np.ones((3, 3)))
     r, c = space.cell(*start)
@@ -190,8 +210,20 @@ def sample_goals(space: FreeSpace, start: tuple[float, float], n: int, seed: int
     ids = window[window > 0]
     if ids.size == 0:
         raise ValueError(f"start {start} is not in free space")
-    comp = labels == np.bincount(ids).argmax()
+    return np.asarray(labels == np.bincount(ids).argmax())
+
+
+def sample_goals(space: FreeSpace, start: tuple[float, float], n: int, seed: int,
+                 min_step: float = 1.0,
+                 allowed: np.ndarray | None = None) -> list[tuple[float, float, float]]:
+    """``n`` seeded random goals, reachable from ``start`` (see the module docstring);
+    ``allowed`` (a mask over ``space``'s cells) narrows the cells drawn from."""
+    comp = start_component(space, start)
+    if allowed is not None:
+        comp &= allowed
     rr, cc = np.nonzero(comp & (space.clearance >= GOAL_CLEARANCE))
+    if rr.size == 0:
+        raise ValueError(f"no goal cell reachable from {start}")
     rng = np.random.default_rng(seed)
     goals: list[tuple[float, float, float]] = []
     prev = start
@@ -251,12 +283,174 @@ def map_of(world: World, out_dir: Path) -> tuple[Path, OccupancyMap]:
     return stem.with_suffix(".yaml"), grid
 
 
+# --------------------------------------------------------------------------- maps
+#: the scripted drive that makes each world's SLAM map (``eddiebot.demo.route``)
+SLAM_ROUTES = {"office": "OFFICE_ROUTE", "warehouse": "WAREHOUSE_ROUTE"}
+
+
+@dataclass
+class MapSetup:
+    """The map served to the stack: its files, its grid and where its frame is in the world."""
+
+    name: str
+    yaml: Path
+    grid: OccupancyMap
+    world_from_map: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def lookup(self, space: FreeSpace) -> tuple[np.ndarray, np.ndarray]:
+        """For each cell centre of ``space`` (world frame): this map's row and column, -1
+        where the centre falls outside the map."""
+        from eddiebot.geometry import se2_inverse, se2_transform_points
+
+        h, w = space.clearance.shape
+        rr, cc = np.mgrid[0:h, 0:w]
+        world = np.stack([space.origin[0] + (cc + 0.5) * space.resolution,
+                          space.origin[1] + (rr + 0.5) * space.resolution], axis=-1)
+        pts = se2_transform_points(se2_inverse(self.world_from_map), world.reshape(-1, 2))
+        g = self.grid
+        r = np.floor((pts[:, 1] - g.origin[1]) / g.resolution).astype(int).reshape(h, w)
+        c = np.floor((pts[:, 0] - g.origin[0]) / g.resolution).astype(int).reshape(h, w)
+        inside = (r >= 0) & (c >= 0) & (r < g.height) & (c < g.width)
+        return np.where(inside, r, -1), np.where(inside, c, -1)
+
+    def free_mask(self, space: FreeSpace, clearance: float) -> np.ndarray:
+        """Cells of ``space`` this map calls free with ``clearance`` (unknown counts as
+        an obstacle)."""
+        r, c = self.lookup(space)
+        own = FreeSpace.of(self.grid).clearance
+        return np.asarray((r >= 0) & (own[np.maximum(r, 0), np.maximum(c, 0)] >= clearance))
+
+    def unknown_depth(self, space: FreeSpace) -> np.ndarray:
+        """For each cell of ``space``: its distance (m) to this map's nearest known cell, 0
+        on known cells, +inf outside the map."""
+        r, c = self.lookup(space)
+        depth = ndimage.distance_transform_edt(self.grid.data < 0) * self.grid.resolution
+        return np.where(r >= 0, depth[np.maximum(r, 0), np.maximum(c, 0)], np.inf)
+
+
+def truth_setup(world_name: str, tmp: Path) -> MapSetup:
+    from eddiebot.sim.worlds import load_world
+
+    map_yaml, grid = map_of(load_world(world_name), tmp)
+    return MapSetup("truth", map_yaml, grid)
+
+
+def slam_setup(world_name: str, cache: Path, seed: int) -> MapSetup:
+    """The SLAM map of ``world_name`` made on the demo's scripted drive (``eddiebot.demo.
+    mapping.run_mapping``), kept in ``cache`` and made again only when missing. Its frame is
+    the robot's start pose in the world."""
+    from eddiebot.maps import load_map
+
+    map_yaml = cache / f"{world_name}_map.yaml"
+    info_path = cache / f"{world_name}_mapping.json"
+    if not (map_yaml.exists() and info_path.exists()):
+        if world_name not in SLAM_ROUTES:
+            raise SystemExit(f"--maps slam: no mapping route for world {world_name!r} "
+                             f"(routes for: {', '.join(SLAM_ROUTES)})")
+        from eddiebot.demo import route as routes
+        from eddiebot.demo.mapping import run_mapping
+
+        cache.mkdir(parents=True, exist_ok=True)
+        print(f"mapping {world_name} along {SLAM_ROUTES[world_name]} ...", flush=True)
+        t_cpu = time.process_time()
+        m = run_mapping(cache, world=world_name, route=getattr(routes, SLAM_ROUTES[world_name]),
+                        seed=seed, record=False)
+        info = {"route": SLAM_ROUTES[world_name], "finished": m.finished,
+                "distance_m": m.distance_m, "sim_s": m.sim_seconds, "wall_s": m.wall_seconds,
+                "cpu_s": time.process_time() - t_cpu, "collisions": m.collisions,
+                "ate_rmse_m": m.ate_rmse_m, "ate_aligned_rmse_m": m.ate_aligned_rmse_m,
+                "aligned_turn_deg": m.aligned_turn_deg, "agreement": m.agreement,
+                "agreement_tolerant": m.agreement_tolerant, "start": list(m.start)}
+        info_path.write_text(json.dumps(info, indent=1, default=float) + "\n")
+        print(f"  {info}", flush=True)
+    info = json.loads(info_path.read_text())
+    start = tuple(float(v) for v in info["start"])
+    return MapSetup("slam", map_yaml, load_map(map_yaml), start, info)  # type: ignore[arg-type]
+
+
+# --------------------------------------------------------------------------- controllers
+CONTROLLERS = ("rpp", "mppi", "dwb")
+#: Nav2 Jazzy's sample MPPI section (tests/data/nav2/nav2_params_jazzy.yaml) with Eddie's
+#: limits: the velocity smoother's speeds and accelerations, RPP's and DWB's 0.4 m/s; the
+#: batch at MPPI's own default (1000) to keep the whole stack near real time on one core
+MPPI_EDDIE = {"vx_max": 0.4, "vx_min": -0.3, "wz_max": 1.5, "ax_max": 0.8, "ax_min": -1.0,
+              "az_max": 2.0, "batch_size": 1000, "visualize": False}
+
+
+def controller_params(controller: str, out_dir: Path) -> tuple[Path, float]:
+    """config/nav2.yaml with ``FollowPath`` (the controller the navigator's trees name) set to
+    ``controller``, and that controller's desired speed (m/s) for the oracle time."""
+    from eddiebot.cli.nav import default_params
+
+    source = default_params()
+    doc = yaml.safe_load(source.read_text())
+    srv = doc["controller_server"]["ros__parameters"]
+    if controller == "dwb":
+        srv["FollowPath"] = dict(srv["DWB"])
+    elif controller == "mppi":
+        jazzy = yaml.safe_load((Path(__file__).resolve().parents[1] / "tests" / "data" / "nav2"
+                                / "nav2_params_jazzy.yaml").read_text())
+        srv["FollowPath"] = {**jazzy["controller_server"]["ros__parameters"]["FollowPath"],
+                             **MPPI_EDDIE}
+    elif controller != "rpp":
+        raise ValueError(f"unknown controller {controller!r} (one of {', '.join(CONTROLLERS)})")
+    section = srv["FollowPath"]
+    speed = float(section.get("desired_linear_vel", section.get("vx_max",
+                                                                section.get("max_vel_x", 0.5))))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"nav2-{controller}.yaml"
+    path.write_text(f"# {source} with FollowPath = {controller}\n"
+                    + yaml.safe_dump(doc, sort_keys=False))
+    return path, speed
+
+
+# --------------------------------------------------------------------------- special goals
+ABORT_LIMIT_S = 60.0
+SPECIAL_KINDS = ("unreachable", "unknown")
+
+
+def special_goals(truth: FreeSpace, start: tuple[float, float], truth_grid: OccupancyMap,
+                  slam: MapSetup | None, kinds: list[str]) -> list[tuple[str, tuple[float, float, float]]]:
+    """Goals the navigator must give up on, in the world frame:
+
+    * ``obstacle`` (run ``unreachable``): the cell deepest inside an obstacle of the footprint
+      map within the start area's bounding box;
+    * ``closed_room`` (run ``unreachable``): the free cell with the most clearance (≥ 0.35 m)
+      in that box that the robot cannot reach (a room behind closed doors), if any;
+    * ``unknown`` (SLAM map only): the cell of the start's free space (reachable in the
+      world) deepest in the SLAM map's unknown space."""
+    comp = start_component(truth, start)
+    rows, cols = np.nonzero(comp)
+    box = np.zeros_like(comp)
+    box[rows.min():rows.max() + 1, cols.min():cols.max() + 1] = True
+    out: list[tuple[str, tuple[float, float, float]]] = []
+
+    def pick(score: np.ndarray, kind: str) -> None:
+        if np.isfinite(score).any() and np.nanmax(np.where(np.isfinite(score), score, -1)) > 0:
+            k = int(np.argmax(np.where(np.isfinite(score), score, -1)))
+            x, y = truth.centre(*divmod(k, score.shape[1]))
+            out.append((kind, (x, y, 0.0)))
+
+    if "unreachable" in kinds:
+        inside = ndimage.distance_transform_edt(truth_grid.data != 0)
+        pick(np.where(box, inside, 0.0), "obstacle")
+        pick(np.where(box & ~comp & (truth.clearance >= GOAL_CLEARANCE), truth.clearance, 0.0),
+             "closed_room")
+    if "unknown" in kinds and slam is not None:
+        depth = slam.unknown_depth(truth)
+        pick(np.where(comp & (truth.clearance >= GOAL_CLEARANCE) & np.isfinite(depth), depth, 0.0),
+             "unknown")
+    return out
+
+
 # --------------------------------------------------------------------------- one run
 @dataclass
 class GoalRecord:
     index: int
     goal: tuple[float, float, float]
     start: tuple[float, float, float]
+    kind: str = "random"
     status: str = "not sent"
     error_code: int = 0
     error_msg: str = ""
@@ -264,17 +458,24 @@ class GoalRecord:
     driven_m: float = 0.0
     shortest_m: float = math.nan
     ratio: float = math.nan
+    oracle_s: float = math.nan
+    """The reference length at the controller's desired speed."""
+    time_ratio: float = math.nan
     final_xy_error: float = math.nan
     final_yaw_error: float = math.nan
     amcl_error: float = math.nan
     collisions: int = 0
     reached: bool = False
+    passed: bool = False
+    """Special goals: aborted with an error code within ``ABORT_LIMIT_S``, no contact."""
 
 
 @dataclass
 class RunResult:
     name: str
     world: str
+    map: str = "truth"
+    controller: str = "rpp"
     goals: list[GoalRecord] = field(default_factory=list)
     collisions: int = 0
     person_collisions: int = 0
@@ -283,20 +484,37 @@ class RunResult:
     wall_s: float = 0.0
     cpu_s: float = 0.0
 
+    @property
+    def key(self) -> str:
+        return "/".join([self.name, self.world, *([self.map, self.controller]
+                                                  if (self.map, self.controller) != ("truth", "rpp")
+                                                  else [])])
+
     def summary(self) -> dict[str, Any]:
-        n = len(self.goals)
-        reached = [g for g in self.goals if g.reached]
+        goals = [g for g in self.goals if g.kind == "random"]
+        n = len(goals)
+        reached = [g for g in goals if g.reached]
         ratios = [g.ratio for g in reached if math.isfinite(g.ratio)]
-        amcl = [g.amcl_error for g in self.goals if math.isfinite(g.amcl_error)]
+        times = [g.time_ratio for g in reached if math.isfinite(g.time_ratio)]
+        amcl = [g.amcl_error for g in goals if math.isfinite(g.amcl_error)]
+        special = [g for g in self.goals if g.kind != "random"]
         return {
-            "run": self.name, "world": self.world, "goals": n,
-            "succeeded": sum(1 for g in self.goals if g.status == "succeeded"), "reached": len(reached),
+            "run": self.name, "world": self.world, "map": self.map, "controller": self.controller,
+            "goals": n,
+            "succeeded": sum(1 for g in goals if g.status == "succeeded"), "reached": len(reached),
             "reached_pct": 100.0 * len(reached) / n if n else math.nan,
             "collisions": self.collisions, "person_collisions": self.person_collisions,
             "mean_ratio": float(np.mean(ratios)) if ratios else math.nan,
             "max_ratio": float(np.max(ratios)) if ratios else math.nan,
             "sum_ratio": (sum(g.driven_m for g in reached) / sum(g.shortest_m for g in reached)
                           if reached else math.nan),
+            "mean_time_ratio": float(np.mean(times)) if times else math.nan,
+            "max_time_ratio": float(np.max(times)) if times else math.nan,
+            "sum_time_ratio": (sum(g.seconds for g in reached) / sum(g.oracle_s for g in reached)
+                               if reached else math.nan),
+            "special": [{"kind": g.kind, "status": g.status, "error_code": g.error_code,
+                         "seconds": g.seconds, "driven_m": g.driven_m, "collisions": g.collisions,
+                         "passed": g.passed} for g in special],
             "mean_amcl_err": float(np.mean(amcl)) if amcl else math.nan,
             "max_amcl_err": float(np.max(amcl)) if amcl else math.nan,
             "sim_s": self.sim_s, "wall_s": self.wall_s, "cpu_s": self.cpu_s,
@@ -307,21 +525,29 @@ class NavRun:
     """The ``nav_sim`` launch in one process on the sim clock, with a goal client."""
 
     def __init__(self, world_file: Path, map_yaml: Path, start: tuple[float, float, float],
-                 run_dir: Path, seed: int = 0, camera: tuple[int, int] = (320, 240)) -> None:
+                 run_dir: Path, seed: int = 0, camera: tuple[int, int] = (320, 240),
+                 params: Path | None = None,
+                 world_from_map: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> None:
+        """``start`` is the world pose; ``world_from_map`` places the served map in the world
+        (a SLAM map's frame is the robot's start pose): AMCL starts at ``start`` in the map
+        frame, goals given in the world go to the navigator in the map frame."""
         from eddiebot.cli.nav import default_params, resolve_params
         from eddiebot.core.action import ActionClient
         from eddiebot.core.context import Context
         from eddiebot.core.executors import SingleThreadedExecutor
         from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
         from eddiebot.core.node import Node
-        from eddiebot.geometry import quaternion_to_yaw
+        from eddiebot.geometry import quaternion_to_yaw, se2_compose, se2_inverse
         from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
         from eddiebot.msgs.nav2_msgs import NavigateToPose
         from eddiebot.msgs.nav_msgs import Odometry
         from eddiebot.msgs.std_msgs import UInt32
         from eddiebot.registry import NODES
 
-        params = resolve_params(default_params(), run_dir, start)
+        self.world_from_map = np.array(world_from_map, dtype=float)
+        self.map_from_world = se2_inverse(self.world_from_map)
+        in_map = tuple(float(v) for v in se2_compose(self.map_from_world, start))
+        params = resolve_params(params or default_params(), run_dir, in_map)  # type: ignore[arg-type]
         self.context = Context(use_sim_time=True)
         args = {"world": str(world_file), "seed": str(seed), "map": str(map_yaml),
                 "params_file": str(params), "camera_width": str(camera[0]),
@@ -345,7 +571,9 @@ class NavRun:
         def on_amcl(msg: Any) -> None:
             p = msg.pose.pose
             q = p.orientation
-            self.amcl = (p.position.x, p.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))
+            self.amcl = tuple(float(v) for v in se2_compose(  # type: ignore[assignment]
+                self.world_from_map,
+                (p.position.x, p.position.y, quaternion_to_yaw(q.x, q.y, q.z, q.w))))
 
         def on_contact(msg: Any) -> None:
             st = self.sim.state
@@ -375,12 +603,13 @@ class NavRun:
 
     def navigate(self, goal: tuple[float, float, float], timeout_s: float,
                  record: GoalRecord) -> None:
-        from eddiebot.geometry import yaw_to_quaternion
+        from eddiebot.geometry import se2_compose, yaw_to_quaternion
 
         msg = self.NavigateToPose.Goal()
         msg.pose.header.frame_id = "map"
-        msg.pose.pose.position.x, msg.pose.pose.position.y = goal[0], goal[1]
-        q = yaw_to_quaternion(goal[2])
+        in_map = se2_compose(self.map_from_world, goal)
+        msg.pose.pose.position.x, msg.pose.pose.position.y = float(in_map[0]), float(in_map[1])
+        q = yaw_to_quaternion(float(in_map[2]))
         o = msg.pose.pose.orientation
         o.x, o.y, o.z, o.w = q
         n0 = len(self.truth)
@@ -434,40 +663,57 @@ def run_goals(name: str, world_name: str, world_file: Path, n_goals: int, seed: 
               tmp: Path, verbose: bool = True,
               goals: list[tuple[float, float, float]] | None = None,
               checkpoint: Callable[[RunResult], None] | None = None,
-              first: int = 0) -> RunResult:
+              first: int = 0, *, setup: MapSetup | None = None, controller: str = "rpp",
+              special: list[tuple[str, tuple[float, float, float]]] | None = None,
+              allowed: np.ndarray | None = None) -> RunResult:
     """Goals one after another in one launch; ``checkpoint`` sees the result after each goal.
 
     ``first`` > 0 resumes the seeded sequence at that goal: the robot starts on goal
-    ``first - 1`` (its position and yaw), as if the earlier goals had just been driven."""
+    ``first - 1`` (its position and yaw), as if the earlier goals had just been driven.
+    ``setup``: the map served (default: the world's footprint map); ``controller``: the
+    controller run as ``FollowPath``; ``special``: goals to be aborted, sent after the random
+    ones; ``allowed``: a mask narrowing the cells random goals are drawn from."""
     from eddiebot.sim.worlds import load_world
 
     world = load_world(world_file)
-    map_yaml, grid = map_of(load_world(world_name), tmp)
-    space = FreeSpace.of(grid)
+    setup = setup or truth_setup(world_name, tmp)
     truth_space = FreeSpace.of(map_of(world, tmp)[1])
     if goals is None:
-        goals = sample_goals(truth_space, world.start[:2], n_goals, seed)
+        goals = sample_goals(truth_space, world.start[:2], n_goals, seed, allowed=allowed)
     start_pose = world.start
     if first > 0:
         start_pose = goals[first - 1]
         world_file = with_start(world_file, start_pose, tmp)
     graph = PathGraph(truth_space)
-    result = RunResult(name, world_name)
+    result = RunResult(name, world_name, setup.name, controller)
+    run_dir = tmp / f"{name}-{world_name}-{setup.name}-{controller}"
+    params, speed = controller_params(controller, run_dir)
+    sequence = [("random", g) for g in goals[first:]] + list(special or [])
     t_wall, t_cpu = time.perf_counter(), time.process_time()
-    run = NavRun(world_file, map_yaml, start_pose, tmp / f"{name}-{world_name}", seed=seed)
+    run = NavRun(world_file, setup.yaml, start_pose, run_dir, seed=seed, params=params,
+                 world_from_map=setup.world_from_map)
     try:
         run.spin(3.0)
-        for i, goal in enumerate(goals[first:], start=first):
+        for i, (kind, goal) in enumerate(sequence, start=first):
             start = run.pose()
-            rec = GoalRecord(i, goal, start)
+            rec = GoalRecord(i, goal, start, kind)
             try:
                 rec.shortest_m = graph.shortest(start[:2], goal[:2])
             except ValueError:
                 rec.shortest_m = math.nan
-            timeout = goal_timeout(rec.shortest_m if math.isfinite(rec.shortest_m) else 30.0)
+            if kind == "random":
+                timeout = goal_timeout(rec.shortest_m if math.isfinite(rec.shortest_m) else 30.0)
+            else:
+                timeout = ABORT_LIMIT_S + 30.0
             run.navigate(goal, timeout, rec)
+            if math.isfinite(rec.shortest_m) and rec.shortest_m > 0:
+                rec.oracle_s = rec.shortest_m / speed
             if rec.reached and rec.shortest_m > 0:
                 rec.ratio = rec.driven_m / rec.shortest_m
+                rec.time_ratio = rec.seconds / rec.oracle_s
+            if kind != "random":
+                rec.passed = (rec.status == "aborted" and rec.error_code != 0
+                              and rec.seconds <= ABORT_LIMIT_S and rec.collisions == 0)
             result.goals.append(rec)
             result.sim_s = run.now_s()
             result.collisions = len(run.contacts)
@@ -478,9 +724,10 @@ def run_goals(name: str, world_name: str, world_file: Path, n_goals: int, seed: 
             if checkpoint is not None:
                 checkpoint(result)
             if verbose:
-                print(f"  [{world_name} {i:2d}] ({start[0]:6.2f},{start[1]:6.2f}) -> "
+                print(f"  [{world_name} {setup.name} {controller} {kind} {i:2d}] "
+                      f"({start[0]:6.2f},{start[1]:6.2f}) -> "
                       f"({goal[0]:6.2f},{goal[1]:6.2f}) {rec.status:9s} {rec.error_code:3d} "
-                      f"{rec.seconds:6.1f}s drove {rec.driven_m:5.2f} m / {rec.shortest_m:5.2f} m "
+                      f"{rec.seconds:6.1f}s (oracle {rec.oracle_s:5.1f}s) drove {rec.driven_m:5.2f} m / {rec.shortest_m:5.2f} m "
                       f"err {rec.final_xy_error:.3f} m {rec.final_yaw_error:.2f} rad "
                       f"amcl {rec.amcl_error:.3f} contacts {rec.collisions} {rec.error_msg}",
                       flush=True)
@@ -492,7 +739,6 @@ def run_goals(name: str, world_name: str, world_file: Path, n_goals: int, seed: 
         run.close()
     result.wall_s = time.perf_counter() - t_wall
     result.cpu_s = time.process_time() - t_cpu
-    _ = space
     return result
 
 
@@ -614,8 +860,9 @@ def plan_ratios(world_name: str, n_goals: int, seed: int,
 
 
 PERSON_WORLDS = ("office", "warehouse", "depot", "house")
-COLUMNS = ["run", "world", "goals", "succeeded", "reached", "reached_pct", "collisions", "person_collisions",
-           "mean_ratio", "max_ratio", "mean_amcl_err", "sim_s", "wall_s", "cpu_s"]
+COLUMNS = ["run", "world", "map", "controller", "goals", "succeeded", "reached", "collisions",
+           "person_collisions", "mean_ratio", "max_ratio", "mean_time_ratio", "mean_amcl_err",
+           "sim_s", "wall_s", "cpu_s"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -626,7 +873,20 @@ def main(argv: list[str] | None = None) -> int:
                     help="static runs: start at this goal of the seeded sequence (the robot placed on the goal before it), to split one world's goals over several runs")
     ap.add_argument("--person-goals", type=int, default=10)
     ap.add_argument("--runs", nargs="+", default=["static", "person", "door"],
-                    choices=["static", "person", "door"])
+                    choices=["static", "person", "door", *SPECIAL_KINDS],
+                    help="unreachable / unknown: goals to be aborted, sent after the static "
+                         "run's goals (alone with --goals 0)")
+    ap.add_argument("--maps", nargs="+", default=["truth"], choices=["truth", "slam"],
+                    help="static runs: the ground-truth footprint map and/or a SLAM map made "
+                         "first on the demo's scripted drive; with slam, random goals are drawn "
+                         "where the SLAM map is known and free (the same goals on both maps)")
+    ap.add_argument("--controllers", nargs="+", default=["rpp"], choices=list(CONTROLLERS),
+                    help="static runs: the controller run as FollowPath, the same goals for each")
+    ap.add_argument("--slam-goals", action="store_true",
+                    help="draw random goals where the SLAM map is known and free also when "
+                         "only --maps truth runs (the goal set of a --maps slam run)")
+    ap.add_argument("--slam-cache", type=Path, default=None,
+                    help="directory for the SLAM maps (reused when present; default: temporary)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--door-worlds", nargs="+", default=None,
                     help="only the door cases in these worlds (default: all)")
@@ -668,25 +928,34 @@ def main(argv: list[str] | None = None) -> int:
                     doors.append(d)
                     _write(args, rows, doors, details)
                 continue
+            if kind in SPECIAL_KINDS:
+                if "static" in args.runs:
+                    continue  # sent after the static run's goals
+                kind = "static"
             worlds = [w for w in args.worlds if kind == "static" or w in PERSON_WORLDS]
             for w in worlds:
                 wf = world_variant(w, tmp, people=kind == "person")
                 n = args.goals if kind == "static" else args.person_goals
+                for setup, allowed, special in _static_setups(args, kind, w, wf, tmp):
+                    for controller in (args.controllers if kind == "static" else ["rpp"]):
 
-                def save(r: RunResult, final: bool = False) -> None:
-                    # written after every goal, so a run cut short keeps what it measured
-                    details[f"{r.name}/{r.world}"] = {"goals": [asdict(g) for g in r.goals],
-                                                      "collision_points": r.collision_points,
-                                                      "complete": final}
-                    partial = [*rows, r.summary()] if not final else rows
-                    _write(args, partial, doors, details)
+                        def save(r: RunResult, final: bool = False,
+                                 info: dict[str, Any] = setup.info) -> None:
+                            # written after every goal, so a run cut short keeps what it measured
+                            details[r.key] = {"goals": [asdict(g) for g in r.goals],
+                                              "collision_points": r.collision_points,
+                                              "complete": final, "map_info": info}
+                            partial = [*rows, r.summary()] if not final else rows
+                            _write(args, partial, doors, details)
 
-                r = run_goals(kind, w, wf, n, args.seed, tmp, verbose=not args.quiet,
-                              checkpoint=save, first=args.first if kind == "static" else 0)
-                s = r.summary()
-                rows.append(s)
-                save(r, final=True)
-                print_table([s], COLUMNS)
+                        r = run_goals(kind, w, wf, n, args.seed, tmp, verbose=not args.quiet,
+                                      checkpoint=save, first=args.first if kind == "static" else 0,
+                                      setup=setup, controller=controller, special=special,
+                                      allowed=allowed)
+                        s = r.summary()
+                        rows.append(s)
+                        save(r, final=True)
+                        print_table([s], COLUMNS)
     print()
     if rows:
         print_table(rows, COLUMNS)
@@ -696,6 +965,32 @@ def main(argv: list[str] | None = None) -> int:
     _write(args, rows, doors, details)
     print(f"wrote {args.out}")
     return 0
+
+
+def _static_setups(args: argparse.Namespace, kind: str, world_name: str, world_file: Path,
+                   tmp: Path) -> list[tuple[MapSetup, np.ndarray | None,
+                                         list[tuple[str, tuple[float, float, float]]]]]:
+    """Per map of ``--maps``: the map, the mask random goals are drawn from and the special
+    goals (``--runs unreachable unknown``). Person runs: the footprint map alone."""
+    from eddiebot.sim.worlds import load_world
+
+    truth = truth_setup(world_name, tmp)
+    if kind != "static":
+        return [(truth, None, [])]
+    slam = None
+    if "slam" in args.maps or args.slam_goals:
+        slam = slam_setup(world_name, args.slam_cache or tmp / "slam", args.seed)
+    world = load_world(world_file)
+    space = FreeSpace.of(map_of(world, tmp)[1])
+    allowed = slam.free_mask(space, GOAL_CLEARANCE) if slam is not None else None
+    kinds = [k for k in SPECIAL_KINDS if k in args.runs]
+    out = []
+    for name in args.maps:
+        setup = slam if name == "slam" and slam is not None else truth
+        special = special_goals(space, world.start[:2], truth.grid,
+                                slam if setup is slam else None, kinds)
+        out.append((setup, allowed, special))
+    return out
 
 
 def _write(args: argparse.Namespace, rows: list[dict[str, Any]], doors: list[dict[str, Any]],
@@ -720,7 +1015,8 @@ def merge(files: list[Path], out: Path) -> int:
         doors += doc.get("doors", [])
         details_in = doc.get("details", {})
         for r in doc.get("results", []):
-            key = f"{r['run']}/{r['world']}"
+            key = RunResult(r["run"], r["world"], r.get("map", "truth"),
+                            r.get("controller", "rpp")).key
             parts.setdefault(key, []).append((r, details_in.get(key, {})))
         runs.append({"file": f.name, "machine": doc.get("machine"), "args": doc.get("args")})
     rows: list[dict[str, Any]] = []
@@ -731,7 +1027,8 @@ def merge(files: list[Path], out: Path) -> int:
         for _, det in items:
             for g in det.get("goals", []):
                 by_index[int(g["index"])] = g
-        result = RunResult(first_row["run"], first_row["world"])
+        result = RunResult(first_row["run"], first_row["world"], first_row.get("map", "truth"),
+                           first_row.get("controller", "rpp"))
         result.goals = [GoalRecord(**{**g, "goal": tuple(g["goal"]), "start": tuple(g["start"])})
                         for _, g in sorted(by_index.items())]
         result.collisions = sum(int(r.get("collisions", 0)) for r, _ in items)
@@ -744,7 +1041,8 @@ def merge(files: list[Path], out: Path) -> int:
         rows.append(result.summary())
         details[key] = {"goals": [asdict(g) for g in result.goals],
                         "collision_points": result.collision_points,
-                        "complete": all(det.get("complete", False) for _, det in items)}
+                        "complete": all(det.get("complete", False) for _, det in items),
+                        "map_info": items[0][1].get("map_info", {})}
     print_table(rows, COLUMNS)
     for d in doors:
         print(f"door {d['world']}: {d['status']} ({d['error_code']}: {d['error_msg']}) in "
