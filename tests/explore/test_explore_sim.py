@@ -8,7 +8,7 @@ from typing import Any
 
 import pytest
 
-from eddiebot.explore.mission import run_exploration
+from eddiebot.explore.mission import RETURN_ALLOWANCE, run_exploration
 from eddiebot.explore.report import write_report
 
 TWO_ROOMS = """
@@ -44,7 +44,7 @@ def test_explores_two_rooms_and_comes_home(world_file: Path, tmp_path: Path) -> 
     assert result.map_agreement >= 0.9
     assert result.returned_home, result.summary()
     assert result.reason.startswith(("no reachable frontier left", "time limit"))
-    assert result.sim_time_s < 240.0 + 300.0 + 61.0
+    assert result.sim_time_s < 240.0 + RETURN_ALLOWANCE + 61.0
     for name in ("map.yaml", "map.pgm", "report.json", "report.md", "exploration.png"):
         assert (out / name).is_file(), name
     figures = json.loads((out / "report.json").read_text())

@@ -434,7 +434,7 @@ class ExploreNode(Node):
         via = len(goals) - 1 - (staging is not None)
         self.get_logger().info(f"returning to the start ({x:.2f}, {y:.2f}), attempt "
                                f"{self._home_attempts} of {_HOME_ATTEMPTS}"
-                               + (f" by way of {via} points of the driven path" if via else "")
+                               + (f" by way of {via} point{'s' * (via > 1)} of the driven path" if via else "")
                                + (" via a pose facing it" if staging is not None else ""))
         self._home_leg(goals)
 
