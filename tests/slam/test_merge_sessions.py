@@ -65,7 +65,7 @@ def test_a_second_session_of_the_same_place_is_placed_by_scan_matching(halves: A
     other = load_session(second_path, CONFIG)
     placement = place_session(core, other)
     assert placement.by_scan_matching
-    assert placement.relocalized >= 6
+    assert placement.relocalized == 3  # the search stops at three that agree
     assert len(placement.links) >= 6
     assert np.hypot(*(placement.transform[:2] - expected[:2])) < 0.03
     assert abs(placement.transform[2] - expected[2]) < 0.005

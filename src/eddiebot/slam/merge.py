@@ -7,9 +7,11 @@ pose into one grid; the graphs stay apart. Here a session is merged into the gra
 
 1. `place_session` finds the rigid transform from the second session's map frame into this
    one — by scan matching when no pose is given (up to ``samples`` of its nodes, spread
-   along its path, are relocalised over the whole current map; the transforms they imply are
-   clustered and the largest cluster wins), or from a given transform (the user's placement).
-   Each sampled node is then matched against the current nodes near its placed pose (the
+   along its path, are relocalised over the whole current map until
+   `RELOCALIZATION_CONSENSUS` agree; the transforms they imply are clustered and the largest
+   cluster wins), or from a given transform (the user's placement).
+   (Each sampled node is matched with the scans of its neighbours along its own path: a
+   local view.) Each sampled node is then matched against the current nodes near its placed pose (the
    loop-closure search window and thresholds); every match that agrees with the placement is a
    `MergeLink`. A placement found by search needs two links (one for a single-node session):
    a featureless corridor can relocalise somewhere in a room, but its scans then do not match
@@ -42,6 +44,9 @@ __all__ = [
     "AGREEMENT_HEADING",
     "AGREEMENT_POSITION",
     "HAND_PLACEMENT_SIGMAS",
+    "LOCAL_VIEW_NODES",
+    "MINIMUM_LINK_RESPONSE",
+    "RELOCALIZATION_CONSENSUS",
     "MergeLink",
     "Placement",
     "merge_session",
@@ -53,6 +58,15 @@ FloatArray = npt.NDArray[np.float64]
 #: Two placements agree when their transforms differ by at most this much (m, rad).
 AGREEMENT_POSITION = 0.3
 AGREEMENT_HEADING = 0.1
+#: A link's fine response must reach this (or the loop-closure threshold when higher): a
+#: merge commits a whole session, and a local view half unexplained — a corridor's one wall
+#: and end matching a room's corner — is no place to commit it.
+MINIMUM_LINK_RESPONSE = 0.6
+#: Relocalised samples whose placements agree that end the global search.
+RELOCALIZATION_CONSENSUS = 3
+#: Nodes either side of a sampled node (along its session's path) whose scans join it in the
+#: local view that is relocalised and matched.
+LOCAL_VIEW_NODES = 4
 #: Standard deviations (m, m, rad) tying a session placed by hand, with no scan-matched link,
 #: to node 0 of the graph.
 HAND_PLACEMENT_SIGMAS = np.array([0.1, 0.1, 0.05])
@@ -81,7 +95,8 @@ class Placement:
     links: tuple[MergeLink, ...]
     by_scan_matching: bool
     relocalized: int = 0
-    """Sampled nodes whose global relocalisation passed the loop-closure thresholds."""
+    """Sampled nodes whose global relocalisation passed the loop-closure thresholds (the
+    search stops at `RELOCALIZATION_CONSENSUS` agreeing)."""
 
 
 def _mean_transform(ts: list[FloatArray]) -> FloatArray:
@@ -129,8 +144,31 @@ def _check(core: SlamCore, other: SlamCore) -> None:
         )
 
 
+def _local_points(other: SlamCore, k: int, poses: FloatArray) -> FloatArray:
+    """End points of node ``k`` and of its session's nodes within ``LOCAL_VIEW_NODES`` along
+    its path, in node ``k``'s sensor frame: a local map is far more distinctive than one
+    scan when relocalising in a large map."""
+    offset = other.sensor_offset
+    here = se2_inverse(se2_compose(poses[k], offset))
+    parts = []
+    for j in range(max(0, k - LOCAL_VIEW_NODES), min(len(other.nodes), k + LOCAL_VIEW_NODES + 1)):
+        node = other.nodes[j]
+        if node.retired or node.points.shape[0] == 0:
+            continue
+        rel = se2_compose(here, se2_compose(poses[j], offset))
+        c, s = math.cos(float(rel[2])), math.sin(float(rel[2]))
+        pts = node.points
+        parts.append(np.stack([rel[0] + c * pts[:, 0] - s * pts[:, 1],
+                               rel[1] + s * pts[:, 0] + c * pts[:, 1]], axis=1))
+    pts = np.concatenate(parts) if parts else other.nodes[k].points
+    limit = 3 * max(1, other.nodes[k].points.shape[0])
+    return np.ascontiguousarray(pts[:: max(1, -(-pts.shape[0] // limit))])
+
+
 def _relocalized_transforms(core: SlamCore, other: SlamCore, picks: list[int]) -> list[FloatArray]:
-    """Transforms implied by the sampled nodes that global relocalisation places."""
+    """Transforms implied by the sampled nodes that global relocalisation places, until
+    `RELOCALIZATION_CONSENSUS` of them agree (each search covers the whole map: the cost of
+    a merge)."""
     poses = other.node_poses()
     # the whole-map grid relocalisation caches is the graph as it was: rebuild it now, and
     # leave the core's record of relocalisation attempts as it was
@@ -138,10 +176,12 @@ def _relocalized_transforms(core: SlamCore, other: SlamCore, picks: list[int]) -
     before = len(core.relocalizations)
     out = []
     try:
-        for k in picks:
-            found = core.relocalize(other.nodes[k].points)
+        for k in picks[::2] + picks[1::2]:  # spread along the path from the start
+            found = core.relocalize(_local_points(other, k, poses))
             if found.accepted:
                 out.append(se2_compose(found.pose, se2_inverse(poses[k])))
+                if len(_largest_cluster(out)) >= RELOCALIZATION_CONSENSUS:
+                    break
     finally:
         del core.relocalizations[before:]
         core._global = None
@@ -163,12 +203,12 @@ def _link(core: SlamCore, other: SlamCore, k: int, placed: FloatArray) -> MergeL
     near = [int(i) for i in active[keep][np.argsort(d[keep], kind="stable")]][
         : 2 * cfg.scan_buffer_size
     ]
-    points = other.nodes[k].points
+    points = _local_points(other, k, other.node_poses())
     coarse = core._match_against(near, points, sensor, core._loop_coarse)
     if coarse.response < cfg.loop_match_minimum_response_coarse:
         return None
     fine = core._match_against(near, points, coarse.pose, core._loop_fine)
-    if fine.response < cfg.loop_match_minimum_response_fine:
+    if fine.response < max(cfg.loop_match_minimum_response_fine, MINIMUM_LINK_RESPONSE):
         return None
     variance = float(np.linalg.eigvalsh(0.5 * (fine.covariance[:2, :2] + fine.covariance[:2, :2].T))[-1])
     if cfg.loop_match_maximum_variance_fine > 0.0 and variance > cfg.loop_match_maximum_variance_fine:
