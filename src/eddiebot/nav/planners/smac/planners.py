@@ -11,8 +11,9 @@ Differences from upstream kept on purpose: SmacPlanner2D's poses lie at cell cen
 (upstream's at cell corners); every pose carries the heading of its segment, the last one the
 goal's yaw (or the final approach's with ``use_final_approach_orientation``); the Hybrid
 ``lookup_table_size`` window is evaluated on demand (same values as upstream's table).
-``debug_visualizations`` is accepted; no ``unsmoothed_plan``, ``expansions`` or footprint
-marker topics are published (``last_raw_path`` holds the unsmoothed plan).
+No ``unsmoothed_plan``, ``expansions`` or footprint marker topics are published, so
+``debug_visualizations`` is not a key here: a params file that sets it has it named as ignored
+at start (``last_raw_path`` holds the unsmoothed plan).
 """
 
 from __future__ import annotations
@@ -123,7 +124,6 @@ class SmacPlannerHybridConfig:
     analytic_expansion_max_length: float = 3.0
     max_planning_time: float = 5.0
     lookup_table_size: float = 20.0
-    debug_visualizations: bool = False
     motion_model_for_search: str = "DUBIN"
     smoother: Any = field(default_factory=SmacSmootherConfig)
     #: sections of the plugin's parameters read into their own config (``smoother.*``)
