@@ -8,7 +8,8 @@ localization):
 
 * ``~/toggle_interactive_mode`` (slam_toolbox/ToggleInteractive) turns it on or off, sets the
   ``interactive_mode`` and ``paused_processing`` parameters, and drops the staged moves. While
-  it is on, scans are not processed, so the graph does not change under the user.
+  it is on, scans are dropped as when paused (upstream's sync node holds them in its queue
+  instead), so the graph does not change under the user.
 * ``~/feedback`` (visualization_msgs/InteractiveMarkerFeedback, what RViz's interactive marker
   client sends to slam_toolbox's marker server): ``marker_name`` is the node id; a
   ``MOUSE_UP`` stages the move of that node to ``mouse_point`` (x, y; ``pose.position`` when
@@ -38,7 +39,8 @@ node has it, the others do not): true switches a mapping or lifelong node into l
 on its current graph — the robot keeps its pose, ``initialpose`` and
 ``~/clear_localization_buffer`` appear, the graph stops growing; false switches it back to the
 mode it was launched in, the next scan starting a new chain matched against the nodes near
-the robot. ``success`` is false, with the reason in ``message``, when refused.
+the robot. ``success`` is false, with the reason in ``message``, when refused. Unlike
+upstream, ``~/save_map`` stays available while localizing (the map is the graph's, unchanged).
 """
 
 from __future__ import annotations
