@@ -10,269 +10,17 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, field
-from enum import IntEnum
-from typing import Protocol
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 
-from eddiebot.vslam.features import FrameFeatures
-from eddiebot.vslam.occupancy import CloudImages, LocalGrid
+from eddiebot.vslam.link_index import LinkIndex, link_kind, walk_loop_margin
+from eddiebot.vslam.nodes import ODOMETRY_LINK_TYPES, Link, LinkType, Node, NodeData, NodeStore
 from eddiebot.vslam.vocabulary import Vocabulary
 
 __all__ = ["Link", "LinkType", "Memory", "Node", "NodeData", "NodeStore"]
 
 F64 = NDArray[np.float64]
-
-
-class LinkType(IntEnum):
-    """RTAB-Map link types (database values)."""
-
-    NEIGHBOR = 0
-    GLOBAL_CLOSURE = 1
-    LOCAL_SPACE_CLOSURE = 2
-    LOCAL_TIME_CLOSURE = 3
-    USER_CLOSURE = 4
-    VIRTUAL_CLOSURE = 5
-    NEIGHBOR_MERGED = 6
-    POSE_PRIOR = 7
-    LANDMARK = 8
-
-
-#: Odometry links (the only ones that add depth in the Bayes prediction's neighbour search).
-_ODOMETRY_LINK_TYPES = frozenset((LinkType.NEIGHBOR, LinkType.NEIGHBOR_MERGED))
-# kinds of a link in `_Adjacency` (how the loop-margin walk follows it)
-_KIND_ODOMETRY, _KIND_LOOP, _KIND_LOCAL_SPACE = 0, 1, 2
-
-
-@dataclass(frozen=True)
-class Link:
-    """Pose of `to_id` in the base frame of `from_id` (4×4, m) with a 6×6 information matrix."""
-
-    from_id: int
-    to_id: int
-    type: LinkType
-    transform: F64
-    information: F64
-
-    @property
-    def switchable(self) -> bool:
-        """A loop closure (any link but odometry's), which `Optimizer/Robust` may switch off."""
-        return self.type not in _ODOMETRY_LINK_TYPES
-
-    def inverse(self) -> Link:
-        """The same constraint seen from the other end."""
-        from eddiebot.vslam.transforms import se3_inverse
-
-        return Link(self.to_id, self.from_id, self.type, se3_inverse(self.transform),
-                    self.information)
-
-
-@dataclass
-class NodeData:
-    """The heavy part of a node: features, their word ids, local grid, and the decimated,
-    compressed images its cloud is rebuilt from on demand."""
-
-    features: FrameFeatures
-    words: NDArray[np.int64]  # word id per feature, -1 = not quantised
-    grid: LocalGrid | None = None
-    cloud: CloudImages | None = None
-    scan_points: F64 | None = None  # (N, 2) base frame, for neighbour-link refinement
-
-    @property
-    def nbytes(self) -> int:
-        """RAM held by the arrays and images (not Python object overhead)."""
-        f = self.features
-        n = sum(a.nbytes for a in (f.uv, f.responses, f.sizes, f.angles, f.octaves,
-                                   f.descriptors, f.points)) + self.words.nbytes
-        if self.grid is not None:
-            n += sum(a.nbytes for a in (self.grid.ground, self.grid.obstacles, self.grid.empty))
-        if self.cloud is not None:
-            n += self.cloud.nbytes
-        if self.scan_points is not None:
-            n += self.scan_points.nbytes
-        return n
-
-    def word_counts(self) -> dict[int, int]:
-        """Word id → occurrences (valid words only)."""
-        w = self.words[self.words > 0]
-        ids, counts = np.unique(w, return_counts=True)
-        return {int(i): int(c) for i, c in zip(ids, counts)}
-
-
-@dataclass
-class Node:
-    """A graph node; `odom_pose` is the base pose in the odometry frame (4×4)."""
-
-    id: int
-    map_id: int
-    stamp_ns: int
-    odom_pose: F64
-    weight: int = 0
-    data: NodeData | None = None
-    label: str = ""
-    word_counts: dict[int, int] = field(default_factory=dict)
-
-
-class NodeStore(Protocol):
-    """Where LTM node data lives (the session database)."""
-
-    def load_node_data(self, node_id: int) -> NodeData | None:
-        """The node's features, words and grid, or None if unknown."""
-        ...
-
-
-class _Adjacency:
-    """`Memory.links` as arrays for the compiled loop-margin walk: row `id` holds the node's
-    neighbours and link kinds in the order of its links dict (a replaced link keeps its
-    place, a removed one leaves the row, a re-added one goes last, as in a dict).
-
-    Usable while node ids are non-negative and dense enough for rows indexed by id."""
-
-    _MAX_SPARSITY = 4  # rows allowed per link-holding node (plus a constant)
-
-    def __init__(self) -> None:
-        self.nbr = np.zeros((64, 4), np.int64)
-        self.kind = np.zeros((64, 4), np.int8)
-        self.deg = np.zeros(64, np.int64)
-        self.usable = True
-        self._nodes = 0
-
-    def _row(self, i: int) -> bool:
-        if i < 0 or i >= self._MAX_SPARSITY * (self._nodes + 1) + 4096:
-            self.usable = False
-            return False
-        if i >= self.deg.size:
-            rows = max(i + 1, 2 * self.deg.size)
-            extra = rows - self.deg.size
-            self.nbr = np.concatenate([self.nbr, np.zeros((extra, self.nbr.shape[1]), np.int64)])
-            self.kind = np.concatenate([self.kind,
-                                        np.zeros((extra, self.kind.shape[1]), np.int8)])
-            self.deg = np.concatenate([self.deg, np.zeros(extra, np.int64)])
-        return True
-
-    def register(self, i: int) -> None:
-        """A node id now has a links dict."""
-        self._nodes += 1
-        if self.usable:
-            self._row(i)
-
-    def put(self, a: int, b: int, kind: int) -> None:
-        """`links[a][b] = link` (of this kind)."""
-        if not (self.usable and self._row(a) and self._row(b)):
-            return
-        d = int(self.deg[a])
-        hit = np.flatnonzero(self.nbr[a, :d] == b)
-        if hit.size:
-            self.kind[a, hit[0]] = kind
-            return
-        if d == self.nbr.shape[1]:
-            cols = 2 * d
-            self.nbr = np.concatenate([self.nbr, np.zeros((self.nbr.shape[0], cols - d), np.int64)],
-                                      axis=1)
-            self.kind = np.concatenate([self.kind, np.zeros((self.kind.shape[0], cols - d), np.int8)],
-                                       axis=1)
-        self.nbr[a, d] = b
-        self.kind[a, d] = kind
-        self.deg[a] = d + 1
-
-    def pop(self, a: int, b: int) -> None:
-        """`links[a].pop(b)`."""
-        if not self.usable or a < 0 or a >= self.deg.size:
-            return
-        d = int(self.deg[a])
-        hit = np.flatnonzero(self.nbr[a, :d] == b)
-        if hit.size:
-            k = int(hit[0])
-            self.nbr[a, k:d - 1] = self.nbr[a, k + 1:d].copy()
-            self.kind[a, k:d - 1] = self.kind[a, k + 1:d].copy()
-            self.deg[a] = d - 1
-
-    def clear(self, a: int) -> None:
-        """`links.pop(a)`."""
-        if self.usable and 0 <= a < self.deg.size:
-            self.deg[a] = 0
-
-    def members(self, ids: Iterable[int], count: int) -> NDArray[np.bool_] | None:
-        """Rows flagged for these ids (None if one cannot have a row)."""
-        flags = np.zeros(self.deg.size, np.bool_)
-        arr = np.fromiter(ids, np.int64, count)
-        if arr.size and int(arr.min()) < 0:
-            return None
-        if arr.size and int(arr.max()) >= flags.size:
-            arr = arr[arr < flags.size]  # ids beyond the rows hold no links: never reached
-        flags[arr] = True
-        return flags
-
-
-def _link_kind(link_type: LinkType) -> int:
-    if link_type in _ODOMETRY_LINK_TYPES:
-        return _KIND_ODOMETRY
-    return _KIND_LOCAL_SPACE if link_type == LinkType.LOCAL_SPACE_CLOSURE else _KIND_LOOP
-
-
-@njit(cache=True)
-def _walk_loop_margin(nbr, kind, deg, start, max_depth, in_stm, in_wm, wm_only):  # type: ignore[no-untyped-def]
-    """`Memory._neighbours_loop_margin` over `_Adjacency` rows: (ids, depths) in the order the
-    Python walk inserts them."""
-    n = deg.size
-    out_id = np.empty(n, np.int64)
-    out_depth = np.empty(n, np.int64)
-    n_out = 0
-    if start < 0 or start >= n:
-        return out_id[:0], out_depth[:0]
-    seen = np.zeros(n, np.bool_)
-    seen[start] = True
-    margin = np.empty(n + 1, np.int64)
-    nxt = np.empty(n + 1, np.int64)
-    odo = np.empty(int(deg.sum()) + 1, np.int64)
-    margin[0] = start
-    n_margin = 1
-    for depth in range(max_depth + 1):
-        n_odo = 0
-        k = 0
-        while k < n_margin:
-            a = margin[k]
-            k += 1
-            for c in range(deg[a]):
-                m = nbr[a, c]
-                t = kind[a, c]
-                if t == 0:
-                    odo[n_odo] = m
-                    n_odo += 1
-                    continue
-                if seen[m] or in_stm[m] or t == 2:
-                    continue
-                seen[m] = True
-                if wm_only and not in_wm[m]:
-                    continue
-                out_id[n_out] = m
-                out_depth[n_out] = depth
-                n_out += 1
-                margin[n_margin] = m
-                n_margin += 1
-        if depth == max_depth:
-            break
-        n_nxt = 0
-        for q in range(n_odo):
-            m = odo[q]
-            if seen[m] or in_stm[m]:
-                continue
-            seen[m] = True
-            if wm_only and not in_wm[m]:
-                continue
-            out_id[n_out] = m
-            out_depth[n_out] = depth + 1
-            n_out += 1
-            nxt[n_nxt] = m
-            n_nxt += 1
-        if n_nxt == 0:
-            break
-        margin, nxt = nxt, margin
-        n_margin = n_nxt
-    return out_id[:n_out], out_depth[:n_out]
 
 
 class Memory:
@@ -298,7 +46,7 @@ class Memory:
         self._uf_parent: dict[int, int] = {}
         self._uf_members: dict[int, list[int]] = {}
         self._uf_valid = False
-        self._adjacency = _Adjacency()  # `links` as arrays, for the loop-margin walk
+        self._adjacency = LinkIndex()  # `links` as arrays, for the loop-margin walk
         # pairs (a < b) of the links added since `take_link_log`, or None once anything else
         # changed the graph in RAM (a link or node left, a node entered other than as new)
         self._link_log: list[tuple[int, int]] | None = None
@@ -410,7 +158,7 @@ class Memory:
     def add_link(self, link: Link) -> None:
         """Add a link (stored under both ends)."""
         a, b = link.from_id, link.to_id
-        kind = _link_kind(link.type)
+        kind = link_kind(link.type)
         adjacency = self._adjacency
         for i in (a, b):
             if i not in self.links:
@@ -492,16 +240,16 @@ class Memory:
                                        if exclude_stm else 0)
             in_wm = adjacency.members(self.wm, len(self.wm))
             if in_stm is not None and in_wm is not None:
-                ids, depths = _walk_loop_margin(adjacency.nbr, adjacency.kind, adjacency.deg,
+                ids, depths = walk_loop_margin(adjacency.nbr, adjacency.kind, adjacency.deg,
                                                 node_id, max_depth, in_stm, in_wm, wm_only)
                 return dict(zip(ids.tolist(), depths.tolist()))
         return self._neighbours_loop_margin_walk(node_id, max_depth, exclude_stm, wm_only)
 
     def _neighbours_loop_margin_walk(self, node_id: int, max_depth: int, exclude_stm: bool,
                                      wm_only: bool) -> dict[int, int]:
-        """The loop-margin walk over the links dicts (when ids do not suit `_Adjacency`)."""
+        """The loop-margin walk over the links dicts (when ids do not suit `LinkIndex`)."""
         stm = set(self.stm) if exclude_stm else set()
-        odometry = _ODOMETRY_LINK_TYPES
+        odometry = ODOMETRY_LINK_TYPES
         local_space = LinkType.LOCAL_SPACE_CLOSURE
         links, wm = self.links, self.wm
         out: dict[int, int] = {}
