@@ -3,6 +3,7 @@ clear_changes) and set_localization_mode: the pure edit and the node's services.
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 from typing import Any
@@ -12,7 +13,7 @@ import pytest
 from slam_world import ROOM, SCAN_ANGLES, drifting_odometry, loop_path, raycast
 from test_node import START, rig_factory  # noqa: F401  (the fixture)
 
-from eddiebot.geometry import yaw_to_quaternion
+from eddiebot.geometry import se2_compose, se2_inverse, yaw_to_quaternion
 from eddiebot.msgs.slam_toolbox import Clear, LoopClosure, ToggleInteractive
 from eddiebot.msgs.std_srvs import SetBool
 from eddiebot.msgs.visualization_msgs import InteractiveMarkerFeedback
@@ -242,3 +243,42 @@ def test_set_localization_mode_cannot_leave_a_localization_launch(rig_factory: A
     res = rig.call(SetBool, "set_localization_mode", data=False)
     assert not res.success
     assert "launched in localization mode" in res.message
+
+
+# -- from the dashboard ----------------------------------------------------------------------
+def test_the_dashboard_edits_a_running_slam_node(rig_factory: Any) -> None:  # noqa: F811
+    """The dashboard's slam commands through the bus to the node: interactive mode, a node
+    dragged in the display frame, close loop; its graph frame lists the nodes by id."""
+    from eddiebot.viz.dashboard.hub import Hub
+    from eddiebot.viz.dashboard.node import DashboardNode
+
+    rig = rig_factory(enable_interactive_mode=True)
+    rig.drive(12)
+    dash = DashboardNode(Hub(), context=rig.ctx)
+    rig.ex.add_node(dash)
+    answers: list[tuple[bool, str]] = []
+    try:
+        node = rig.node
+        node.mark_map_dirty()
+        rig.ex.spin_for(node.config.map_update_interval + 0.5)
+        frame = json.loads(dash._slam_graph_frame(dash._slam_graph[1]))
+        poses = node.core.node_poses()
+        assert frame["count"] == len(poses)
+        assert np.allclose(np.reshape(frame["nodes"], (-1, 2)), poses[:, :2], atol=2e-3)
+        dash.slam_command("interactive", lambda ok, text: answers.append((ok, text)))
+        rig.ex.spin_for(0.1)
+        assert answers[-1][0] and node.editing.interactive_mode
+        before = node.core.node_poses().copy()
+        target = before[6, :2] + np.array([0.0, 0.3])
+        # the display frame is odom; the map frame sits on it as map → odom says
+        shown = se2_compose(se2_inverse(node.core.map_to_odom), np.array([*target, 0.0]))
+        dash.slam_command("move", lambda ok, text: answers.append((ok, text)),
+                          node=6, x=float(shown[0]), y=float(shown[1]))
+        rig.ex.spin_for(0.1)
+        assert answers[-1][0], answers[-1][1]
+        assert np.allclose(node.editing.staged[6][:2], target, atol=1e-6)
+        dash.slam_command("close_loop", lambda ok, text: answers.append((ok, text)))
+        rig.ex.spin_for(0.1)
+        assert np.hypot(*(node.core.node_poses()[6, :2] - target)) < 0.02
+    finally:
+        dash.destroy_node()
