@@ -220,3 +220,19 @@ def test_add_submap_refuses_a_bad_file(
     assert rig.node.editing.submaps == []
 
 
+
+
+def test_nodes_marginalised_out_stay_behind(halves: Any) -> None:
+    first_path, second_path, truth, _ = halves
+    core = load_session(first_path, CONFIG)
+    other = load_session(second_path, CONFIG)
+    # as lifelong mode removes a node: retired, and marginalised out of the graph
+    other.nodes[7].retired = True
+    other.graph.marginalize([7])
+    n, m = len(core.nodes), len(other.nodes)
+    ids = merge_session(core, other, place_session(core, other))
+    assert len(ids) == m - 1 and len(core.nodes) == n + m - 1
+    stamps = {node.scan.stamp_ns for node in core.nodes}
+    assert other.nodes[7].scan.stamp_ns not in stamps
+    err = np.hypot(*(core.node_poses()[:, :2] - _truth_of(core, truth)[:, :2]).T)
+    assert err.max() < 0.03

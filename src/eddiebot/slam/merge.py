@@ -273,34 +273,45 @@ def place_session(
 
 def merge_session(core: SlamCore, other: SlamCore, placement: Placement) -> range:
     """Append ``other``'s nodes and edges to ``core`` at ``placement``, link them and
-    re-optimise; returns the new node ids."""
+    re-optimise; returns the new node ids. Nodes lifelong mode marginalised out of ``other``
+    are left behind with their edges, as a saved session leaves them."""
     _check(core, other)
     t = placement.transform
-    poses = se2_compose(np.broadcast_to(t, other.node_poses().shape), other.node_poses())
-    offset = len(core.nodes)
+    gone = set(other.graph.removed_nodes)
+    keep = [k for k in range(len(other.nodes)) if k not in gone]
+    if not keep:
+        raise MergeError("the session to merge holds no nodes")
+    own = other.node_poses()[keep]
+    poses = se2_compose(np.broadcast_to(t, own.shape), own)
     core.node_poses()  # folds in anything pending before the graph grows
-    for k, node in enumerate(other.nodes):
-        core.graph.add_node(poses[k])
+    offset = len(core.nodes)
+    new_id = {old: offset + new for new, old in enumerate(keep)}
+    for k, pose in zip(keep, poses):
+        node = other.nodes[k]
+        core.graph.add_node(pose)
         core.nodes.append(dataclasses.replace(node, odom_pose=node.odom_pose.copy()))
-    for e in other.graph.edges:
-        core.graph.add_edge(
-            e.i + offset, e.j + offset, e.measurement, e.covariance, kind=e.kind, robust=e.robust
-        )
+    dropped = set(other.graph.removed_edges)
+    for q, e in enumerate(other.graph.edges):
+        if q not in dropped:
+            core.graph.add_edge(new_id[e.i], new_id[e.j], e.measurement, e.covariance,
+                                kind=e.kind, robust=e.robust)
     graph_poses = core.graph.poses
     for lk in placement.links:
         anchor = graph_poses[lk.anchor]
         core.graph.add_edge(
             lk.anchor,
-            lk.node + offset,
+            new_id[lk.node],
             se2_between(anchor, lk.pose),
             _rotate_covariance(lk.covariance, float(anchor[2])),
             kind=EdgeKind.LOOP,
         )
     if not placement.links:
+        removed = set(core.graph.removed_nodes)
+        first = next(k for k in range(offset) if k not in removed)
         core.graph.add_edge(
-            0,
+            first,
             offset,
-            se2_between(graph_poses[0], poses[0]),
+            se2_between(graph_poses[first], poses[0]),
             np.diag(HAND_PLACEMENT_SIGMAS**2),
             kind=EdgeKind.LOOP,
         )
