@@ -256,3 +256,7 @@ def test_second_pass_does_not_double_the_graph(tmp_path, use_tree: bool) -> None
     assert len(again.nodes) == life.graph.live_nodes
     assert len(again.graph.edges) == len(life.graph.edges) - len(life.graph.removed_edges)
     assert np.allclose(again.node_poses(), poses[live], atol=1e-9)
+    # with the nodes' scores, which carry on decaying in the next session (as upstream's)
+    kept = [life.lifelong_scores.get(k, 1.0) for k in live]
+    assert min(kept) < 1.0
+    assert [again.lifelong_scores.get(k, 1.0) for k in range(len(live))] == pytest.approx(kept)

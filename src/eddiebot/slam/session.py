@@ -8,7 +8,9 @@ Format (``.eslam``, version 1): a ZIP archive holding
   ``stamps_ns`` (N,) int64; ``retired`` (N,) bool; ``range_min``, ``range_max`` (N,);
   ``beam_offsets`` (N+1,) int64 into the concatenated ``ranges`` / ``angles`` (float64);
   ``edge_ij`` (E, 2) int64; ``edge_measurement`` (E, 3); ``edge_covariance`` (E, 3, 3);
-  ``edge_kind`` (E,) int8 (0 odometry, 1 scan match, 2 loop); ``edge_robust`` (E,) bool.
+  ``edge_kind`` (E,) int8 (0 odometry, 1 scan match, 2 loop); ``edge_robust`` (E,) bool;
+  ``lifelong_scores`` (N,) the nodes' lifelong scores, kept between sessions as slam_toolbox
+  keeps its vertex scores (optional: 1 when absent).
 
 Writing goes to a temporary file renamed over the target, so a failure never leaves a
 half-written session; the file gets the mode the user's umask gives new files. Reading checks the format tag, the version and every array's shape; a
@@ -76,6 +78,7 @@ def save_session(core: SlamCore, path: str | os.PathLike[str]) -> Path:
         "edge_covariance": np.array([e.covariance for e in edges]).reshape(-1, 3, 3),
         "edge_kind": np.array([_KINDS.index(e.kind) for e in edges], dtype=np.int8),
         "edge_robust": np.array([e.robust for e in edges], dtype=bool),
+        "lifelong_scores": np.array([core.lifelong_scores.get(k, 1.0) for k in keep]),
     }
     params = {k: v for k, v in core.config.to_parameters().items() if _jsonable(v)}
     header = {
@@ -178,6 +181,11 @@ def load_session(
             raise SessionError(
                 f"{src}: scan arrays hold {arr['ranges'].shape} beams, expected {total}"
             )
+        scores = arr.get("lifelong_scores", np.ones(n))  # absent before lifelong scores
+        if scores.shape != (n,):
+            raise SessionError(
+                f"{src}: array 'lifelong_scores' has shape {scores.shape}, expected {(n,)}"
+            )
         if e and (arr["edge_ij"].min() < 0 or arr["edge_ij"].max() >= n):
             raise SessionError(f"{src}: an edge refers to a node that does not exist")
         if not np.all(np.isfinite(arr["poses"])):
@@ -226,4 +234,5 @@ def load_session(
         for q in range(e)
     ]
     core._restore(nodes, arr["poses"], edges)
+    core.lifelong_scores = {k: float(v) for k, v in enumerate(scores.tolist()) if v != 1.0}
     return core

@@ -412,8 +412,8 @@ class PoseGraph(GatedPoseGraph):
     def marginalize(self, nodes: Iterable[int]) -> int:
         """Remove ``nodes`` from the graph, keeping what their edges said about the rest.
 
-        Each node in turn (ascending) is linearised at the current estimate and eliminated:
-        its accepted edges are replaced by relative-pose edges between its neighbours
+        Each node in turn (ascending) is linearised at the current estimate (robust edges with
+        their kernel's weight there) and eliminated: its accepted edges are replaced by relative-pose edges between its neighbours
         carrying the Schur complement (`eddiebot.slam.pose_graph.marginal`: exact for a node
         with two neighbours, a chain sparsification beyond); its held and rejected edges go
         without replacement. The node keeps its last pose (`pose` still answers) but leaves
@@ -437,9 +437,13 @@ class PoseGraph(GatedPoseGraph):
                 touching.setdefault(e.j, []).append(k)
         for node in todo:
             ks = [k for k in touching.get(node, []) if k not in self._dropped]
-            kept = [self._edges[k] for k in ks if not self._is_out(k)]
+            kept_ids = [k for k in ks if not self._is_out(k)]
+            kept = [self._edges[k] for k in kept_ids]
             ends = {node} | {e.i for e in kept} | {e.j for e in kept}
-            replacement = marginal_edges(node, kept, {n: self._p[n].copy() for n in ends})
+            replacement = marginal_edges(
+                node, kept, {n: self._p[n].copy() for n in ends},
+                [self._edge_factor(k) for k in kept_ids],
+            )
             for k in ks:
                 self._drop_edge(k)
             for other in self._adjacency[node]:
@@ -453,7 +457,16 @@ class PoseGraph(GatedPoseGraph):
                 touching.setdefault(m.j, []).append(k_new)
                 added += 1
         if self.optimizer == "isam2" and not self._isam_broken:
-            self._restart_isam()
+            try:
+                self._restart_isam()
+            except RuntimeError:
+                # as in `optimize`: a batch solve, then iSAM2 from it, or batch from now on
+                self._store(self._lm(self._inlier_graph()))
+                self.isam_recoveries += 1
+                try:
+                    self._restart_isam()
+                except RuntimeError:
+                    self._isam_broken = True
         return added
 
     def _drop_edge(self, k: int) -> None:

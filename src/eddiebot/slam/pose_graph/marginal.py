@@ -41,11 +41,14 @@ class MarginalEdge:
     kind: EdgeKind
 
 
-def _whitened(edge: Edge, values: gtsam.Values) -> tuple[FloatArray, FloatArray]:
-    factor = gtsam.BetweenFactorPose2(
-        edge.i, edge.j, _pose2(edge.measurement),
-        gtsam.noiseModel.Gaussian.Covariance(edge.covariance),
-    )
+def _whitened(
+    edge: Edge, factor: gtsam.BetweenFactorPose2 | None, values: gtsam.Values
+) -> tuple[FloatArray, FloatArray]:
+    if factor is None:
+        factor = gtsam.BetweenFactorPose2(
+            edge.i, edge.j, _pose2(edge.measurement),
+            gtsam.noiseModel.Gaussian.Covariance(edge.covariance),
+        )
     a, b = factor.linearize(values).jacobian()
     return np.asarray(a), np.asarray(b)
 
@@ -55,12 +58,17 @@ def _adjoint_inverse(z: gtsam.Pose2) -> FloatArray:
 
 
 def marginal_edges(
-    node: int, edges: Sequence[Edge], poses: dict[int, FloatArray]
+    node: int,
+    edges: Sequence[Edge],
+    poses: dict[int, FloatArray],
+    factors: Sequence[gtsam.BetweenFactorPose2] | None = None,
 ) -> list[MarginalEdge]:
     """The edges that replace ``node``'s ``edges`` once it is marginalised out.
 
-    ``poses`` holds the current estimate (map frame) of ``node`` and of every neighbour; the
-    edges are taken as Gaussian (an accepted robust edge has full weight inside its gate).
+    ``poses`` holds the current estimate (map frame) of ``node`` and of every neighbour.
+    ``factors``, parallel to ``edges``, are the factors the graph solves with: a robust edge
+    is linearised with its kernel's weight at the estimate (without them, every edge is
+    taken as Gaussian).
     The new edges' kind is ``ODOMETRY`` when every removed edge was odometry, else
     ``SCAN_MATCH``.
     """
@@ -75,8 +83,8 @@ def marginal_edges(
     dim = 3 * len(keys)
     h = np.zeros((dim, dim))
     g = np.zeros(dim)
-    for e in edges:
-        a, b = _whitened(e, values)
+    for k, e in enumerate(edges):
+        a, b = _whitened(e, None if factors is None else factors[k], values)
         cols = np.r_[col[e.i] : col[e.i] + 3, col[e.j] : col[e.j] + 3]
         h[np.ix_(cols, cols)] += a.T @ a
         g[cols] += a.T @ b
