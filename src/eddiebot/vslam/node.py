@@ -41,8 +41,6 @@ is never processed with a made-up pose.
 
 from __future__ import annotations
 
-import re
-import shlex
 from collections import deque
 from pathlib import Path
 from typing import Any
@@ -56,11 +54,11 @@ from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, ma
 from eddiebot.core.time import ns_to_stamp, stamp_to_ns
 from eddiebot.geometry import matrix_to_quaternion, se3_from_tq
 from eddiebot.maps import map_to_msg, save_map
-from eddiebot.msgs.geometry_msgs import Point, PoseWithCovarianceStamped
+from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
 from eddiebot.msgs.nav2_msgs import SaveMap as Nav2SaveMap
 from eddiebot.msgs.nav_msgs import OccupancyGrid, Odometry
 from eddiebot.msgs.rtabmap_msgs import Info, MapData, MapGraph
-from eddiebot.msgs.sensor_msgs import CameraInfo, Image, LaserScan, PointCloud2, PointField
+from eddiebot.msgs.sensor_msgs import CameraInfo, Image, LaserScan, PointCloud2
 from eddiebot.msgs.slam_toolbox import SaveMap as PathRequest
 from eddiebot.msgs.std_msgs import Header
 from eddiebot.msgs.std_srvs import Empty
@@ -70,10 +68,21 @@ from eddiebot.vslam.database import SessionDatabase
 from eddiebot.vslam.errors import DatabaseError
 from eddiebot.vslam.errors import ParameterError as VslamParameterError
 from eddiebot.vslam.export import write_ply
-from eddiebot.vslam.memory import LinkType
 from eddiebot.vslam.occupancy import Scan2D
-from eddiebot.vslam.parameters import RtabmapParameters, parameter_names
-from eddiebot.vslam.ros_messages import graph_message, info_message, map_data_message
+from eddiebot.vslam.parameters import (
+    RTABMAP_NAME,
+    RtabmapParameters,
+    parameter_names,
+    parameter_text,
+    parse_rtabmap_args,
+)
+from eddiebot.vslam.ros_messages import (
+    cloud_message,
+    graph_markers,
+    graph_message,
+    info_message,
+    map_data_message,
+)
 from eddiebot.vslam.rtabmap import ProcessResult, Rtabmap
 
 __all__ = ["DEFAULT_DATABASE_PATH", "RtabmapNode", "parse_rtabmap_args"]
@@ -82,45 +91,6 @@ DEFAULT_DATABASE_PATH = "~/.local/share/eddiebot/rtabmap.db"
 _RGB_ENCODINGS = ("rgb8", "bgr8", "mono8")
 _DEPTH_ENCODINGS = ("16UC1", "32FC1")
 _SEC = 1_000_000_000
-_RTABMAP_NAME = re.compile(r"^[A-Z][A-Za-z0-9]*[/.][A-Z][A-Za-z0-9_/]*$")
-
-
-def parse_rtabmap_args(text: str) -> tuple[dict[str, str], bool, list[str]]:
-    """Upstream's ``rtabmap_args``: ``(-d|--delete_db_on_start) --Group/Name value ...`` →
-    (parameters, delete_db_on_start, ignored tokens)."""
-    tokens = shlex.split(text or "")
-    params: dict[str, str] = {}
-    ignored: list[str] = []
-    delete = False
-    k = 0
-    while k < len(tokens):
-        tok = tokens[k]
-        if tok in ("-d", "--delete_db_on_start"):
-            delete = True
-        elif tok.startswith("--") and "/" in tok:
-            name, _, inline = tok[2:].partition("=")
-            if inline:
-                value = inline
-            elif k + 1 < len(tokens):
-                k += 1
-                value = tokens[k]
-            else:
-                ignored.append(tok)
-                break
-            if _RTABMAP_NAME.match(name):
-                params[name] = value
-            else:
-                ignored.append(tok)
-        else:
-            ignored.append(tok)
-        k += 1
-    return params, delete, ignored
-
-
-def _as_text(value: Any) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return str(value)
 
 
 def _tf_matrix(tf: Any) -> np.ndarray:
@@ -264,16 +234,16 @@ class RtabmapNode(Node):
         for name in names:
             value = self.declare_parameter(name, None, desc).value
             if value is not None:
-                out[name] = _as_text(value)
+                out[name] = parameter_text(value)
         dotted = {n.replace("/", "."): n for n in names}
         for o in self.undeclared_overrides():
             if o.name in dotted:
-                out[dotted[o.name]] = _as_text(o.value)
+                out[dotted[o.name]] = parameter_text(o.value)
                 self.declare_parameter(o.name, None, desc)
-            elif _RTABMAP_NAME.match(o.name):
+            elif RTABMAP_NAME.match(o.name):
                 name = o.name.replace(".", "/", 1) if "/" not in o.name else o.name
                 self.declare_parameter(o.name, None, desc)
-                out[name] = _as_text(o.value)
+                out[name] = parameter_text(o.value)
         return out
 
     def effective_parameters(self, stored: dict[str, str]) -> dict[str, str]:
@@ -650,55 +620,14 @@ class RtabmapNode(Node):
             # a map not merged yet is drawn in its own frame, map_<id> (no TF joins it)
             name = (self.map_frame_id if frame == self.core.current_frame
                     else f"{self.map_frame_id}_{frame}")
-            out += self._graph_markers({i: all_poses[i] for i in ids}, links, name, len(out))
+            out += graph_markers({i: all_poses[i] for i in ids}, links, name, len(out))
         self.markers_pub.publish(MarkerArray(markers=out))
-
-    def _graph_markers(self, poses: dict[int, np.ndarray], links: list[Any], frame_id: str,
-                       first_id: int) -> list[Marker]:
-        header = Header(frame_id=frame_id)
-        nodes = Marker(header=header, ns="rtabmap_nodes", id=first_id, type=Marker.SPHERE_LIST,
-                       action=Marker.ADD)
-        nodes.scale.x = nodes.scale.y = nodes.scale.z = 0.06
-        nodes.color.r, nodes.color.g, nodes.color.b, nodes.color.a = 1.0, 0.5, 0.0, 1.0
-        nodes.pose.orientation.w = 1.0
-        nodes.points = [Point(x=float(t[0, 3]), y=float(t[1, 3]), z=float(t[2, 3]))
-                        for t in poses.values()]
-        out = [nodes]
-        for k, (name, kinds, rgb) in enumerate((
-                ("rtabmap_neighbor_links", {LinkType.NEIGHBOR}, (0.0, 0.6, 1.0)),
-                ("rtabmap_loop_links", None, (1.0, 0.0, 0.0)))):
-            m = Marker(header=header, ns=name, id=first_id + k + 1, type=Marker.LINE_LIST,
-                       action=Marker.ADD)
-            m.scale.x = 0.02
-            m.color.r, m.color.g, m.color.b, m.color.a = (*rgb, 1.0)
-            m.pose.orientation.w = 1.0
-            pts = []
-            for lk in links:
-                is_kind = lk.type in kinds if kinds is not None else lk.type != LinkType.NEIGHBOR
-                if not is_kind or lk.from_id not in poses or lk.to_id not in poses:
-                    continue
-                a, b = poses[lk.from_id], poses[lk.to_id]
-                pts += [Point(x=float(a[0, 3]), y=float(a[1, 3]), z=float(a[2, 3])),
-                        Point(x=float(b[0, 3]), y=float(b[1, 3]), z=float(b[2, 3]))]
-            m.points = pts
-            out.append(m)
-        return out
 
     def cloud_message(self) -> Any:
         """The assembled cloud (map frame) as PointCloud2 with x, y, z and packed rgb."""
         xyz, colors = self.core.point_cloud(self.cloud_voxel_size)
-        n = int(xyz.shape[0])
-        packed = np.zeros((n, 4), np.float32)
-        packed[:, :3] = xyz
-        if n:
-            c = np.asarray(colors, np.uint32).reshape(n, 3)
-            packed[:, 3] = ((c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]).view(np.float32)
-        fields = [PointField(name=name, offset=4 * k, datatype=PointField.FLOAT32, count=1)
-                  for k, name in enumerate(("x", "y", "z", "rgb"))]
         header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.map_frame_id)
-        return PointCloud2(header=header, height=1, width=n, fields=fields, is_bigendian=False,
-                           point_step=16, row_step=16 * n, data=packed.view(np.uint8).reshape(-1),
-                           is_dense=True)
+        return cloud_message(xyz, colors, header)
 
     # -- services --------------------------------------------------------------------------
     def _srv_reset(self, req: Any, res: Any) -> Any:

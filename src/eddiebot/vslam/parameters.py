@@ -9,6 +9,8 @@ line, in ROS parameters and in the database's ``Info.parameters``.
 from __future__ import annotations
 
 import dataclasses
+import re
+import shlex
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -369,3 +371,46 @@ def _parse(key: str, raw: str, kind: type) -> Any:
         return text
     except ValueError as exc:
         raise ParameterError(f"{key}: {exc}") from exc
+
+
+#: an RTAB-Map parameter name, ``Group/Name`` (or ``Group.Name`` from nested YAML)
+RTABMAP_NAME = re.compile(r"^[A-Z][A-Za-z0-9]*[/.][A-Z][A-Za-z0-9_/]*$")
+
+
+def parse_rtabmap_args(text: str) -> tuple[dict[str, str], bool, list[str]]:
+    """Upstream's ``rtabmap_args``: ``(-d|--delete_db_on_start) --Group/Name value ...`` →
+    (parameters, delete_db_on_start, ignored tokens)."""
+    tokens = shlex.split(text or "")
+    params: dict[str, str] = {}
+    ignored: list[str] = []
+    delete = False
+    k = 0
+    while k < len(tokens):
+        tok = tokens[k]
+        if tok in ("-d", "--delete_db_on_start"):
+            delete = True
+        elif tok.startswith("--") and "/" in tok:
+            name, _, inline = tok[2:].partition("=")
+            if inline:
+                value = inline
+            elif k + 1 < len(tokens):
+                k += 1
+                value = tokens[k]
+            else:
+                ignored.append(tok)
+                break
+            if RTABMAP_NAME.match(name):
+                params[name] = value
+            else:
+                ignored.append(tok)
+        else:
+            ignored.append(tok)
+        k += 1
+    return params, delete, ignored
+
+
+def parameter_text(value: Any) -> str:
+    """A parameter value as RTAB-Map's string form (booleans "true"/"false")."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return str(value)

@@ -13,13 +13,16 @@ from numpy.typing import NDArray
 from eddiebot.geometry import matrix_to_quaternion
 from eddiebot.msgs.geometry_msgs import Point, Pose, Quaternion, Transform, Vector3
 from eddiebot.msgs.rtabmap_msgs import Info, Link, MapData, MapGraph, Node
+from eddiebot.msgs.sensor_msgs import PointCloud2, PointField
 from eddiebot.msgs.std_msgs import Header
+from eddiebot.msgs.visualization_msgs import Marker
 from eddiebot.vslam.memory import Link as GraphLink
+from eddiebot.vslam.memory import LinkType
 from eddiebot.vslam.memory import Node as MemoryNode
 from eddiebot.vslam.records import ProcessResult
 
-__all__ = ["graph_message", "info_message", "map_data_message", "pose_message",
-           "transform_message"]
+__all__ = ["cloud_message", "graph_markers", "graph_message", "info_message",
+           "map_data_message", "pose_message", "transform_message"]
 
 F64 = NDArray[np.float64]
 
@@ -84,3 +87,52 @@ def info_message(header: Header, result: ProcessResult, wm_state: Iterable[int],
         weights_values=np.asarray([weights[k] for k in wkeys], np.int32),
         stats_keys=keys,
         stats_values=np.asarray([result.statistics[k] for k in keys], np.float32))
+
+
+def graph_markers(poses: Mapping[int, F64], links: Iterable[GraphLink], frame_id: str,
+                  first_id: int) -> list[Marker]:
+    """``~/graph_markers`` (not upstream): the nodes as spheres, neighbour links blue and loop
+    links red, marker ids from `first_id`."""
+    header = Header(frame_id=frame_id)
+    nodes = Marker(header=header, ns="rtabmap_nodes", id=first_id, type=Marker.SPHERE_LIST,
+                   action=Marker.ADD)
+    nodes.scale.x = nodes.scale.y = nodes.scale.z = 0.06
+    nodes.color.r, nodes.color.g, nodes.color.b, nodes.color.a = 1.0, 0.5, 0.0, 1.0
+    nodes.pose.orientation.w = 1.0
+    nodes.points = [Point(x=float(t[0, 3]), y=float(t[1, 3]), z=float(t[2, 3]))
+                    for t in poses.values()]
+    out = [nodes]
+    for k, (name, kinds, rgb) in enumerate((
+            ("rtabmap_neighbor_links", {LinkType.NEIGHBOR}, (0.0, 0.6, 1.0)),
+            ("rtabmap_loop_links", None, (1.0, 0.0, 0.0)))):
+        m = Marker(header=header, ns=name, id=first_id + k + 1, type=Marker.LINE_LIST,
+                   action=Marker.ADD)
+        m.scale.x = 0.02
+        m.color.r, m.color.g, m.color.b, m.color.a = (*rgb, 1.0)
+        m.pose.orientation.w = 1.0
+        pts = []
+        for lk in links:
+            is_kind = lk.type in kinds if kinds is not None else lk.type != LinkType.NEIGHBOR
+            if not is_kind or lk.from_id not in poses or lk.to_id not in poses:
+                continue
+            a, b = poses[lk.from_id], poses[lk.to_id]
+            pts += [Point(x=float(a[0, 3]), y=float(a[1, 3]), z=float(a[2, 3])),
+                    Point(x=float(b[0, 3]), y=float(b[1, 3]), z=float(b[2, 3]))]
+        m.points = pts
+        out.append(m)
+    return out
+
+
+def cloud_message(xyz: F64, colors: NDArray[np.uint8], header: Header) -> PointCloud2:
+    """A coloured cloud (N×3 m, N×3 RGB) as PointCloud2 with x, y, z and packed rgb."""
+    n = int(xyz.shape[0])
+    packed = np.zeros((n, 4), np.float32)
+    packed[:, :3] = xyz
+    if n:
+        c = np.asarray(colors, np.uint32).reshape(n, 3)
+        packed[:, 3] = ((c[:, 0] << 16) | (c[:, 1] << 8) | c[:, 2]).view(np.float32)
+    fields = [PointField(name=name, offset=4 * k, datatype=PointField.FLOAT32, count=1)
+              for k, name in enumerate(("x", "y", "z", "rgb"))]
+    return PointCloud2(header=header, height=1, width=n, fields=fields, is_bigendian=False,
+                       point_step=16, row_step=16 * n, data=packed.view(np.uint8).reshape(-1),
+                       is_dense=True)
