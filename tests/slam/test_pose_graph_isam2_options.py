@@ -110,50 +110,6 @@ def _room_run(config: SlamConfig) -> tuple[SlamCore, np.ndarray, list]:
     return core, truth, results
 
 
-def test_span_edges_in_batches_end_in_the_same_graph(tmp_path) -> None:
-    from eddiebot.slam import ProcessStatus, load_session, save_session
-
-    def config(batch: int) -> SlamConfig:
-        return SlamConfig(minimum_travel_distance=0.5, loop_match_minimum_chain_size=6,
-                          odometry_span_nodes=4, odometry_span_batch=batch)
-
-    every, truth, _ = _room_run(config(1))
-    core, _, results = _room_run(config(3))
-    added = [k for k, r in enumerate(results) if r.status is ProcessStatus.ADDED]
-    held = len(core._span_queue)
-    assert 0 < held < 3 or len(added) % 3 == 0  # the last spans wait for a full batch ...
-    spans = [e for e in core.graph.edges if e.kind is EdgeKind.ODOMETRY and e.j - e.i == 4]
-    est = core.node_poses()  # ... and the first query of the poses adds them
-    assert not core._span_queue
-    after = [e for e in core.graph.edges if e.kind is EdgeKind.ODOMETRY and e.j - e.i == 4]
-    assert len(after) == len(spans) + held
-    ref = [e for e in every.graph.edges if e.kind is EdgeKind.ODOMETRY and e.j - e.i == 4]
-    assert sorted((e.i, e.j) for e in after) == sorted((e.i, e.j) for e in ref)
-    assert len(ref) > 20
-    # the same graph, so the same optimum up to the order the edges came in (this synthetic
-    # odometry's heading bias, which the span edges trust, sets the error of both alike)
-    err = np.hypot(*(est[:, :2] - truth[added, :2]).T)
-    ref_err = np.hypot(*(every.node_poses()[:, :2] - truth[added, :2]).T)
-    assert err.mean() < 1.1 * ref_err.mean() and err.max() < 1.1 * ref_err.max()
-    assert float(np.max(np.abs(est[:, :2] - every.node_poses()[:, :2]))) < 0.03
-    # a session saved with spans still held gets them: the saved graph is the whole one
-    held_core, _, _ = _room_run(config(1000))
-    assert held_core._span_queue
-    path = save_session(held_core, tmp_path / "room.eslam")
-    assert not held_core._span_queue
-    loaded = load_session(path)
-    assert len(loaded.graph.edges) == len(held_core.graph.edges)
-    saved = [e for e in loaded.graph.edges if e.kind is EdgeKind.ODOMETRY and e.j - e.i == 4]
-    assert sorted((e.i, e.j) for e in saved) == sorted((e.i, e.j) for e in ref)
-    # (the loaded graph is re-solved whole: the same optimum, up to the iterations left)
-    assert np.allclose(loaded.node_poses(), held_core.node_poses(), atol=1e-3)
-
-
-def test_odometry_span_batch_is_checked() -> None:
-    with pytest.raises(ConfigError, match="odometry_span_batch"):
-        SlamConfig(odometry_span_batch=0).validated()
-
-
 def _with_spans(edges: list, truth: np.ndarray, span: int) -> list:
     """``edges`` plus an odometry edge from every node to the node ``span`` back (the chained
     noisy steps between them, with their summed covariance), as `odometry_span_nodes` adds."""

@@ -27,6 +27,7 @@ from eddiebot.slam.errors import ConfigError
 __all__ = [
     "CERES_PARAMETERS",
     "NODE_PARAMETERS",
+    "REMOVED_PARAMETERS",
     "SlamConfig",
     "SlamMode",
     "load_slam_config",
@@ -37,7 +38,6 @@ SlamMode = str  # "mapping" | "localization" | "lifelong"
 _MODES = ("mapping", "localization", "lifelong")
 _OPTIMIZERS = ("isam2", "levenberg_marquardt")
 _FACTORIZATIONS = ("qr", "cholesky")  # eddiebot.slam.pose_graph.FACTORIZATIONS, without importing GTSAM
-_MATCH_COVARIANCES = ("response", "icp")
 _KERNELS = ("none", "huber", "cauchy", "dcs")
 _STEP_HEADINGS = ("odometry", "quantization", "match")
 
@@ -161,16 +161,6 @@ class SlamConfig:
     """Warn when the scan-match variance along the weakest direction exceeds this (m²)."""
     use_icp_refinement: bool = True
     """Polish each correlative match with point-to-line ICP on the reference points."""
-    match_covariance: str = "response"
-    """Where a scan match's covariance comes from: ``response`` (Karto's: the spread of the
-    correlative search's good responses, scaled by 1/response) or ``icp`` (the point-to-line
-    ICP fit's Gauss–Newton covariance, residual-variance scaled, plus the floors below; the
-    response spread where ICP does not converge). ``icp`` needs ``use_icp_refinement``."""
-    icp_covariance_floor_translation: float = 0.01
-    """σ (m) added in quadrature to an ICP match covariance's position (the fit's own
-    covariance ignores errors shared by neighbouring points: map error, range bias)."""
-    icp_covariance_floor_rotation: float = 0.005
-    """σ (rad) added in quadrature to an ICP match covariance's heading."""
     slip_search_dimension: float = 2.0
     """Side (m) of the wide re-search after a weak or window-edge sequential match; 0 = off."""
     slip_search_minimum_response: float = 0.0
@@ -193,12 +183,6 @@ class SlamConfig:
     """Odometry heading σ per radian turned (rad/rad)."""
     odometry_rotation_noise_per_meter: float = 0.05
     """Odometry heading σ per metre travelled (rad/m)."""
-    match_fine_search_climb: int = 0
-    """Re-centre the correlative matcher's fine search (fine headings × ±(step/2 + 1) cells)
-    on its best up to this many times while that best lies on the edge of its translation
-    box. A heading error of ½ coarse step turns far end points by centimetres, so the best
-    translation at the right fine heading can lie outside the box Karto searches around the
-    coarse best; 0 = Karto's single box."""
     match_coarse_heading_variance: bool = False
     """Sequential matches take their heading variance from every coarse heading (how well
     the scan fits several degrees off), not only from the fine steps beside the best."""
@@ -219,12 +203,6 @@ class SlamConfig:
     odometry_heading_quantization: float = 0.01
     """σ (rad) of the odometry heading's non-accumulating error (encoder quantisation), used by
     ``odometry_span_nodes``."""
-    odometry_span_batch: int = 1
-    """Hand the span edges of ``odometry_span_nodes`` to the graph this many at a time (every
-    node still gets its own). A span edge reaches back that many nodes, and iSAM2 re-eliminates
-    the path from that node's clique to the root (long once loops have closed); in batches, the
-    path is paid once per batch. Edges still waiting are added before any query of the node
-    poses (map updates, session saves, the final trajectory)."""
     fused_step_heading: str = "odometry"
     """Odometry heading σ of each fused sequential step (``fuse_odometry``): "odometry" = the
     noise model above; "quantization" = raised to at least √2 · ``odometry_heading_quantization``
@@ -238,30 +216,11 @@ class SlamConfig:
     """Verify at most this many loop-closure candidate chains per scan, in Karto's order (the
     oldest first); 0 = every candidate, as Karto does. Each failed verification costs a coarse
     and a fine match (~7 ms on the simulated routes), so this bounds a scan's loop search."""
-    scan_range_bias_quadratic: float = 0.0
-    """Known range bias of the scan, corrected before use: every valid range r becomes
-    ``r + scan_range_bias_quadratic · r²`` (capped at the scan's range_max) for matching and
-    for the map (1/m). A depth camera's scan taken as the nearest of several image rows, as
-    depthimage_to_laserscan does, reads short by about 1.5 σ of the camera's range noise,
-    which grows as r²; 0 = ranges as they are."""
-    match_degeneracy_analysis: bool = False
-    """Check every scan match against what the scan's own geometry and range noise allow
-    (`eddiebot.slam.mapper.scan_position_covariance`: a degeneracy analysis of the
-    point-to-line Hessian, Zhang et al. 2016): a direction no line observes (a corridor's
-    length) or only far points pin (a corridor's end wall seen from metres away), with a
-    variance above ``corridor_covariance_threshold``, gets that variance added to the match's
-    covariance, so fusion with odometry and ``loop_match_constrained_variance`` drop it and
-    the low-feature warning sees it. Off: the correlative search's covariance alone (Karto's)."""
     scan_range_sigma: float = 0.01
-    """Range error σ (m) of a scan point at zero range, for the degeneracy analysis."""
+    """Range error σ (m) of a scan point at zero range, for ``loop_match_range_covariance``."""
     scan_range_sigma_quadratic: float = 0.0
-    """Range error σ growth with the squared range (1/m), for the degeneracy analysis: a
-    depth camera's error grows as z² (a Kinect's disparity steps are 2.85e-3·z²)."""
-    loop_match_constrained_variance: float = 0.0
-    """A loop closure constrains the graph only along the position directions its fine match
-    observes with a variance below this (m²); along the others (a corridor's length, seen only
-    on a far end wall) the edge carries no information, as a sequential match fused with
-    odometry does. 0 = the match's covariance as it is."""
+    """Range error σ growth with the squared range (1/m), for ``loop_match_range_covariance``:
+    a depth camera's error grows as z² (a Kinect's disparity steps are 2.85e-3·z²)."""
     loop_match_range_covariance: bool = False
     """Add to every loop closure's covariance the position error the scan's range errors
     leave it (`eddiebot.slam.mapper.scan_position_covariance` with ``scan_range_sigma`` and
@@ -269,14 +228,6 @@ class SlamConfig:
     depth camera's range bias, which grows as r², does not average out. A loop closed on
     walls 6-8 m ahead is then weak along the view and as strong as before across it. Off:
     the correlative search's covariance alone (Karto's)."""
-    loop_match_range_bias_quadratic: float = 0.0
-    """Known quadratic range bias (1/m) removed from the points of a loop-closure match only:
-    the new scan's and its candidate chain's points are read at ``r + k · r²`` (each point moved
-    away from its sensor). A loop typically compares a scan of walls metres ahead with a chain
-    that saw them from close by, so a range bias that grows as r² (a depth camera's scan taken
-    as the nearest of several image rows) shifts the closure along the view; sequential
-    matching and the map keep the ranges as they are (see ``scan_range_bias_quadratic`` for
-    correcting everything). 0 = off (slam_toolbox's behaviour)."""
     map_max_laser_range: float = 0.0
     """Range (m) beyond which beams leave no hit in the occupancy grid (cut there, clearing
     up to it), when shorter than ``max_laser_range`` (which still bounds scan matching): a
@@ -333,11 +284,6 @@ class SlamConfig:
             raise ConfigError(
                 f"parameter 'loop_robust_kernel' must be one of {_KERNELS}, got {out.loop_robust_kernel!r}"
             )
-        if out.match_covariance not in _MATCH_COVARIANCES:
-            raise ConfigError(
-                f"parameter 'match_covariance' must be one of {_MATCH_COVARIANCES}, "
-                f"got {out.match_covariance!r}"
-            )
         if out.fused_step_heading not in _STEP_HEADINGS:
             raise ConfigError(
                 f"parameter 'fused_step_heading' must be one of {_STEP_HEADINGS}, "
@@ -349,7 +295,6 @@ class SlamConfig:
             "max_laser_range",
             "map_max_laser_range",
             "odometry_heading_quantization",
-            "loop_match_range_bias_quadratic",
             "slip_search_minimum_response",
             "isam2_wildfire_threshold",
         ):
@@ -379,7 +324,6 @@ class SlamConfig:
             ("isam2_relinearize_skip", 1),
             ("isam2_recent_nodes_last", 0),
             ("loop_match_maximum_chains", 0),
-            ("odometry_span_batch", 1),
             ("odometry_span_nodes", 0),
         ):
             count = getattr(out, name)
@@ -490,6 +434,25 @@ CERES_PARAMETERS = (
 NODE_PARAMETERS = ("processing", "use_sim_time", "odom_session")
 
 
+_CORRELATIVE = "a match's covariance is the correlative search's, as Karto's"
+_RANGES = "scan ranges are used as they are"
+
+#: eddiebot options that were removed (off by default, on in no shipped configuration, and no
+#: benchmark showed them paying: docs/benchmarks/slam.md#slam-extras) → what the SLAM does
+#: instead. A file that still sets one is read; the key is named as not supported.
+REMOVED_PARAMETERS: dict[str, str] = {
+    "match_covariance": _CORRELATIVE,
+    "icp_covariance_floor_translation": _CORRELATIVE,
+    "icp_covariance_floor_rotation": _CORRELATIVE,
+    "match_degeneracy_analysis": _CORRELATIVE,
+    "loop_match_constrained_variance": _CORRELATIVE,
+    "match_fine_search_climb": "the fine search covers Karto's single box",
+    "odometry_span_batch": "each odometry span edge is added with its node",
+    "scan_range_bias_quadratic": _RANGES,
+    "loop_match_range_bias_quadratic": _RANGES,
+}
+
+
 _Rule = Callable[["SlamConfig", Any], "str | None"]
 
 
@@ -557,9 +520,12 @@ def parameter_warnings(given: dict[str, Any], config: SlamConfig) -> list[str]:
     resulting configuration. Accepted-but-unused slam_toolbox keys whose value would matter
     give ``ignored: <key>[, <key>...] (<why>)`` (keys sharing a reason share a line: Ceres'
     keys, the lifelong ones); a key that is neither slam_toolbox's nor eddiebot's gives
-    ``unknown parameter: <key> (...)``.
+    ``unknown parameter: <key> (...)``; a removed eddiebot option (`REMOVED_PARAMETERS`)
+    gives ``not supported: <key>[, <key>...] (removed eddiebot option: <what is done instead>;
+    ignored)``.
     """
     reasons: dict[str, list[str]] = {}
+    removed: dict[str, list[str]] = {}
     unknown: list[str] = []
     known = {f.name for f in fields(SlamConfig)} - {"extra"}
     for name, value in given.items():
@@ -570,9 +536,15 @@ def parameter_warnings(given: dict[str, Any], config: SlamConfig) -> list[str]:
             why = rule(config, value)
             if why is not None:
                 reasons.setdefault(why, []).append(name)
+        elif name in REMOVED_PARAMETERS:
+            removed.setdefault(REMOVED_PARAMETERS[name], []).append(name)
         elif name not in known:
             unknown.append(name)
     out = [f"ignored: {', '.join(names)} ({why})" for why, names in reasons.items()]
+    out += [
+        f"not supported: {', '.join(names)} (removed eddiebot option: {instead}; ignored)"
+        for instead, names in removed.items()
+    ]
     out += [
         f"unknown parameter: {name} (neither slam_toolbox's nor eddiebot's; ignored)"
         for name in unknown

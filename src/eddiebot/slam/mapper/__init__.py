@@ -39,13 +39,10 @@ from __future__ import annotations
 
 from eddiebot.slam.mapper.core import SlamCore
 from eddiebot.slam.mapper.measurement import (
-    constrained_covariance,
     constrained_information,
-    corrected_scan,
     fuse_increments,
     matcher_params,
     scan_position_covariance,
-    unbiased_points,
 )
 from eddiebot.slam.mapper.results import NodeRecord, ProcessResult, ProcessStatus, SlamWarning
 from eddiebot.slam.mapper.warm_up import valid_point_count, warm_up
@@ -56,13 +53,10 @@ __all__ = [
     "ProcessStatus",
     "SlamCore",
     "SlamWarning",
-    "constrained_covariance",
     "constrained_information",
-    "corrected_scan",
     "fuse_increments",
     "matcher_params",
     "scan_position_covariance",
-    "unbiased_points",
     "valid_point_count",
     "warm_up",
 ]

@@ -9,7 +9,6 @@ import numpy as np
 import numpy.typing as npt
 
 from eddiebot.slam.mapper.localization import Localization
-from eddiebot.slam.mapper.measurement import corrected_scan
 from eddiebot.slam.mapper.results import ProcessResult, ProcessStatus, SlamWarning
 from eddiebot.slam.mapper.se2_rows import _compose1, _inverse1
 from eddiebot.slam.scan import Scan, check_scan
@@ -100,8 +99,6 @@ class SlamCore(Localization):
             if jump is not None:
                 self._reanchor(odom, jump, warnings, stamp)
         st.last_seen_odom = odom.copy()
-        if self.config.scan_range_bias_quadratic > 0.0:
-            scan = corrected_scan(scan, self.config.scan_range_bias_quadratic)
         if not self._moved_enough(odom):
             return ProcessResult(
                 ProcessStatus.NOT_MOVED, self.map_to_odom, warnings=tuple(warnings)

@@ -4,7 +4,6 @@ chains, loop closures, and the removal of depreciated nodes (lifelong)."""
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -22,10 +21,8 @@ from eddiebot.slam.mapper.measurement import (
     _NO_HEADING_VARIANCE,
     _odometry_covariance,
     _rotate_covariance,
-    constrained_covariance,
     constrained_information,
     fuse_increments,
-    unbiased_points,
 )
 from eddiebot.slam.mapper.results import (
     FloatArray,
@@ -68,8 +65,6 @@ class Mapping(ScanMatching):
             match = self._recover_slip(
                 running, points, prior_sensor, match, warnings, stamp, odo_delta
             )
-            if cfg.match_degeneracy_analysis:
-                match = self._with_scan_geometry(match, points, len(self.nodes))
             response, covariance = match.response, match.covariance
             if match.response >= cfg.link_match_minimum_response_fine:
                 pose = _compose1(match.pose, _inverse1(self.sensor_offset))
@@ -119,9 +114,7 @@ class Mapping(ScanMatching):
             st.chain_start = idx
         span = cfg.odometry_span_nodes
         if span > 0 and matched and idx - span >= st.chain_start:
-            self._span_queue.append((idx - span, idx))
-            if len(self._span_queue) >= cfg.odometry_span_batch:
-                self._flush_spans()
+            self._add_odometry_span(idx - span, idx)
         # running buffer
         st.running.append(idx)
         while len(st.running) > cfg.scan_buffer_size:
@@ -343,19 +336,12 @@ class Mapping(ScanMatching):
             found: LoopClosure | None = None
             poses = self.graph.poses  # in sync since _positions: no second pass
             sensor = _compose1(poses[idx], self.sensor_offset)
-            icp_cov = cfg.use_icp_refinement and cfg.match_covariance == "icp"
-            bias = cfg.loop_match_range_bias_quadratic
-            query = points if bias <= 0.0 else unbiased_points(points, bias)
             if cfg.loop_match_maximum_chains > 0:
                 chains = chains[: cfg.loop_match_maximum_chains]
             for chain in chains:
-                if bias > 0.0:
-                    ref = np.concatenate([self._unbiased_world_points(i, poses[i], bias)
-                                          for i in chain])
-                else:
-                    ref = self._reference(chain, poses)[0]
+                ref = self._reference(chain, poses)[0]
                 found = verify_loop(
-                    query,
+                    points,
                     sensor,
                     chain,
                     ref,
@@ -365,18 +351,8 @@ class Mapping(ScanMatching):
                     min_response_coarse=cfg.loop_match_minimum_response_coarse,
                     max_variance_coarse=cfg.loop_match_maximum_variance_coarse,
                     min_response_fine=cfg.loop_match_minimum_response_fine,
-                    max_variance_fine=0.0 if icp_cov else cfg.loop_match_maximum_variance_fine,
+                    max_variance_fine=cfg.loop_match_maximum_variance_fine,
                 )
-                if found is not None and icp_cov:
-                    normals = self._reference(chain, poses, normals=True)[1]
-                    assert normals is not None
-                    polished = self._polish(found.match, query, ref, normals, self._loop_fine)
-                    found = dataclasses.replace(found, match=polished)
-                    if cfg.loop_match_maximum_variance_fine > 0.0 and (
-                        float(np.linalg.eigvalsh(polished.covariance[:2, :2])[-1])
-                        > cfg.loop_match_maximum_variance_fine
-                    ):
-                        found = None
                 if found is not None:
                     break
             if found is None:
@@ -385,13 +361,9 @@ class Mapping(ScanMatching):
             cand_pose = self.graph.pose(found.candidate)
             delta = _between1(cand_pose, base)
             match = found.match
-            if cfg.match_degeneracy_analysis:
-                match = self._with_scan_geometry(match, points, idx)
             if cfg.loop_match_range_covariance:
                 match = self._with_range_error(match, points, idx)
             cov = _rotate_covariance(match.covariance, float(cand_pose[2]))
-            if cfg.loop_match_constrained_variance > 0.0:
-                cov = constrained_covariance(cov, cfg.loop_match_constrained_variance)
             self.graph.add_edge(found.candidate, idx, delta, cov, kind=EdgeKind.LOOP, robust=True)
             self.loop_closures.append(found)
             self.graph.optimize(full=True)
@@ -475,7 +447,6 @@ class Mapping(ScanMatching):
         """Marginalise the retired nodes out of the pose graph and free their scans."""
         if not self._depreciated:
             return
-        self._flush_spans()
         removed, self._depreciated = self._depreciated, []
         self.graph.marginalize(removed)
         for j in removed:

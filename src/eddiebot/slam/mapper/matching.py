@@ -12,7 +12,7 @@ import numpy as np
 import numpy.typing as npt
 
 from eddiebot.geometry import wrap_angle
-from eddiebot.slam.mapper.measurement import scan_position_covariance, unbiased_points
+from eddiebot.slam.mapper.measurement import scan_position_covariance
 from eddiebot.slam.mapper.results import FloatArray, SlamWarning
 from eddiebot.slam.mapper.se2_rows import _compose1, _compose_rows, _place_rows
 from eddiebot.slam.mapper.state import MapperState
@@ -23,7 +23,7 @@ from eddiebot.slam.scan_matcher import (
     match_scan,
     point_normals,
     pyramid_levels,
-    refine_icp_with_covariance,
+    refine_icp,
 )
 
 
@@ -74,18 +74,6 @@ class ScanMatching(MapperState):
         world[:, 0] = sensor[0] + c * pts[:, 0] - s * pts[:, 1]
         world[:, 1] = sensor[1] + s * pts[:, 0] + c * pts[:, 1]
         self._ref_cache[idx] = (pose, world)
-        return world
-
-
-    def _unbiased_world_points(self, idx: int, pose: FloatArray, bias: float) -> FloatArray:
-        """Node ``idx``'s end points with the range bias removed (`unbiased_points`), in the
-        map frame at ``pose`` (loop-closure matching only: not cached)."""
-        sensor = _compose1(pose, self.sensor_offset)
-        pts = unbiased_points(self.nodes[idx].points, bias)
-        c, s = math.cos(sensor[2]), math.sin(sensor[2])
-        world = np.empty_like(pts)
-        world[:, 0] = sensor[0] + c * pts[:, 0] - s * pts[:, 1]
-        world[:, 1] = sensor[1] + s * pts[:, 0] + c * pts[:, 1]
         return world
 
 
@@ -226,10 +214,8 @@ class ScanMatching(MapperState):
         normals: FloatArray,
         params: MatcherParams,
     ) -> MatchResult:
-        """Point-to-line ICP from a correlative match; its fit's covariance when configured."""
-        refined, share, icp_cov = refine_icp_with_covariance(
-            points, ref, match.pose, reference_normals=normals
-        )
+        """Point-to-line ICP from a correlative match (kept when it stays near the match)."""
+        refined, share = refine_icp(points, ref, match.pose, reference_normals=normals)
         moved = float(np.hypot(*(refined[:2] - match.pose[:2])))
         turned = abs(float(wrap_angle(refined[2] - match.pose[2])))
         if not (
@@ -238,28 +224,7 @@ class ScanMatching(MapperState):
             and turned <= params.coarse_angle_resolution
         ):
             return match
-        cov = match.covariance
-        if self.config.match_covariance == "icp" and icp_cov is not None:
-            cov = self._icp_covariance(icp_cov, match.covariance)
-        return MatchResult(refined, match.response, cov)
-
-
-    def _icp_covariance(self, icp_cov: FloatArray, response_cov: FloatArray) -> FloatArray:
-        """ICP fit covariance plus the floors; directions the fit leaves unobserved (a
-        corridor's length) are capped at the correlative search's largest spread."""
-        cfg = self.config
-        cov = np.array(icp_cov, dtype=np.float64)
-        cap = float(np.linalg.eigvalsh(0.5 * (response_cov[:2, :2] + response_cov[:2, :2].T))[-1])
-        w, v = np.linalg.eigh(cov[:2, :2])
-        w = np.minimum(np.maximum(w, 0.0), max(cap, 0.0)) + cfg.icp_covariance_floor_translation**2
-        cov[:2, :2] = (v * w) @ v.T
-        cov[2, 2] = min(max(float(cov[2, 2]), 0.0), max(float(response_cov[2, 2]), 0.0))
-        cov[2, 2] += cfg.icp_covariance_floor_rotation**2
-        if float(np.linalg.eigvalsh(cov)[0]) <= 0.0:
-            # a capped direction can leave the heading cross terms inconsistent
-            cov[:2, 2] = 0.0
-            cov[2, :2] = 0.0
-        return cov
+        return MatchResult(refined, match.response, match.covariance)
 
 
     def _scan_normals(self, idx: int, points: FloatArray) -> FloatArray:
@@ -285,22 +250,6 @@ class ScanMatching(MapperState):
         )
         c, s = math.cos(float(match.pose[2])), math.sin(float(match.pose[2]))
         return geo, np.array([[c, -s], [s, c]])
-
-
-    def _with_scan_geometry(self, match: MatchResult, points: FloatArray, idx: int) -> MatchResult:
-        """A match whose covariance also shows the directions its scan's geometry leaves
-        degenerate: along each eigen-direction of `scan_position_covariance` with a variance
-        above ``corridor_covariance_threshold`` that variance is added (the others, which the
-        scan's lines pin, keep the correlative search's covariance)."""
-        geo, rot = self._scan_geometry(match, points, idx)
-        w, v = np.linalg.eigh(geo)
-        weak = w > self.config.corridor_covariance_threshold
-        if not np.any(weak):
-            return match
-        d = rot @ v[:, weak]
-        cov = np.array(match.covariance, dtype=np.float64)
-        cov[:2, :2] += (d * w[weak]) @ d.T
-        return MatchResult(match.pose, match.response, cov)
 
 
     def _with_range_error(self, match: MatchResult, points: FloatArray, idx: int) -> MatchResult:

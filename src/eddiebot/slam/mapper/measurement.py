@@ -1,10 +1,9 @@
 """The measurement model: scan-matcher parameters from the config, odometry and scan-range
-covariances, the range-bias correction, and the fusion of a match with odometry."""
+covariances, and the fusion of a match with odometry."""
 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -12,7 +11,6 @@ import numpy as np
 from eddiebot.slam.config import SlamConfig
 from eddiebot.slam.mapper.results import FloatArray
 from eddiebot.slam.mapper.se2_rows import _wrap1
-from eddiebot.slam.scan import Scan
 from eddiebot.slam.scan_matcher import (
     MatcherParams,
 )
@@ -32,7 +30,6 @@ def matcher_params(
             fine_angle_step=config.fine_search_angle_offset,
             penalize=False,
             use_response_expansion=config.use_response_expansion,
-            fine_search_climb=config.match_fine_search_climb,
         )
     return MatcherParams(
         search_dimension=config.correlation_search_space_dimension,
@@ -48,7 +45,6 @@ def matcher_params(
         minimum_angle_penalty=config.minimum_angle_penalty,
         use_response_expansion=config.use_response_expansion,
         coarse_heading_variance=config.match_coarse_heading_variance,
-        fine_search_climb=config.match_fine_search_climb,
     )
 
 
@@ -100,22 +96,6 @@ def constrained_information(
     return info, int(np.count_nonzero(~keep))
 
 
-def corrected_scan(scan: Scan, bias_quadratic: float) -> Scan:
-    """``scan`` with each finite range r in [range_min, range_max] read as
-    ``r + bias_quadratic · r²`` (capped at range_max): a quadratic range bias removed."""
-    r = np.array(scan.ranges, dtype=np.float64)
-    ok = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
-    r[ok] = np.minimum(r[ok] + bias_quadratic * r[ok] ** 2, scan.range_max)
-    return dataclasses.replace(scan, ranges=r)
-
-
-def unbiased_points(points: FloatArray, bias_quadratic: float) -> FloatArray:
-    """Sensor-frame points (M, 2) each moved away from the sensor to range ``r + k · r²``
-    (``k = bias_quadratic``, 1/m): a quadratic range bias removed from a scan's end points."""
-    r = np.hypot(points[:, 0], points[:, 1])
-    return np.asarray(points * (1.0 + bias_quadratic * r)[:, None], dtype=np.float64)
-
-
 def scan_position_covariance(
     points: FloatArray,
     normals: FloatArray,
@@ -147,26 +127,6 @@ def scan_position_covariance(
     count = np.sum((n @ v) ** 2, axis=0)
     var = np.minimum((count + 1.0) / np.maximum(lam, 1e-12), 1.0e6)
     return np.asarray((v * var) @ v.T)
-
-
-def constrained_covariance(
-    covariance: FloatArray, max_variance: float, unobserved_variance: float = 1.0e4
-) -> FloatArray:
-    """A match covariance with its poorly observed position directions made uninformative.
-
-    The position directions `constrained_information` drops get ``unobserved_variance`` (m²;
-    an edge with no information there, still invertible for the optimiser); the others and
-    the heading are kept as `constrained_information` keeps them.
-    """
-    info, dropped = constrained_information(covariance, max_variance)
-    if dropped == 0:
-        return np.asarray(covariance, dtype=np.float64)
-    cov = 0.5 * (covariance + covariance.T)
-    w, v = np.linalg.eigh(cov[:2, :2])
-    drop = v[:, np.maximum(w, 1e-12) > max_variance]
-    info[:2, :2] += (drop @ drop.T) / unobserved_variance
-    out = np.linalg.inv(info)
-    return np.asarray(0.5 * (out + out.T))
 
 
 def fuse_increments(

@@ -85,7 +85,6 @@ class MapperState:
             wildfire_threshold=self.config.isam2_wildfire_threshold,
         )
         self.nodes: list[NodeRecord] = []
-        self._span_queue: list[tuple[int, int]] = []
         self.loop_closures: list[LoopClosure] = []
         self.near_chain_links = 0
         """Edges `_link_near_chains` added (Karto's near-chain links)."""
@@ -126,24 +125,14 @@ class MapperState:
         return self._state.map_to_odom.copy()
 
 
-    def _flush_spans(self) -> None:
-        """Add the span edges `odometry_span_batch` holds back."""
-        queue, self._span_queue = self._span_queue, []
-        for j, idx in queue:
-            self._add_odometry_span(j, idx)
-
-
     def node_poses(self) -> FloatArray:
-        """Robot (base) poses of every node in the map frame (N, 3), optimised (span edges held
-        by `odometry_span_batch` are folded in first)."""
-        self._flush_spans()
+        """Robot (base) poses of every node in the map frame (N, 3), optimised."""
         self.graph.optimize()
         return self.graph.poses
 
 
     def sensor_poses(self) -> FloatArray:
         """Sensor poses of every node in the map frame (N, 3), optimised as `node_poses`."""
-        self._flush_spans()
         self.graph.optimize()
         poses = self.graph.poses
         if poses.shape[0] == 0:
