@@ -71,5 +71,5 @@ def test_built_from_nav2_params() -> None:
     with pytest.raises(ParameterError, match="refinement_num"):
         build_smoother("sg", {"plugin": "nav2_smoother::SavitzkyGolaySmoother",
                               "refinement_num": -1})
-    with pytest.raises(UnsupportedPlugin, match="ConstrainedSmoother"):
-        build_smoother("c", {"plugin": "nav2_constrained_smoother/ConstrainedSmoother"})
+    with pytest.raises(UnsupportedPlugin, match="NoSuchSmoother"):
+        build_smoother("c", {"plugin": "nav2_smoother::NoSuchSmoother"})
