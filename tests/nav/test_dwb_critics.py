@@ -195,3 +195,21 @@ def test_controller_path_align_scale() -> None:
     assert ok[0] and sc[0] == 1.0 and scale == pytest.approx(0.05 * 0.5 * 32.0)
     near = np.array([2.3, 1.5, 0.0])  # within forward_point_distance of the goal: scale 0
     assert ctrl._map_grid("PathAlign", traj, near, plan[-1], plan, cm, 32.0)[2] == 0.0
+
+
+@pytest.mark.parametrize("critic", ["PathDist", "GoalDist", "GoalAlign", "PathAlign"])
+def test_every_map_grid_critic_weighs_resolution_half_scale(critic: str) -> None:
+    """MapGridCritic::getScale: cell distances count resolution / 2 · scale, so 24 on a 0.05 m
+    grid is 0.6 per cell (12 per metre), comparable to BaseObstacle's 0.02 · cost."""
+    cm = make_costmap(np.zeros((60, 60), dtype=np.int8))
+    plan = np.stack([np.linspace(0.5, 2.5, 41), np.full(41, 1.5), np.zeros(41)], axis=1)
+    ctrl = DWBController(dwb_config_from_params({
+        "max_vel_x": 0.3, "max_speed_xy": 0.3, "max_vel_theta": 1.0, "acc_lim_x": 2.5,
+        "acc_lim_theta": 3.2, "decel_lim_x": -2.5, "decel_lim_theta": -3.2, "vy_samples": 1,
+        "critics": [critic]}))
+    traj = np.array([[[1.0, 1.75, 0.0]]])
+    pose = np.array([0.5, 1.55, 0.0])
+    sc, ok, scale = ctrl._map_grid(critic, traj, pose, plan[-1], plan, cm, 24.0)
+    assert ok[0] and scale == pytest.approx(0.05 * 0.5 * 24.0)
+    if critic == "PathDist":
+        assert sc[0] == 5.0  # (1.0, 1.75) is 5 cells above the plan's row

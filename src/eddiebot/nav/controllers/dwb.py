@@ -345,18 +345,20 @@ class DWBController:
                   costmap: LayeredCostmap, scale: float
                   ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_], float]:
         """One map-grid critic: ``prepare`` (wavefront from the transformed plan) and
-        ``scoreTrajectory``; returns scores, legality and the effective scale (PathAlign's is
-        ``resolution / 2 · scale``, and 0 within ``forward_point_distance`` of the goal)."""
+        ``scoreTrajectory``; returns scores, legality and the effective scale: as upstream's
+        ``MapGridCritic::getScale`` every map-grid critic weighs its cell distances by
+        ``resolution / 2 · scale`` (PathAlign's is 0 within ``forward_point_distance`` of the
+        goal)."""
         cfg = self.config
         cm = costmap.master
         n = traj.shape[0]
         origin = (cm.origin_x, cm.origin_y)
         fwd = 0.0
+        scale *= cm.resolution * 0.5
         if name == "PathAlign":
             fwd = cfg.PathAlign_forward_point_distance
             if math.hypot(pose[0] - goal[0], pose[1] - goal[1]) <= fwd:
                 return np.zeros(n), np.ones(n, dtype=bool), 0.0
-            scale *= cm.resolution * 0.5
         elif name == "GoalAlign":
             fwd = cfg.GoalAlign_forward_point_distance
             # The nose is drawn to the goal position seen from the robot, not to the goal
