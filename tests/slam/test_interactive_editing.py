@@ -16,7 +16,12 @@ from test_node import START, rig_factory  # noqa: F401  (the fixture)
 from eddiebot.geometry import se2_compose, se2_inverse, yaw_to_quaternion
 from eddiebot.msgs.slam_toolbox import Clear, LoopClosure, ToggleInteractive
 from eddiebot.msgs.std_srvs import SetBool
-from eddiebot.msgs.visualization_msgs import InteractiveMarkerFeedback
+from eddiebot.msgs.visualization_msgs import (
+    GetInteractiveMarkers,
+    InteractiveMarkerControl,
+    InteractiveMarkerFeedback,
+    InteractiveMarkerUpdate,
+)
 from eddiebot.slam import Scan, SlamConfig, SlamCore
 from eddiebot.slam.editing import apply_node_moves, check_node_move
 from eddiebot.slam.errors import GraphEditError
@@ -141,6 +146,87 @@ def test_clear_changes_drops_the_staged_moves(rig_factory: Any) -> None:  # noqa
     rig.call(LoopClosure, "manual_loop_closure")  # nothing staged: nothing changes
     assert len(rig.node.core.graph.edges) == edges
     assert np.array_equal(rig.node.core.node_poses(), before)
+
+
+def _positions(markers: Any) -> dict[str, tuple[float, float]]:
+    return {m.name: (m.pose.position.x, m.pose.position.y) for m in markers}
+
+
+def test_the_marker_server_serves_a_marker_per_node(rig_factory: Any) -> None:  # noqa: F811
+    rig = rig_factory(enable_interactive_mode=True)
+    rig.drive(12)
+    node = rig.node
+    updates: list[Any] = []
+    rig.probe.create_subscription(InteractiveMarkerUpdate, "/slam_toolbox/update", updates.append, 100)
+    # interactive mode off: the server holds nothing
+    empty = rig.call(GetInteractiveMarkers, "get_interactive_markers")
+    assert empty.markers == [] and empty.sequence_number == 0
+    rig.call(ToggleInteractive, "toggle_interactive_mode")
+    rig.ex.spin_for(0.05)
+    poses = node.core.node_poses().copy()
+    n = len(poses)
+    res = rig.call(GetInteractiveMarkers, "get_interactive_markers")
+    assert res.sequence_number == 1
+    assert [m.name for m in res.markers] == [str(i) for i in range(n)]
+    got = _positions(res.markers)
+    assert max(math.hypot(got[str(i)][0] - p[0], got[str(i)][1] - p[1])
+               for i, p in enumerate(poses)) < 1e-9
+    marker = res.markers[4]
+    assert marker.header.frame_id == "map" and marker.pose.orientation.w == 1.0
+    assert [c.interaction_mode for c in marker.controls] == [
+        InteractiveMarkerControl.MOVE_PLANE, InteractiveMarkerControl.ROTATE_AXIS]
+    assert marker.controls[0].markers[0].id == 4
+    # the same set went out as update 1
+    assert [u.seq_num for u in updates] == [1]
+    assert updates[0].type == InteractiveMarkerUpdate.UPDATE
+    assert [m.name for m in updates[0].markers] == [str(i) for i in range(n)]
+    # a drag moves the marker on the server; the loop closure's update puts every marker on
+    # its node's new pose
+    editor = _Editor(rig)
+    target = poses[6] + np.array([0.1, 0.4, 0.0])
+    editor.pub.publish(_feedback(6, target[0], target[1],
+                                 event=InteractiveMarkerFeedback.POSE_UPDATE))
+    rig.ex.spin_for(0.05)
+    drag = _positions(rig.call(GetInteractiveMarkers, "get_interactive_markers").markers)
+    assert drag["6"] == pytest.approx((target[0], target[1]))
+    editor.drag(6, target[0], target[1])
+    rig.call(LoopClosure, "manual_loop_closure")
+    rig.ex.spin_for(0.05)
+    after = node.core.node_poses()
+    assert [u.seq_num for u in updates] == [1, 2]
+    closed = _positions(updates[-1].markers)
+    assert len(closed) == n and updates[-1].erases == []
+    assert max(math.hypot(closed[str(i)][0] - p[0], closed[str(i)][1] - p[1])
+               for i, p in enumerate(after)) < 1e-9
+    assert math.hypot(closed["6"][0] - poses[6, 0], closed["6"][1] - poses[6, 1]) > 0.35
+    assert rig.call(GetInteractiveMarkers, "get_interactive_markers").sequence_number == 2
+    # the map republished with the graph unchanged: no further update
+    rig.ex.spin_for(node.config.map_update_interval + 0.1)
+    assert [u.seq_num for u in updates] == [1, 2]
+    # interactive mode off: every marker erased
+    rig.call(ToggleInteractive, "toggle_interactive_mode")
+    rig.ex.spin_for(0.05)
+    assert updates[-1].seq_num == 3 and updates[-1].markers == []
+    assert sorted(updates[-1].erases, key=int) == [str(i) for i in range(n)]
+    assert rig.call(GetInteractiveMarkers, "get_interactive_markers").markers == []
+
+
+def test_clear_changes_puts_the_markers_back_on_their_nodes(rig_factory: Any) -> None:  # noqa: F811
+    rig = rig_factory(enable_interactive_mode=True)
+    rig.drive(8)
+    rig.call(ToggleInteractive, "toggle_interactive_mode")
+    poses = rig.node.core.node_poses().copy()
+    editor = _Editor(rig)
+    editor.pub.publish(_feedback(3, poses[3, 0], poses[3, 1] + 1.0,
+                                 event=InteractiveMarkerFeedback.POSE_UPDATE))
+    editor.drag(3, poses[3, 0], poses[3, 1] + 1.0)
+    assert _positions(rig.node.editing.markers.markers.values())["3"][1] == pytest.approx(
+        poses[3, 1] + 1.0)
+    seq = rig.node.editing.markers.sequence_number
+    rig.call(Clear, "clear_changes")
+    res = rig.call(GetInteractiveMarkers, "get_interactive_markers")
+    assert res.sequence_number == seq + 1
+    assert _positions(res.markers)["3"] == pytest.approx((poses[3, 0], poses[3, 1]))
 
 
 def _warnings(caplog: pytest.LogCaptureFixture) -> list[str]:

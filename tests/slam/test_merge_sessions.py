@@ -4,20 +4,23 @@ matching or by hand, the merged graph against the truth, refusals; and the node'
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 from slam_world import CORRIDOR, ROOM, SCAN_ANGLES, drifting_odometry, loop_path, raycast
-from test_node import MOUNT, rig_factory  # noqa: F401  (the fixture)
+from test_node import MOUNT, _map_odom_count, rig_factory  # noqa: F401  (the fixture)
 
 from eddiebot.geometry import se2_compose, se2_inverse
 from eddiebot.msgs.slam_toolbox import AddSubmap, MergeMaps, SerializePoseGraph
 from eddiebot.msgs.visualization_msgs import InteractiveMarkerFeedback
-from eddiebot.slam import Scan, SlamConfig, SlamCore, load_session, save_session
+from eddiebot.slam import Scan, SlamConfig, SlamCore, load_session, node_editing, save_session
 from eddiebot.slam.errors import MergeError
-from eddiebot.slam.merge import merge_session, place_session
+from eddiebot.slam.merge import map_snapshot, merge_session, place_session, rebase_placement
+from eddiebot.slam.node_editing import _load_and_place
 
 CONFIG = SlamConfig(minimum_travel_distance=0.5, loop_match_minimum_chain_size=6)
 #: the second session's map frame in the first one's (where its odometry started)
@@ -120,7 +123,66 @@ def test_refusals_name_the_reason(halves: Any) -> None:
         place_session(core, other, transform=(0.0, np.inf, 0.0))
 
 
+def test_a_placement_found_on_a_snapshot_follows_its_anchors(halves: Any) -> None:
+    first_path, second_path, truth, expected = halves
+    core = load_session(first_path, CONFIG)
+    other = load_session(second_path, CONFIG)
+    snapshot = map_snapshot(core)
+    assert len(snapshot.nodes) == len(core.nodes) and snapshot.graph.edges == []
+    assert np.array_equal(snapshot.graph.poses, core.node_poses())
+    searched = snapshot.graph.poses.copy()
+    placement = place_session(snapshot, other)
+    assert np.hypot(*(placement.transform[:2] - expected[:2])) < 0.03
+    # meanwhile the live map moved as a whole (as after a loop closure far away): the links,
+    # kept relative to their anchor nodes, move with it
+    shift = np.array([0.5, -0.2, 0.1])
+    core.graph.set_poses(se2_compose(np.broadcast_to(shift, searched.shape), searched))
+    moved = rebase_placement(placement, other, searched, core)
+    assert len(moved.links) == len(placement.links)
+    assert np.allclose(moved.transform, se2_compose(shift, placement.transform), atol=1e-6)
+    # a retired anchor's link is dropped
+    gone = moved.links[0].anchor
+    core.nodes[gone].retired = True
+    fewer = rebase_placement(placement, other, searched, core)
+    assert all(lk.anchor != gone for lk in fewer.links)
+    assert len(fewer.links) == len(placement.links) - sum(
+        lk.anchor == gone for lk in placement.links)
+
+
+def test_loading_and_placing_touches_only_the_snapshot(halves: Any) -> None:
+    first_path, second_path, _, expected = halves
+    core = load_session(first_path, CONFIG)
+    poses = core.node_poses().copy()
+    placed = _load_and_place(str(second_path), map_snapshot(core))
+    assert placed.placement is not None and placed.unplaced == ""
+    assert np.hypot(*(placed.placement.transform[:2] - expected[:2])) < 0.03
+    assert np.array_equal(core.node_poses(), poses)
+    assert core._global is None and core.relocalizations == []
+
+
 # -- the node's services ---------------------------------------------------------------------
+def _spin_until(rig: Any, done: Any, wall_s: float = 120.0) -> None:
+    """Spin the rig until ``done()``; the bound only stops a broken run from hanging."""
+    stop = time.monotonic() + wall_s
+    while not done():
+        assert time.monotonic() < stop, "no answer"
+        rig.ex.spin_once(timeout_sec=0.01)
+
+
+def _add_submap(rig: Any, path: Path) -> list[Any]:
+    """Call ~/add_submap as a client does; returns the answers (filled once it answers)."""
+    (service,) = [s for s in rig.node.services if s.service_name == "/slam_toolbox/add_submap"]
+    answers: list[Any] = []
+    service.handle_async(AddSubmap.Request(filename=str(path)), lambda r, e: answers.append((r, e)))
+    return answers
+
+
+def _added(rig: Any, path: Path) -> None:
+    answers = _add_submap(rig, path)
+    _spin_until(rig, lambda: answers)
+    assert answers[0][1] is None
+
+
 def _map_room(rig: Any, xs: Any, y: float, odom_frame: np.ndarray | None = None) -> None:
     """Drive along ``y`` through ``xs``; the odometry is exact, in ``odom_frame`` (its origin
     in the room; the room's own frame by default)."""
@@ -145,7 +207,7 @@ def test_add_submap_and_merge_submaps(
     rig.drive(17)
     n = len(rig.node.core.nodes)
     caplog.set_level(logging.INFO)
-    rig.call(AddSubmap, "add_submap", filename=str(path))
+    _added(rig, path)
     (sub,) = rig.node.editing.submaps
     assert sub.placement is not None
     # the other session's map frame is its odometry's
@@ -166,6 +228,88 @@ def test_add_submap_and_merge_submaps(
     assert any("merged " in r.getMessage() for r in caplog.records)
 
 
+def _other_session(rig_factory: Any, tmp_path: Path) -> tuple[Path, int]:  # noqa: F811
+    """A session driven along y = 5.5 from x = 7 to 10, its odometry in another frame."""
+    other = rig_factory()
+    _map_room(other, np.arange(7.0, 10.01, 0.25), 5.5, odom_frame=SECOND_FRAME)
+    path = tmp_path / "other.eslam"
+    other.call(SerializePoseGraph, "serialize_map", filename=str(path))
+    return path, len(other.node.core.nodes)
+
+
+def test_scans_are_processed_while_a_submap_is_placed(
+    rig_factory: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch  # noqa: F811
+) -> None:
+    path, m = _other_session(rig_factory, tmp_path)
+    rig = rig_factory()
+    rig.drive(17)  # along y = 4 from x = 2 to 6
+    n = len(rig.node.core.nodes)
+    # the placement search is held until the robot has driven on: however fast the machine,
+    # the scans below arrive while it runs
+    started, release = threading.Event(), threading.Event()
+    searched_on: list[str] = []
+    real_place = node_editing.place_session
+
+    def held(core: SlamCore, other: SlamCore, **kwargs: Any) -> Any:
+        searched_on.append(threading.current_thread().name)
+        started.set()
+        assert release.wait(120)
+        return real_place(core, other, **kwargs)
+
+    monkeypatch.setattr(node_editing, "place_session", held)
+    answers = _add_submap(rig, path)
+    _spin_until(rig, started.is_set)
+    tf_before, processed = _map_odom_count(rig), rig.node.scans_processed
+    _map_room(rig, np.arange(6.25, 7.51, 0.25), 4.0)  # 3 s of driving, 6 scans
+    assert not answers and rig.node.editing.submaps == []
+    assert rig.node.scans_processed == processed + 6
+    assert len(rig.node.core.nodes) == n + 6
+    # map → odom kept publishing every transform_publish_period (0.05 s) of those 3 s
+    assert _map_odom_count(rig) - tf_before >= 59
+    release.set()
+    _spin_until(rig, lambda: answers)
+    assert answers[0][1] is None
+    assert searched_on == ["slam-add-submap"]
+    (sub,) = rig.node.editing.submaps
+    assert np.hypot(*(sub.transform[:2] - SECOND_FRAME[:2])) < 0.05
+    # merged into the graph as it is now, the six nodes added meanwhile included
+    rig.call(MergeMaps, "merge_submaps")
+    poses = rig.node.core.node_poses()
+    assert len(poses) == n + 6 + m
+    assert np.abs(poses[n : n + 6, 0] - np.arange(6.25, 7.51, 0.25)).max() < 0.05
+    assert np.abs(poses[n + 6 :, 1] - 5.5).max() < 0.05
+    assert np.abs(poses[n + 6 :, 0] - np.linspace(7.0, 10.0, m)).max() < 0.05
+
+
+def test_merge_submaps_leaves_a_submap_still_being_placed(
+    rig_factory: Any, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,  # noqa: F811
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    path, m = _other_session(rig_factory, tmp_path)
+    rig = rig_factory()
+    rig.drive(17)
+    n = len(rig.node.core.nodes)
+    started, release = threading.Event(), threading.Event()
+    real_place = node_editing.place_session
+
+    def held(core: SlamCore, other: SlamCore, **kwargs: Any) -> Any:
+        started.set()
+        assert release.wait(120)
+        return real_place(core, other, **kwargs)
+
+    monkeypatch.setattr(node_editing, "place_session", held)
+    answers = _add_submap(rig, path)
+    _spin_until(rig, started.is_set)
+    caplog.set_level(logging.WARNING)
+    rig.call(MergeMaps, "merge_submaps")
+    assert len(rig.node.core.nodes) == n
+    assert any("1 submaps are still being placed" in r.getMessage() for r in caplog.records)
+    release.set()
+    _spin_until(rig, lambda: answers)
+    rig.call(MergeMaps, "merge_submaps")
+    assert len(rig.node.core.nodes) == n + m
+
+
 def test_a_submap_placed_by_hand(
     rig_factory: Any, tmp_path: Path, caplog: pytest.LogCaptureFixture  # noqa: F811
 ) -> None:
@@ -179,7 +323,7 @@ def test_a_submap_placed_by_hand(
         corridor.process(_scan(CORRIDOR, se2_compose(pose, MOUNT), k * 100_000_000), pose)
     path = save_session(corridor, tmp_path / "corridor.eslam")
     caplog.set_level(logging.WARNING)
-    rig.call(AddSubmap, "add_submap", filename=str(path))
+    _added(rig, path)
     assert len(rig.node.editing.submaps) == 1
     assert any("it waits at its own origin" in r.getMessage() for r in caplog.records)
     pub = rig.probe.create_publisher(InteractiveMarkerFeedback, "/merge_maps_tool/feedback", 10)
@@ -210,8 +354,8 @@ def test_add_submap_refuses_a_bad_file(
     bad = tmp_path / "notes.txt"
     bad.write_text("not a session")
     caplog.set_level(logging.ERROR)
-    rig.call(AddSubmap, "add_submap", filename=str(bad))
-    rig.call(AddSubmap, "add_submap", filename=str(tmp_path / "missing.eslam"))
+    _added(rig, bad)
+    _added(rig, tmp_path / "missing.eslam")
     errors = [r.getMessage() for r in caplog.records if r.levelno >= logging.ERROR]
     assert len(errors) == 2
     assert f"add_submap: {bad}: not a readable SLAM session" in errors[0]

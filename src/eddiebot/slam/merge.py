@@ -23,6 +23,12 @@ pose into one grid; the graphs stay apart. Here a session is merged into the gra
 
 The merged nodes keep their own odometry frame: the next scan of a running mapper starts a
 new chain linked by scan matching to the nodes it is matched against, as after a start pose.
+
+A running node searches on a copy: `map_snapshot` copies the map as it is (on the node's
+executor, cheap: the scans are shared), `place_session` runs on the copy on another thread
+while the live graph goes on growing, and `rebase_placement` re-expresses the placement
+against the live graph as it is when it is merged (each link kept relative to its anchor
+node, which loop closures may have moved meanwhile).
 """
 
 from __future__ import annotations
@@ -49,8 +55,10 @@ __all__ = [
     "RELOCALIZATION_CONSENSUS",
     "MergeLink",
     "Placement",
+    "map_snapshot",
     "merge_session",
     "place_session",
+    "rebase_placement",
 ]
 
 FloatArray = npt.NDArray[np.float64]
@@ -269,6 +277,47 @@ def place_session(
     else:
         final = guess
     return Placement(final, tuple(keep), transform is None, relocalized)
+
+
+def map_snapshot(core: SlamCore) -> SlamCore:
+    """A copy of ``core``'s map for `place_session` to search while ``core`` goes on mapping:
+    the same parameters and laser mount, every node at its current pose (retired ones
+    retired), no edges (placement reads poses and scans only). Node records are copied, their
+    scans and points shared (a node's scan is never changed in place)."""
+    snap = SlamCore(core.config, sensor_offset=core.sensor_offset)
+    if core.nodes:
+        poses = core.node_poses().copy()
+        snap._restore([dataclasses.replace(n) for n in core.nodes], poses, [])
+    return snap
+
+
+def rebase_placement(
+    placement: Placement, other: SlamCore, searched: FloatArray, core: SlamCore
+) -> Placement:
+    """``placement``, found on a snapshot whose node poses were ``searched`` (N, 3), against
+    ``core`` as it is now: each link's matched pose moves with its anchor node (kept relative
+    to it), links whose anchor is gone (retired, or no longer in the graph) are dropped, and a
+    transform found by scan matching is re-derived from the links kept."""
+    if not placement.links:
+        return placement
+    now = core.node_poses()
+    active = core.active_mask()
+    removed = set(core.graph.removed_nodes)
+    own = other.node_poses()
+    links = []
+    for lk in placement.links:
+        a = lk.anchor
+        if a >= now.shape[0] or a >= searched.shape[0] or not active[a] or a in removed:
+            continue
+        pose = se2_compose(now[a], se2_between(searched[a], lk.pose))
+        turn = float(now[a, 2] - searched[a, 2])
+        links.append(dataclasses.replace(
+            lk, pose=pose, covariance=_rotate_covariance(lk.covariance, -turn)))
+    if links:
+        transform = _mean_transform([se2_compose(lk.pose, se2_inverse(own[lk.node])) for lk in links])
+    else:
+        transform = placement.transform
+    return dataclasses.replace(placement, transform=transform, links=tuple(links))
 
 
 def merge_session(core: SlamCore, other: SlamCore, placement: Placement) -> range:

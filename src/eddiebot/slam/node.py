@@ -445,6 +445,7 @@ class SlamNode(Node):
             ]
         edges.points = pts
         self.graph_pub.publish(MarkerArray(markers=[nodes, edges]))
+        self.editing.publish_markers()
 
     # -- services --------------------------------------------------------------------------
     def _save_map(self, req: Any, res: Any) -> Any:
@@ -633,6 +634,12 @@ class SlamNode(Node):
         self.get_logger().info(f"clear_queue: dropped {dropped} queued scans")
         res.status = True
         return res
+
+    def destroy_node(self) -> None:
+        editing = getattr(self, "editing", None)  # None when __init__ failed before it
+        if editing is not None:
+            editing.close()
+        super().destroy_node()
 
     def mark_map_dirty(self) -> None:
         """Re-render and publish the map and graph at the next map update."""
