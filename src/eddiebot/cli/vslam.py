@@ -21,7 +21,8 @@ running on the same ROS_DOMAIN_ID (a ``/clock`` or ``/odom`` publisher within
 The grid is published on ``/map`` (``--map-topic``). ``replay`` runs visual odometry + SLAM over a TUM RGB-D folder, or the
 ``rtabmap`` node (the report's parameters) over a rosbag2 of our topics (``/image_raw``,
 ``/depth/image_raw``, camera infos, ``/tf``, ``/tf_static``, ``/odom``, ``/scan``), writing
-``rtabmap.db``, ``poses.txt`` (every input frame) and ``keyframes.txt`` (TUM) into OUT. A TUM
+``rtabmap.db``, ``poses.txt`` (every input colour frame), ``keyframes.txt``, ``odom.txt``
+(TUM, the colour camera's optical frame) and ``report.json`` into OUT. A TUM
 folder's intrinsics come from ``--fx/--fy/--cx/--cy`` or ``--camera-info`` (ROS camera_info
 YAML), else from its name (freiburg1/2/3), else 525/525/319.5/239.5; its depth PNGs have
 ``--depth-scale`` units per metre (default TUM's 5000; ICL-NUIM 1000). A bag's come from its
@@ -353,13 +354,24 @@ def _bag_camera(reader: Any, present: set[str]) -> dict[str, Any]:
 
 def replay_bag(bag: Path, out_dir: Path, parameters: dict[str, str] | None = None
                ) -> dict[str, Any]:
-    """Run the ``rtabmap`` node over a rosbag2 of our topics on the bag's clock; writes
-    ``rtabmap.db`` and ``poses.txt`` (base poses, map frame, TUM) into ``out_dir``."""
+    """Run the ``rtabmap`` node over a rosbag2 of our topics on the bag's clock; writes into
+    ``out_dir`` (poses TUM, of the colour camera's optical frame as in a TUM replay):
+
+    - ``poses.txt``: a pose for every input colour frame in the map frame (its key frame's
+      optimised pose composed with the TF odometry since; a frame without odometry or
+      skipped as bad input is counted lost and keeps the previous pose);
+    - ``keyframes.txt``: the key frames' optimised poses; ``odom.txt``: the odometry (odom
+      frame) of the frames that had it;
+    - ``rtabmap.db`` and ``report.json`` (appearance loop closures, proximity links and
+      rejected hypotheses counted separately)."""
+    import numpy as np
+
     from eddiebot.bag import BagReader
     from eddiebot.core.context import Context
     from eddiebot.core.executors import SingleThreadedExecutor
     from eddiebot.core.node import Node
     from eddiebot.core.qos import qos_profile_latched
+    from eddiebot.vslam.frame_track import FrameTrack
     from eddiebot.vslam.node import RtabmapNode
     from eddiebot.vslam.tum import write_tum_trajectory
 
@@ -377,12 +389,13 @@ def replay_bag(bag: Path, out_dir: Path, parameters: dict[str, str] | None = Non
         overrides.update(REPORT_PARAMETERS)
         overrides.update(parameters or {})
         slam = RtabmapNode(context=context, parameter_overrides=overrides)
+        track = slam.frame_track = FrameTrack()
         player = Node("vslam_bag_player", context=context)
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(slam)
         executor.add_node(player)
         pubs: dict[str, Any] = {}
-        n = 0
+        n = colour = 0
         for msg in reader.messages(topics=[t for t in topics if t in present]):
             obj = msg.decode()
             if msg.topic not in pubs:
@@ -393,12 +406,26 @@ def replay_bag(bag: Path, out_dir: Path, parameters: dict[str, str] | None = Non
             pubs[msg.topic].publish(obj)
             executor.spin_until_idle()
             n += 1
-        executor.spin_for(1.0)
-    stamps, poses = slam.trajectory()
-    write_tum_trajectory(out_dir / "poses.txt", [t / 1e9 for t in stamps], list(poses))
-    summary = {"messages": n, "frames": slam.frames_processed, "nodes": len(stamps),
-               "loop_closures": slam.loop_closures, "database": str(out_dir / "rtabmap.db"),
-               **camera}
+            colour += msg.topic == "/image_raw"
+        # past wait_for_transform: every frame still queued is processed or counted lost
+        executor.spin_for(max(1.0, 2 * slam.wait_for_transform))
+    optimized, _ = slam.core.graph()
+    maps = max(1, len(slam.core.map_frames()))
+    lt = slam.camera_transform if slam.camera_transform is not None else np.eye(4)
+    stamps, poses = track.frame_poses(optimized)
+    write_tum_trajectory(out_dir / "poses.txt", stamps, [p @ lt for p in poses])
+    key_stamps, key_poses = track.keyframe_poses(optimized)
+    write_tum_trajectory(out_dir / "keyframes.txt", key_stamps, [p @ lt for p in key_poses])
+    odom = sorted((t, o) for t, o in track.records if o is not None)
+    write_tum_trajectory(out_dir / "odom.txt", [t for t, _ in odom], [o @ lt for _, o in odom])
+    # input colour frames the synchroniser never released (no depth after them) are lost too
+    lost = track.lost + max(0, colour - track.frames)
+    summary = {"messages": n, "frames": colour, "frames_processed": slam.frames_processed,
+               "poses": len(stamps), "nodes": len(key_stamps), "lost_frames": lost,
+               "loop_closures": track.loop_closures, "proximity_links": track.proximity_links,
+               "rejected_hypotheses": track.rejected_hypotheses,
+               "odometry_resets": track.new_maps, "map_merges": track.map_merges,
+               "maps": maps, "database": str(out_dir / "rtabmap.db"), **camera}
     slam.destroy_node()
     player.destroy_node()
     context.shutdown()

@@ -37,37 +37,37 @@ map_server files at ``map_url``), ``~/export_cloud`` (slam_toolbox/SaveMap: a PL
 Bad input (an image without depth or camera_info, mismatched sizes, unsupported encodings, time
 going backwards, missing odometry, lost odometry) is skipped with one warning per kind; a frame
 is never processed with a made-up pose.
+
+The input synchronisation is `eddiebot.vslam.node_sync.RgbdSync`, the publishers
+`eddiebot.vslam.node_outputs.RtabmapOutputs` (bases of `RtabmapNode`). With `frame_track` set
+(replays), every input colour frame is recorded with its odometry and key frame (throttled ones
+too), or as lost.
 """
 
 from __future__ import annotations
 
-from collections import deque
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from eddiebot.core.node import Node
 from eddiebot.core.parameters import ParameterDescriptor
-from eddiebot.core.qos import qos_profile_latched, qos_profile_sensor_data
-from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, make_transform
-from eddiebot.core.time import ns_to_stamp, stamp_to_ns
-from eddiebot.geometry import matrix_to_quaternion, se3_from_tq
-from eddiebot.maps import map_to_msg, save_map
-from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
+from eddiebot.core.qos import qos_profile_sensor_data
+from eddiebot.core.tf import Buffer, TransformListener
+from eddiebot.maps import save_map
 from eddiebot.msgs.nav2_msgs import SaveMap as Nav2SaveMap
-from eddiebot.msgs.nav_msgs import OccupancyGrid, Odometry
-from eddiebot.msgs.rtabmap_msgs import Info, MapData, MapGraph
-from eddiebot.msgs.sensor_msgs import CameraInfo, Image, LaserScan, PointCloud2
+from eddiebot.msgs.nav_msgs import Odometry
+from eddiebot.msgs.sensor_msgs import CameraInfo, Image, LaserScan
 from eddiebot.msgs.slam_toolbox import SaveMap as PathRequest
-from eddiebot.msgs.std_msgs import Header
 from eddiebot.msgs.std_srvs import Empty
-from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
 from eddiebot.vslam.camera import CameraIntrinsics
 from eddiebot.vslam.database import SessionDatabase
 from eddiebot.vslam.errors import DatabaseError
 from eddiebot.vslam.errors import ParameterError as VslamParameterError
 from eddiebot.vslam.export import write_ply
+from eddiebot.vslam.frame_track import FrameTrack
+from eddiebot.vslam.node_outputs import RtabmapOutputs
+from eddiebot.vslam.node_sync import RgbdSync, tf_matrix
 from eddiebot.vslam.occupancy import Scan2D
 from eddiebot.vslam.parameters import (
     RTABMAP_NAME,
@@ -75,13 +75,6 @@ from eddiebot.vslam.parameters import (
     parameter_names,
     parameter_text,
     parse_rtabmap_args,
-)
-from eddiebot.vslam.ros_messages import (
-    cloud_message,
-    graph_markers,
-    graph_message,
-    info_message,
-    map_data_message,
 )
 from eddiebot.vslam.rtabmap import ProcessResult, Rtabmap
 
@@ -93,19 +86,13 @@ _DEPTH_ENCODINGS = ("16UC1", "32FC1")
 _SEC = 1_000_000_000
 
 
-def _tf_matrix(tf: Any) -> np.ndarray:
-    t = tf.transform.translation
-    q = tf.transform.rotation
-    return se3_from_tq((t.x, t.y, t.z), (q.x, q.y, q.z, q.w))
-
-
 def _image_array(msg: Any, accepted: tuple[str, ...]) -> np.ndarray:
     from eddiebot.perception._image import image_to_array
 
     return image_to_array(msg, accepted)
 
 
-class RtabmapNode(Node):
+class RtabmapNode(RgbdSync, RtabmapOutputs):
     """The ``rtabmap`` node (mapping or localization) on `Rtabmap`."""
 
     default_node_name = "rtabmap"
@@ -152,7 +139,7 @@ class RtabmapNode(Node):
         scan_topic = str(p("scan_topic", "/scan"))
         odom_topic = str(p("odom_topic", "/odom"))
 
-        self._warned: set[str] = set()
+        self._init_sync()
         self.explicit_parameters = self._explicit_rtabmap_parameters()
         args, delete, ignored = parse_rtabmap_args(self.rtabmap_args)
         if ignored:
@@ -165,16 +152,11 @@ class RtabmapNode(Node):
         self.loop_closures = 0
         self.last_result: ProcessResult | None = None
         self.node_stamps: dict[int, int] = {}
-        self._rgb: deque[Any] = deque(maxlen=max(1, self.sync_queue_size))
-        self._depth: deque[Any] = deque(maxlen=max(1, self.sync_queue_size))
-        self._scans: deque[Any] = deque(maxlen=max(1, self.sync_queue_size))
-        self._odom: deque[Any] = deque(maxlen=max(10, 4 * self.sync_queue_size))
-        self._rgb_info: deque[Any] = deque(maxlen=5)
-        self._depth_info: deque[Any] = deque(maxlen=5)
-        self._pending: deque[tuple[int, Any, Any | None]] = deque(maxlen=max(1, self.sync_queue_size))
-        self._last_set_ns: int | None = None
+        #: every input colour frame's place (set it to a `FrameTrack` to record: replays)
+        self.frame_track: FrameTrack | None = None
+        #: base → colour optical frame of the last processed image
+        self.camera_transform: np.ndarray | None = None
         self._last_processed_ns: int | None = None
-        self._static: dict[tuple[str, str], np.ndarray] = {}
         self._map_dirty = True
         self._odom_reset_pending = False
 
@@ -183,17 +165,7 @@ class RtabmapNode(Node):
 
         self.tf_buffer = Buffer(10.0, node=self)
         self.tf_listener = TransformListener(self.tf_buffer, self)
-        self.tf_broadcaster = TransformBroadcaster(self)
-        self.map_pub = self.create_publisher(OccupancyGrid, self.map_topic, qos_profile_latched)
-        self.graph_pub = self.create_publisher(MapGraph, "~/mapGraph", qos_profile_latched)
-        self.map_data_pub = self.create_publisher(MapData, "~/mapData", qos_profile_latched)
-        self.info_pub = self.create_publisher(Info, "~/info", 10)
-        self.localization_pose_pub = self.create_publisher(
-            PoseWithCovarianceStamped, "~/localization_pose", 10)
-        self.markers_pub = self.create_publisher(MarkerArray, "~/graph_markers",
-                                                 qos_profile_latched)
-        self._published_nodes: set[int] = set()
-        self.cloud_pub = self.create_publisher(PointCloud2, "~/cloud_map", qos_profile_latched)
+        self._create_outputs(self.map_topic)
         sensor = qos_profile_sensor_data
         self.create_subscription(Image, rgb_topic, self._on_rgb, sensor)
         self.create_subscription(CameraInfo, rgb_info_topic, self._rgb_info.append, sensor)
@@ -305,158 +277,32 @@ class RtabmapNode(Node):
         self._close_db()
         super().destroy_node()
 
-    # -- warnings --------------------------------------------------------------------------
-    def _warn_once(self, kind: str, text: str) -> None:
-        if kind not in self._warned:
-            self._warned.add(kind)
-            self.get_logger().warning(f"{text} (further '{kind}' warnings suppressed)")
-
-    # -- synchronisation -------------------------------------------------------------------
-    @property
-    def _odom_offset_ns(self) -> int:
-        return round(self.odom_stamp_offset * _SEC)
-
-    @property
-    def _tolerance_ns(self) -> int:
-        return round(self.approx_sync_max_interval * _SEC) if self.approx_sync else 0
-
-    def _on_rgb(self, msg: Any) -> None:
-        if self.paused:
-            return
-        self._rgb.append(msg)
-        self._sync()
-
-    def _on_depth(self, msg: Any) -> None:
-        if self.paused:
-            return
-        self._depth.append(msg)
-        self._sync()
-
-    def _on_scan(self, msg: Any) -> None:
-        self._scans.append(msg)
-
-    def _sync(self) -> None:
-        tol = self._tolerance_ns
-        rate = self.core.params.rtabmap_detection_rate
-        period = round(_SEC / rate) if rate > 0 else 0
-        while self._rgb:
-            img = self._rgb[0]
-            t = stamp_to_ns(img.header.stamp)
-            depth = None
-            if self.subscribe_depth:
-                if not self._depth:
-                    return
-                best = min(self._depth, key=lambda d: abs(stamp_to_ns(d.header.stamp) - t))
-                if abs(stamp_to_ns(best.header.stamp) - t) > tol:
-                    if stamp_to_ns(self._depth[-1].header.stamp) > t + tol:
-                        self._rgb.popleft()
-                        self._warn_once("no_depth", "an image has no depth image within "
-                                        f"{tol / 1e9:.3f} s of its stamp: skipped")
-                        continue
-                    return  # its depth may still come
-                depth = best
-                while self._depth and stamp_to_ns(self._depth[0].header.stamp) <= stamp_to_ns(
-                        best.header.stamp):
-                    self._depth.popleft()
-            self._rgb.popleft()
-            if self._last_set_ns is not None and t < self._last_set_ns:
-                self._warn_once("time_backwards",
-                                "image time went backwards (bag restarted?): skipped")
-                continue
-            # Rtabmap/DetectionRate: drop sets closer than 1/rate to the last kept one
-            if self._last_set_ns is not None and period and t - self._last_set_ns < period * 0.999:
-                continue
-            self._last_set_ns = t
-            self._pending.append((t, img, depth))
-
-    def _drain(self) -> None:
-        now = self.get_clock().now_ns()
-        wait = round(self.wait_for_transform * _SEC)
-        while self._pending:
-            t, img, depth = self._pending[0]
-            ready = self.tf_buffer.can_transform(self.odom_frame_id, self.frame_id,
-                                                 t + self._odom_offset_ns)
-            scan = self._match_scan(t) if self.subscribe_scan else None
-            if not ready or (self.subscribe_scan and scan is None):
-                if now - t <= wait:
-                    return  # wait for newer odometry (or the scan)
-                if not ready:
-                    self._pending.popleft()
-                    self._warn_once("no_odom_tf",
-                                    f"no transform {self.odom_frame_id} → {self.frame_id} at an "
-                                    f"image's time within {self.wait_for_transform} s: frame dropped")
-                    continue
-                self._warn_once("no_scan", "no scan near an image's time: processed without it")
-            self._pending.popleft()
-            try:
-                self._process(t, img, depth, scan)
-            except Exception as exc:  # one bad frame must not stop the node
-                self._warn_once(f"error_{type(exc).__name__}", f"frame skipped: {exc}")
-
-    def _match_scan(self, t: int) -> Any | None:
-        if not self._scans:
-            return None
-        best = min(self._scans, key=lambda s: abs(stamp_to_ns(s.header.stamp) - t))
-        if abs(stamp_to_ns(best.header.stamp) - t) <= max(self._tolerance_ns, 1):
-            return best
-        return None
-
     # -- processing ------------------------------------------------------------------------
-    def _static_tf(self, target: str, source: str) -> np.ndarray | None:
-        key = (target, source)
-        if key not in self._static:
-            try:
-                self._static[key] = _tf_matrix(self.tf_buffer.lookup_transform(target, source, 0))
-            except Exception as exc:
-                self._warn_once(f"no_tf_{source}", f"no transform {target} → {source}: {exc}")
-                return None
-        return self._static[key]
-
-    def _info_for(self, infos: deque[Any], t: int, frame: str) -> Any | None:
-        cands = [i for i in infos if not frame or i.header.frame_id == frame] or list(infos)
-        if not cands:
-            return None
-        return min(cands, key=lambda i: abs(stamp_to_ns(i.header.stamp) - t))
-
-    def _odometry_state(self, t: int) -> str:
-        """What the /odom message nearest `t` says: ``lost`` (null pose, as rtabmap_odom
-        publishes it), ``reset`` (a pose with covariance 9999: re-initialised, the next node
-        starts a new map) or ``ok``."""
-        if not self._odom:
-            return "ok"
-        msg = min(self._odom, key=lambda m: abs(stamp_to_ns(m.header.stamp) - t))
-        if abs(stamp_to_ns(msg.header.stamp) - t) > _SEC // 2:
-            return "ok"
-        q = msg.pose.pose.orientation
-        cov = np.asarray(msg.pose.covariance, dtype=np.float64)
-        if q.x == 0.0 and q.y == 0.0 and q.z == 0.0 and q.w == 0.0:
-            return "lost"
-        return "reset" if cov.size and cov[0] >= 9999.0 else "ok"
-
-    def _process(self, t: int, img: Any, depth_msg: Any | None, scan_msg: Any | None) -> None:
+    def _process(self, t: int, img: Any, depth_msg: Any | None, scan_msg: Any | None) -> bool:
+        """Process one set; False when it was skipped (bad input, no odometry)."""
         from eddiebot.perception.errors import ImageSizeError, UnsupportedEncodingError
 
         if self._last_processed_ns is not None:
             if t <= self._last_processed_ns:
                 self._warn_once("time_backwards",
                                 "image time went backwards (bag restarted?): skipped")
-                return
+                return False
             gap = (t - self._last_processed_ns) / _SEC
             if gap > 30.0:
                 self._warn_once("time_jump", f"time jumped {gap:.1f} s forward")
         rgb_info = self._info_for(self._rgb_info, t, img.header.frame_id)
         if rgb_info is None:
             self._warn_once("no_camera_info", "an image arrived without camera_info: skipped")
-            return
+            return False
         try:
             rgb = _image_array(img, _RGB_ENCODINGS)
         except (UnsupportedEncodingError, ImageSizeError) as exc:
             self._warn_once("bad_rgb", f"RGB image skipped: {exc}")
-            return
+            return False
         if (int(img.width), int(img.height)) != (int(rgb_info.width), int(rgb_info.height)):
             self._warn_once("size_mismatch", f"RGB image {img.width}x{img.height} does not match "
                             f"camera_info {rgb_info.width}x{rgb_info.height}: skipped")
-            return
+            return False
         if rgb.ndim == 2:
             rgb = np.repeat(rgb[:, :, None], 3, axis=2)
         elif img.encoding == "bgr8":
@@ -464,20 +310,20 @@ class RtabmapNode(Node):
         rgb_frame = str(rgb_info.header.frame_id or img.header.frame_id)
         if depth_msg is None:
             self._warn_once("no_depth", "no depth image (subscribe_depth false): skipped")
-            return
+            return False
         depth = self._depth_array(depth_msg, rgb_info, rgb_frame, t)
         if depth is None:
-            return
+            return False
         if depth.shape[:2] != rgb.shape[:2]:
             fy, fx = rgb.shape[0] / depth.shape[0], rgb.shape[1] / depth.shape[1]
             if fx != fy or fx < 1 or fx != int(fx):
                 self._warn_once("size_mismatch", f"depth {depth.shape[1]}x{depth.shape[0]} and "
                                 f"RGB {rgb.shape[1]}x{rgb.shape[0]} differ: skipped")
-                return
+                return False
             depth = np.repeat(np.repeat(depth, int(fx), axis=0), int(fx), axis=1)
         cam_pose = self._static_tf(self.frame_id, rgb_frame)
         if cam_pose is None:
-            return
+            return False
         camera = CameraIntrinsics.from_k(rgb_info.k, int(rgb_info.width), int(rgb_info.height),
                                          cam_pose)
         odom_state = self._odometry_state(t)
@@ -486,13 +332,13 @@ class RtabmapNode(Node):
             self._odom_reset_pending = True
             self._warn_once("odom_lost", "odometry is lost at an image's time: skipped; a new "
                             "map starts when it is back")
-            return
+            return False
         try:
-            odom = _tf_matrix(self.tf_buffer.lookup_transform(
+            odom = tf_matrix(self.tf_buffer.lookup_transform(
                 self.odom_frame_id, self.frame_id, t + self._odom_offset_ns))
         except Exception as exc:
             self._warn_once("no_odom_tf", f"no odometry at an image's time: {exc}")
-            return
+            return False
         scan = self._scan(scan_msg) if scan_msg is not None else None
         lin, ang = self.odom_tf_linear_variance, self.odom_tf_angular_variance
         cov = np.diag([lin, lin, lin, ang, ang, ang])
@@ -500,6 +346,9 @@ class RtabmapNode(Node):
             cov = np.diag([9999.0] * 6)
             self._odom_reset_pending = False
         result = self.core.process(rgb, depth, camera, odom, t, scan, odom_covariance=cov)
+        self.camera_transform = cam_pose
+        if self.frame_track is not None:
+            self.frame_track.tracked(t / _SEC, result, self._core_odometry(odom))
         self._last_processed_ns = t
         self.frames_processed += 1
         self.last_result = result
@@ -508,7 +357,7 @@ class RtabmapNode(Node):
             self._publish_localization_pose(result.pose, t)
         if result.pose is None:
             self._warn_once("rejected", f"frame rejected: {result.rejection_reason}")
-            return
+            return True
         if result.new_map:
             self.get_logger().info(f"odometry reset: map {result.map_id} started (its own "
                                    "frame until a loop closure merges it)")
@@ -523,6 +372,7 @@ class RtabmapNode(Node):
             self._map_dirty = True
             self.get_logger().info(
                 f"loop closure {result.node_id} → {result.loop_closure_id or result.proximity_id}")
+        return True
 
     def _depth_array(self, depth_msg: Any, rgb_info: Any, rgb_frame: str, t: int
                      ) -> np.ndarray | None:
@@ -555,86 +405,13 @@ class RtabmapNode(Node):
         return Scan2D(np.asarray(msg.ranges, dtype=np.float32), float(msg.angle_min),
                       float(msg.angle_increment), float(msg.range_min), float(msg.range_max), lt)
 
-    # -- outputs ---------------------------------------------------------------------------
-    def _publish_tf(self) -> None:
-        m = self.core.map_to_odom
-        q = matrix_to_quaternion(m[:3, :3])
-        stamp = self.get_clock().now_ns() + round(self.tf_tolerance * _SEC)
-        self.tf_broadcaster.sendTransform(make_transform(
-            self.map_frame_id, self.odom_frame_id, stamp, float(m[0, 3]), float(m[1, 3]),
-            float(m[2, 3]), *(float(v) for v in q)))
-
-    def _publish_map(self, force: bool = False) -> None:
-        if not (self._map_dirty or force) and self.map_pub.sequence > 0:
-            return
-        grid = self.core.occupancy_grid()
-        if grid is None:
-            return
-        msg = map_to_msg(grid.to_occupancy_map(self.map_frame_id), frame_id=self.map_frame_id,
-                         stamp_ns=self.get_clock().now_ns())
-        self.map_pub.publish(msg)
-        self._map_dirty = False
-        self._publish_graph()
-
-    def _publish_info(self, result: ProcessResult, t: int) -> None:
-        header = Header(stamp=ns_to_stamp(t), frame_id=self.map_frame_id)
-        core = self.core
-        loop_tf = None
-        partner = result.loop_closure_id
-        if partner and result.node_id:
-            link = core.memory.links.get(result.node_id, {}).get(partner)
-            loop_tf = None if link is None else link.transform
-        weights = {i: n.weight for i, n in core.memory.nodes.items()}
-        self.info_pub.publish(info_message(
-            header, result, [*core.memory.wm, *core.memory.stm], core.bayes.posterior_arrays(),
-            weights, loop_tf))
-
-    def _publish_localization_pose(self, pose: np.ndarray, t: int) -> None:
-        """rtabmap's ``localization_pose``: the base in the map frame, covariance 9999 until
-        localized, then the last accepted localization's."""
-        from eddiebot.vslam.ros_messages import pose_message
-
-        msg = PoseWithCovarianceStamped()
-        msg.header = Header(stamp=ns_to_stamp(t), frame_id=self.map_frame_id)
-        msg.pose.pose = pose_message(pose)
-        cov = self.core.localization_covariance
-        if not self.core.localized or cov is None:
-            cov = np.diag([9999.0] * 6)
-        msg.pose.covariance = np.asarray(cov, np.float64).reshape(36).copy()
-        self.localization_pose_pub.publish(msg)
-
-    def _publish_graph(self) -> None:
-        all_poses, links = self.core.graph()
-        frames = self.core.map_frames()
-        current = frames.get(self.core.current_frame, [])
-        poses = {i: all_poses[i] for i in current}
-        header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.map_frame_id)
-        graph = graph_message(header, self.core.map_to_odom, poses, links)
-        self.graph_pub.publish(graph)
-        fresh = [n for i, n in sorted(self.core.memory.nodes.items())
-                 if i in poses and i not in self._published_nodes]
-        self.map_data_pub.publish(map_data_message(header, graph, fresh))
-        self._published_nodes.update(n.id for n in fresh)
-        out: list[Marker] = []
-        for frame, ids in frames.items():
-            # a map not merged yet is drawn in its own frame, map_<id> (no TF joins it)
-            name = (self.map_frame_id if frame == self.core.current_frame
-                    else f"{self.map_frame_id}_{frame}")
-            out += graph_markers({i: all_poses[i] for i in ids}, links, name, len(out))
-        self.markers_pub.publish(MarkerArray(markers=out))
-
-    def cloud_message(self) -> Any:
-        """The assembled cloud (map frame) as PointCloud2 with x, y, z and packed rgb."""
-        xyz, colors = self.core.point_cloud(self.cloud_voxel_size)
-        header = Header(stamp=self.get_clock().now().to_msg(), frame_id=self.map_frame_id)
-        return cloud_message(xyz, colors, header)
-
     # -- services --------------------------------------------------------------------------
     def _srv_reset(self, req: Any, res: Any) -> Any:
         self._close_db()
         self.core = self._make_core(True)
         self._published_nodes.clear()
         self._pending.clear()
+        self._unprocessed.clear()
         self._last_set_ns = self._last_processed_ns = None
         self._map_dirty = True
         self.get_logger().info("map reset (memory and database emptied)")

@@ -14,10 +14,11 @@ from numpy.typing import NDArray
 from eddiebot.vslam.camera import CameraIntrinsics, check_depth_plausible
 from eddiebot.vslam.database import SessionDatabase
 from eddiebot.vslam.errors import TumFormatError
+from eddiebot.vslam.frame_track import FrameTrack
 from eddiebot.vslam.odometry import VisualOdometry
 from eddiebot.vslam.parameters import RtabmapParameters
 from eddiebot.vslam.rtabmap import Rtabmap
-from eddiebot.vslam.transforms import se3_inverse, to_3dof
+from eddiebot.vslam.transforms import to_3dof
 from eddiebot.vslam.tum import (
     TUM_CALIBRATIONS,
     TUM_DEPTH_SCALE,
@@ -146,14 +147,8 @@ def replay_tum(
     vo = VisualOdometry(params)
     odom_stamps: list[float] = []
     odom_poses: list[F64] = []
-    node_stamps: dict[int, float] = {}
-    # per input frame: (its key frame, odometry of the frame as the core sees it); None = lost
-    # before any key frame
-    frame_keys: list[tuple[int, F64] | None] = []
-    key_odom: dict[int, F64] = {}
-    key_order: list[int] = []
-    lost = loops = proximity = rejected = resets = merges = 0
-    lost_run = 0
+    track = FrameTrack()
+    resets = lost_run = 0
     reset_after = params.odom_reset_countdown if params.odom_reset_countdown > 0 else 2
     odom_ms: list[float] = []
     slam_ms: list[float] = []
@@ -164,7 +159,7 @@ def replay_tum(
             stamp_ns = round(frame.stamp * 1e9)
             t0 = time.perf_counter()
             odom = vo.process(rgb, depth, camera, stamp_ns)
-            if odom.pose is None and frame_keys and frame_keys[-1] is not None:
+            if odom.pose is None and track.has_key_frame:
                 lost_run += 1
                 if lost_run >= reset_after:
                     # re-seed the odometry from this frame, where it was: a new map starts
@@ -173,8 +168,7 @@ def replay_tum(
                     resets += odom.pose is not None
             odom_ms.append((time.perf_counter() - t0) * 1e3)
             if odom.pose is None:
-                lost += 1
-                frame_keys.append(frame_keys[-1] if frame_keys else None)
+                track.lost_frame(frame.stamp)
                 continue
             lost_run = 0
             odom_stamps.append(frame.stamp)
@@ -185,26 +179,16 @@ def replay_tum(
                                   features=odom.frame_features)
             slam_ms.append((time.perf_counter() - t0) * 1e3)
             core_odom = to_3dof(odom.pose) if params.reg_force_3dof else np.asarray(odom.pose)
-            if result.added:
-                node_stamps[result.node_id] = frame.stamp
-                key_odom[result.node_id] = core_odom
-                key_order.append(result.node_id)
-            frame_keys.append((key_order[-1], core_odom) if key_order else None)
-            loops += bool(result.loop_closure_id)
-            proximity += bool(result.proximity_id)
-            rejected += bool(result.rejected_loop_id)
-            merges += bool(result.maps_merged)
+            track.tracked(frame.stamp, result, core_odom)
         poses, _ = slam.graph()
         db.save_optimized(poses, slam.occupancy_grid())
         db.save_weights({i: n.weight for i, n in slam.memory.nodes.items()})
         words = db.word_count()
         in_ram = [n.data.nbytes for n in slam.memory.nodes.values() if n.data is not None]
         node_kb = float(np.mean(in_ram)) / 1e3 if in_ram else 0.0
-    ids = sorted(i for i in poses if i in node_stamps)
-    key_stamps = [node_stamps[i] for i in ids]
-    key_poses = [poses[i] @ lt for i in ids]
-    frame_stamps, frame_poses = _every_frame_poses(
-        [f.stamp for f in frames], frame_keys, key_order, key_odom, poses)
+    key_stamps, key_poses = track.keyframe_poses(poses)
+    key_poses = [p @ lt for p in key_poses]
+    frame_stamps, frame_poses = track.frame_poses(poses)
     frame_poses = [p @ lt for p in frame_poses]
     write_tum_trajectory(out / "odom.txt", odom_stamps, odom_poses)
     write_tum_trajectory(out / "poses.txt", frame_stamps, frame_poses)
@@ -218,41 +202,18 @@ def replay_tum(
             np.array(frame_stamps), np.array(frame_poses), *gt)
         key_ate, _ = absolute_trajectory_error(np.array(key_stamps), np.array(key_poses), *gt)
     report = ReplayReport(
-        len(frames), len(ids), lost, loops, odom_ate, slam_ate,
+        len(frames), len(key_stamps), track.lost, track.loop_closures, odom_ate, slam_ate,
         float(np.median(odom_ms)) if odom_ms else float("nan"),
         float(np.median(slam_ms)) if slam_ms else float("nan"),
-        proximity_links=proximity, rejected_hypotheses=rejected, keyframe_ate_m=key_ate,
+        proximity_links=track.proximity_links,
+        rejected_hypotheses=track.rejected_hypotheses, keyframe_ate_m=key_ate,
         ate_frames=ate_pairs,
         intrinsics=(camera.fx, camera.fy, camera.cx, camera.cy, camera.width, camera.height),
         intrinsics_source=setup.intrinsics_source, depth_scale=scale,
         depth_scale_source=setup.depth_scale_source, odometry_resets=resets,
-        map_merges=merges, maps=max(1, len(slam.map_frames())), words=words,
+        map_merges=track.map_merges, maps=max(1, len(slam.map_frames())), words=words,
         node_kb=node_kb,
     )
     (out / "report.json").write_text(json.dumps(asdict(report), indent=2))
     return report
 
-
-def _every_frame_poses(
-    stamps: list[float], frame_keys: list[tuple[int, F64] | None], key_order: list[int],
-    key_odom: Mapping[int, F64], optimized: Mapping[int, F64],
-) -> tuple[list[float], list[F64]]:
-    """Map-frame base pose of every input frame: the optimised pose of its key frame (or of
-    the latest earlier key frame still in the graph, when the core merged it away) composed
-    with the odometry between the two. Frames before the first key frame have none."""
-    rank = {k: n for n, k in enumerate(key_order)}
-    out_stamps: list[float] = []
-    out_poses: list[F64] = []
-    for stamp, entry in zip(stamps, frame_keys):
-        if entry is None:
-            continue
-        key, odom = entry
-        n = rank[key]
-        while n >= 0 and key_order[n] not in optimized:
-            n -= 1
-        if n < 0:
-            continue
-        anchor = key_order[n]
-        out_stamps.append(stamp)
-        out_poses.append(optimized[anchor] @ se3_inverse(key_odom[anchor]) @ odom)
-    return out_stamps, out_poses
