@@ -55,8 +55,10 @@ def test_a_bag_replay_writes_a_pose_for_every_colour_frame(tmp_path):
     assert report["lost_frames"] == 1
     assert report["frames_processed"] == 3  # frames 0, 5 and 10
     assert report["nodes"] == 3
-    for key in ("loop_closures", "proximity_links", "rejected_hypotheses", "map_merges"):
+    for key in ("loop_closures", "proximity_links", "rejected_hypotheses", "map_merges",
+                "odometry_resets"):
         assert report[key] == 0
+    assert report["maps"] == 1
     assert json.loads((out / "report.json").read_text())["poses"] == FRAMES
     stamps, poses = read_tum_trajectory(out / "poses.txt")
     assert len(stamps) == FRAMES
