@@ -147,6 +147,22 @@ def test_encoder_noise_and_seeding():
         step(RobotState(), wheels, 0.1, EMPTY, p)
 
 
+def test_a_yielding_person_steps_out_of_the_way_the_robot_is_heading():
+    # the person walks east along y = 0; the robot stands just north-east of their path,
+    # facing north into a doorway: stepping "away from the robot" would be south, but a
+    # robot facing south (towards the person's path) makes them step north, out of its way
+    world = parse_world({"start": {"x": 0, "y": 0},
+                         "people": [{"path": [[0, 0], [10, 0]], "speed": 1.0, "loop": False}]})
+    for theta, north in ((math.pi / 2, False), (-math.pi / 2, True)):
+        ps = init_people(world)
+        robot = RobotState(x=1.2, y=0.05, theta=theta)
+        for _ in range(20):
+            ps = step_people(world, ps, robot, 0.1)
+        y = people_positions(world, ps)[0, 1]
+        assert ps.waiting[0]
+        assert (y > 0.3) if north else (y < -0.3), (theta, y)
+
+
 def test_person_walks_and_yields():
     world = parse_world({"start": {"x": 0, "y": 0},
                          "people": [{"path": [[0, 5], [10, 5]], "speed": 1.0, "loop": False}]})

@@ -327,14 +327,18 @@ def people_positions(world: World, state: PeopleState) -> npt.NDArray[np.float64
 #: how far a person steps aside to let the robot pass (m), and how fast (m/s)
 STEP_ASIDE_M = 0.7
 STEP_ASIDE_SPEED = 0.4
+#: a yielding person steps away from the point this far ahead of the robot (m): out of the
+#: way it is heading (a doorway it turns into), not only away from where it stands
+YIELD_LOOKAHEAD_M = 0.6
 
 
 def step_people(world: World, state: PeopleState, robot: RobotState, dt: float,
                 margin: float = 0.15, robot_radius: float = ROBOT_RADIUS) -> PeopleState:
     """Walk everyone ``dt`` seconds along their paths. A person whose next position would
-    come within ``margin`` of the robot waits (yields) and steps aside, away from the robot,
-    by up to ``STEP_ASIDE_M``; once clear they drift back onto their path. (People walk
-    through walls: their paths and side-steps must have room.)"""
+    come within ``margin`` of the robot waits (yields) and steps aside, away from where the
+    robot is heading (the point ``YIELD_LOOKAHEAD_M`` ahead of it), by up to
+    ``STEP_ASIDE_M``; once clear they drift back onto their path. (People walk through
+    walls: their paths and side-steps must have room.)"""
     s_out, d_out, w_out, o_out = [], [], [], []
     offsets = state.offset or (0.0,) * len(world.people)
     for i, p in enumerate(world.people):
@@ -350,10 +354,12 @@ def step_people(world: World, state: PeopleState, robot: RobotState, dt: float,
         now_x, now_y = _pos(p, s, off, d)
         now_clear = math.hypot(now_x - robot.x, now_y - robot.y) - p.radius - robot_radius
         if clear < margin and clear < now_clear:
-            # blocked: wait, and step aside, away from the robot
+            # blocked: wait, and step aside, out of the robot's way
             _, _, ux, uy = _pos_dir(p, s)
             left = (-d * uy, d * ux)
-            side = 1.0 if (now_x - robot.x) * left[0] + (now_y - robot.y) * left[1] >= 0 else -1.0
+            hx = robot.x + YIELD_LOOKAHEAD_M * math.cos(robot.theta)
+            hy = robot.y + YIELD_LOOKAHEAD_M * math.sin(robot.theta)
+            side = 1.0 if (now_x - hx) * left[0] + (now_y - hy) * left[1] >= 0 else -1.0
             if off != 0.0:
                 side = math.copysign(1.0, off)
             off = side * min(STEP_ASIDE_M, abs(off) + STEP_ASIDE_SPEED * dt)
