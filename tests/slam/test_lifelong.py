@@ -260,3 +260,24 @@ def test_second_pass_does_not_double_the_graph(tmp_path, use_tree: bool) -> None
     kept = [life.lifelong_scores.get(k, 1.0) for k in live]
     assert min(kept) < 1.0
     assert [again.lifelong_scores.get(k, 1.0) for k in range(len(live))] == pytest.approx(kept)
+
+
+def test_a_loaded_session_keeps_its_rejected_loops_out(tmp_path) -> None:
+    """Map, save, load (the start of every lifelong run): a loop the gate rejected stays out,
+    and the map comes back where it was saved."""
+    truth = loop_path()
+    odom = drifting_odometry(truth)
+    core = SlamCore(CONFIG)
+    for k, (p, o) in enumerate(zip(truth, odom)):
+        core.process(_scan(p, k * 100_000_000), o)
+    n = len(core.nodes)
+    # a false loop: the last node 3 m and 90° away from where node 5 says it is
+    core.graph.add_edge(5, n - 1, np.array([3.0, 0.0, 1.57]), np.diag([1e-3, 1e-3, 1e-4]),
+                        kind=EdgeKind.LOOP, robust=True)
+    core.graph.optimize(full=True)
+    false = len(core.graph.edges) - 1
+    assert false in core.graph.rejected + core.graph.held
+    saved = core.node_poses()
+    again = load_session(save_session(core, tmp_path / "room.eslam"), mode="lifelong")
+    assert false in again.graph.rejected
+    assert np.abs(again.node_poses() - saved).max() < 0.01

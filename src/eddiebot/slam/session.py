@@ -9,6 +9,8 @@ Format (``.eslam``, version 1): a ZIP archive holding
   ``beam_offsets`` (N+1,) int64 into the concatenated ``ranges`` / ``angles`` (float64);
   ``edge_ij`` (E, 2) int64; ``edge_measurement`` (E, 3); ``edge_covariance`` (E, 3, 3);
   ``edge_kind`` (E,) int8 (0 odometry, 1 scan match, 2 loop); ``edge_robust`` (E,) bool;
+  ``edge_rejected`` (E,) bool, the edges the estimate was solved without (rejected or held
+  by the loop gate; optional: without it every loop is gated again on loading);
   ``lifelong_scores`` (N,) the nodes' lifelong scores, kept between sessions as slam_toolbox
   keeps its vertex scores (optional: 1 when absent).
 
@@ -56,10 +58,11 @@ def save_session(core: SlamCore, path: str | os.PathLike[str]) -> Path:
     nodes = [core.nodes[k] for k in keep]
     poses = poses[keep]
     dropped = set(core.graph.removed_edges)
+    out = set(core.graph.rejected) | set(core.graph.held)
+    live_edges = [k for k in range(len(core.graph.edges)) if k not in dropped]
     edges = [
         dataclasses.replace(e, i=new_id[e.i], j=new_id[e.j])
-        for k, e in enumerate(core.graph.edges)
-        if k not in dropped
+        for e in (core.graph.edges[k] for k in live_edges)
     ]
     lengths = np.array([n.scan.ranges.size for n in nodes], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64)
@@ -79,6 +82,7 @@ def save_session(core: SlamCore, path: str | os.PathLike[str]) -> Path:
         "edge_kind": np.array([_KINDS.index(e.kind) for e in edges], dtype=np.int8),
         "edge_robust": np.array([e.robust for e in edges], dtype=bool),
         "lifelong_scores": np.array([core.lifelong_scores.get(k, 1.0) for k in keep]),
+        "edge_rejected": np.array([k in out for k in live_edges], dtype=bool),
     }
     params = {k: v for k, v in core.config.to_parameters().items() if _jsonable(v)}
     header = {
@@ -182,6 +186,9 @@ def load_session(
                 f"{src}: scan arrays hold {arr['ranges'].shape} beams, expected {total}"
             )
         scores = arr.get("lifelong_scores", np.ones(n))  # absent before lifelong scores
+        flags = arr.get("edge_rejected")  # absent in older files: every loop is gated again
+        if flags is not None and flags.shape != (e,):
+            raise SessionError(f"{src}: array 'edge_rejected' has shape {flags.shape}, expected {(e,)}")
         if scores.shape != (n,):
             raise SessionError(
                 f"{src}: array 'lifelong_scores' has shape {scores.shape}, expected {(n,)}"
@@ -233,6 +240,7 @@ def load_session(
         )
         for q in range(e)
     ]
-    core._restore(nodes, arr["poses"], edges)
+    rejected = None if flags is None else np.flatnonzero(flags).tolist()
+    core._restore(nodes, arr["poses"], edges, rejected)
     core.lifelong_scores = {k: float(v) for k, v in enumerate(scores.tolist()) if v != 1.0}
     return core

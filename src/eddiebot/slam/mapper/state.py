@@ -324,8 +324,10 @@ class MapperState:
         nodes: list[NodeRecord],
         poses: FloatArray,
         edges: list[tuple[int, int, FloatArray, FloatArray, EdgeKind, bool]],
+        rejected: list[int] | None = None,
     ) -> None:
-        """Install a loaded graph (used by `eddiebot.slam.session`)."""
+        """Install a loaded graph (used by `eddiebot.slam.session`); ``rejected``: the edges
+        the stored estimate was solved without (None: gate every robust edge again)."""
         self.clear()
         self.nodes = nodes
         for p in poses:
@@ -333,7 +335,7 @@ class MapperState:
         for i, j, z, cov, kind, robust in edges:
             self.graph.add_edge(i, j, z, cov, kind=kind, robust=robust)
         # the stored estimate is kept as is; iSAM2 takes the whole graph at the next update
-        self.graph.set_poses(poses)
+        self.graph.set_poses(poses, rejected=rejected)
         if nodes:
             self._scan_shape_error(nodes[0].scan)  # later scans must have the session's beams
         if nodes and self.mode in ("mapping", "lifelong"):

@@ -481,8 +481,15 @@ class PoseGraph(GatedPoseGraph):
         self._info_cache.pop(k, None)
         self._dormant.get(self._last_end(k), set()).discard(k)
 
-    def set_poses(self, poses: npt.ArrayLike) -> None:
-        """Replace every estimate (e.g. after loading a session) and restart iSAM2 from them."""
+    def set_poses(self, poses: npt.ArrayLike, *, rejected: Iterable[int] | None = None) -> None:
+        """Replace every estimate (e.g. after loading a session) and restart iSAM2 from them.
+
+        Without ``rejected`` every robust edge goes through the gate again at the next update.
+        With it (indices into `edges`: the edges the estimate was solved without), those stay
+        rejected, the other robust edges stay accepted, and iSAM2 restarts from the estimate
+        at once with the accepted edges: gating them all again would test each loop against an
+        estimate of the graph without any loop, whose wide marginals let false loops in.
+        """
         arr = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         if arr.shape[0] != self._n:
             raise ValueError(f"{arr.shape[0]} poses for {self._n} nodes")
@@ -496,4 +503,18 @@ class PoseGraph(GatedPoseGraph):
         self._due = set()
         self._tested = {}
         self._solved = True
-        self._reset_isam()
+        if rejected is None:
+            self._reset_isam()
+            return
+        out = {int(k) for k in rejected}
+        for k, e in enumerate(self._edges):
+            if k in self._dropped:
+                continue
+            if k in out:
+                self._reject(k)
+            elif e.robust or e.kind is EdgeKind.LOOP:
+                self._closures.setdefault(max(e.i, e.j), []).append(min(e.i, e.j))
+        if self.optimizer == "isam2":
+            self._restart_isam()
+        else:
+            self._pending_nodes, self._pending_edges = [], []
