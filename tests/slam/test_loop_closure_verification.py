@@ -109,7 +109,7 @@ def _thin_reference(points: np.ndarray, cell: float) -> np.ndarray:
 
 
 def test_thin_memo_returns_the_thinning_of_the_points_given() -> None:
-    from eddiebot.slam.scan_matcher import _thin
+    from eddiebot.slam.scan_matcher.lookup import _thin
 
     rng = np.random.default_rng(43)
     pts = rng.uniform(-3.0, 3.0, (300, 2))
@@ -132,7 +132,7 @@ def test_thin_memo_returns_the_thinning_of_the_points_given() -> None:
 
 
 def test_smear_kernel_is_shared_read_only() -> None:
-    from eddiebot.slam.scan_matcher import _smear_kernel
+    from eddiebot.slam.scan_matcher.grid import _smear_kernel
 
     k = _smear_kernel(0.01, 0.1)
     assert _smear_kernel(0.01, 0.1) is k and not k.flags.writeable

@@ -139,7 +139,7 @@ def test_icp_covariance_none_without_pairs() -> None:
 
 
 def test_solve3_matches_linalg() -> None:
-    from eddiebot.slam.scan_matcher import _solve3
+    from eddiebot.slam.scan_matcher.subcell import _solve3
 
     rng = np.random.default_rng(3)
     for _ in range(20):
@@ -174,17 +174,33 @@ def test_fine_search_climb_follows_heading_translation_coupling() -> None:
     assert errors[8] < 0.01
 
 
+def _numpy_normals(points: np.ndarray, nn: np.ndarray) -> np.ndarray:
+    """Normals by numpy: each neighbourhood's scatter matrix through ``np.linalg.eigh``."""
+    nb = points[nn]
+    centred = nb - nb.mean(axis=1, keepdims=True)
+    vals, vecs = np.linalg.eigh(np.einsum("mki,mkj->mij", centred, centred))
+    normals = vecs[:, :, 0].copy()
+    normals[~(vals[:, 0] < 0.1 * vals[:, 1] + 1e-12)] = np.nan
+    return normals
+
+
+def _assert_same_normals(got: np.ndarray, want: np.ndarray) -> None:
+    """Equal up to each normal's sign (a line's normal has no preferred side), NaN alike."""
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+    ok = np.isfinite(want[:, 0])
+    sign = np.sign(np.sum(got[ok] * want[ok], axis=1))[:, None]
+    np.testing.assert_allclose(got[ok] * sign, want[ok], rtol=0, atol=1e-9)
+
+
 def _icp_oracle(
     points: np.ndarray, reference: np.ndarray, pose: np.ndarray, max_distance: float = 0.2
 ) -> tuple[np.ndarray, float, np.ndarray | None]:
     """Plain numpy / k-d tree point-to-line ICP (the compiled kernel must reproduce it)."""
     from scipy.spatial import cKDTree
 
-    from eddiebot.slam.scan_matcher import point_normals
-
     pose = pose.astype(np.float64).copy()
     tree = cKDTree(reference)
-    normals = point_normals(reference, tree)
+    normals = _numpy_normals(reference, tree.query(reference, k=6)[1])
     planar = np.isfinite(normals[:, 0])
     normals = np.where(planar[:, None], normals, 0.0)
     share, cov = 0.0, None
@@ -261,24 +277,59 @@ def _naive_block(
 
 
 def test_response_block_matches_candidate_major_sums() -> None:
-    # the compiled kernel reorders the loops and skips out-of-grid runs: the sums (and so
-    # every match) must stay the same bit for bit, also for points partly or wholly outside
-    from eddiebot.slam.scan_matcher import _response_block
+    # the compiled kernel reorders the loops, reads column phases and skips out-of-grid
+    # runs; every candidate still adds its points in scan order: the candidate-major sums,
+    # also for points partly or wholly outside the grid
+    from eddiebot.slam.scan_matcher.search import _planes, _response_block
 
     rng = np.random.default_rng(7)
     grid = rng.random((37, 53)).astype(np.float32)
-    for step, n in ((1, 9), (4, 7), (3, 5)):
+    for step, n in ((1, 9), (4, 7), (3, 5), (2, 11)):
         px = rng.integers(-30, 80, 40)
         py = rng.integers(-25, 60, 40)
         for x0, y0 in ((-12, -12), (0, 5), (-40, 30)):
-            got = _response_block(grid, px, py, x0, y0, n, step)
+            got = _response_block(_planes(grid, step), 53, px, py, x0, y0, n, step)
             np.testing.assert_array_equal(got, _naive_block(grid, px, py, x0, y0, n, step))
-    assert _response_block(grid, px[:0], py[:0], 0, 0, 3, 1).sum() == 0.0
+    assert _response_block(_planes(grid, 1), 53, px[:0], py[:0], 0, 0, 3, 1).sum() == 0.0
+    for _ in range(40):  # grids of every shape, steps 2-4
+        h, w = (int(v) for v in rng.integers(5, 90, 2))
+        grid = rng.random((h, w)).astype(np.float32)
+        step = int(rng.integers(2, 5))
+        n = int(rng.integers(1, 14))
+        px = rng.integers(-60, 150, 30)
+        py = rng.integers(-60, 150, 30)
+        x0, y0 = (int(v) for v in rng.integers(-40, 40, 2))
+        np.testing.assert_array_equal(
+            _response_block(_planes(grid, step), w, px, py, x0, y0, n, step),
+            _naive_block(grid, px, py, x0, y0, n, step),
+        )
+
+
+def _naive_profile(
+    grid: np.ndarray, px: np.ndarray, py: np.ndarray, dth: np.ndarray, window: int, step: int,
+    res: float, penalize: bool,
+) -> np.ndarray:
+    """Each heading's best (penalised) response over the window, every ``step`` cells."""
+    from eddiebot.slam.scan_matcher.branch_and_bound import _penalty
+
+    n = 2 * (window // step) + 1
+    x0 = -(window // step) * step
+    out = np.zeros(dth.size)
+    for a in range(dth.size):
+        block = _naive_block(grid, px[a], py[a], x0, x0, n, step)
+        for ix in range(n):
+            for iy in range(n):
+                v = block[ix, iy]
+                if penalize:
+                    v *= _penalty((x0 + step * ix) * res, (x0 + step * iy) * res, dth[a],
+                                  0.5, 1.0, 0.5, 0.9)
+                out[a] = max(out[a], v)
+    return out
 
 
 def test_coarse_pass_profile_is_the_heading_profile() -> None:
-    # the coarse pass's per-heading best replaces a second pass over the window
-    from eddiebot.slam.scan_matcher import _coarse_grid_search, _heading_profile
+    # the coarse pass's per-heading best is the heading variance's input
+    from eddiebot.slam.scan_matcher.search import _coarse_grid_search
 
     rng = np.random.default_rng(11)
     grid = rng.random((120, 140)).astype(np.float32)
@@ -289,7 +340,9 @@ def test_coarse_pass_profile_is_the_heading_profile() -> None:
         args = (grid, px, py, dth, 25, 4, 0.01, penalize, 0.5, 1.0, 0.5, 0.9)
         profile = np.zeros(dth.size)
         a, x, y, s = _coarse_grid_search(*args, profile)
-        np.testing.assert_array_equal(profile, _heading_profile(*args))
+        np.testing.assert_array_equal(
+            profile, _naive_profile(grid, px, py, dth, 25, 4, 0.01, penalize)
+        )
         assert s == profile.max() and profile[a] == s
         assert -25 <= x <= 25 and -25 <= y <= 25
 
@@ -297,7 +350,7 @@ def test_coarse_pass_profile_is_the_heading_profile() -> None:
 def test_normals_neighbour_sweep_matches_kd_tree() -> None:
     from scipy.spatial import cKDTree
 
-    from eddiebot.slam.scan_matcher import _nearest_sweep, point_normals
+    from eddiebot.slam.scan_matcher.normals import _nearest_sweep, point_normals
 
     rng = np.random.default_rng(5)
     angles = np.linspace(-0.5, 0.5, 300)
@@ -307,16 +360,17 @@ def test_normals_neighbour_sweep_matches_kd_tree() -> None:
     _, want = tree.query(pts, k=6)
     got = _nearest_sweep(pts, np.argsort(pts[:, 0], kind="stable").astype(np.int64), 6)
     np.testing.assert_array_equal(got, want)
-    # same neighbours in the same order: the same normals bit for bit as through a k-d tree
-    with_tree = point_normals(pts, tree)
-    np.testing.assert_array_equal(point_normals(pts), with_tree)
+    # same neighbours in the same order: numpy's PCA normals through a k-d tree
+    with_tree = _numpy_normals(pts, want)
+    _assert_same_normals(point_normals(pts), with_tree)
     planar = np.isfinite(with_tree[:, 0])
     assert planar[:300].mean() > 0.9 and planar[300:].mean() < 0.5
     assert np.isnan(point_normals(pts[:5])).all()
 
 
 def test_rotated_cells_match_numpy_formula() -> None:
-    from eddiebot.slam.scan_matcher import CorrelationGrid, _cells_for_angles
+    from eddiebot.slam.scan_matcher import CorrelationGrid
+    from eddiebot.slam.scan_matcher.lookup import _cells_for_angles
 
     rng = np.random.default_rng(2)
     pts = rng.uniform(-4.0, 4.0, (200, 2))
@@ -346,15 +400,12 @@ def _numpy_weighted_covariance(
     return cov + np.diag(floor)
 
 
-def test_weighted_covariance_kernel_matches_numpy_bit_for_bit() -> None:
-    # the covariance feeds the graph's edges: the compiled sums must be numpy's (pairwise for
-    # the weights and for one-dimensional coordinates, candidate order for (K, 2))
-    from eddiebot.slam.scan_matcher import _pairwise_sum, _weighted_covariance, _window_offsets
+def test_weighted_covariance_kernel_matches_numpy() -> None:
+    # the covariance feeds the graph's edges: numpy's expressions, to rounding
+    from eddiebot.slam.scan_matcher.covariance import _weighted_covariance
+    from eddiebot.slam.scan_matcher.lookup import _window_offsets
 
     rng = np.random.default_rng(13)
-    for n in (1, 7, 8, 9, 127, 128, 129, 300, 1000, 2601, 6561):
-        a = rng.random(n) * 10.0 ** rng.uniform(-3, 3, n)
-        assert _pairwise_sum(a, 0, n) == a.sum()
     for window in (1, 3, 25, 40):
         coords = _window_offsets(window, 0.01)
         for power in (1.0, 3.0, 8.0):
@@ -362,8 +413,9 @@ def test_weighted_covariance_kernel_matches_numpy_bit_for_bit() -> None:
             for best in (float(values.max()), float(values.max()) - 0.05):
                 floor = np.full(2, 1e-5)
                 got = _weighted_covariance(values, coords, best, floor)
-                np.testing.assert_array_equal(
-                    got, _numpy_weighted_covariance(values, coords, best, floor)
+                np.testing.assert_allclose(
+                    got, _numpy_weighted_covariance(values, coords, best, floor),
+                    rtol=1e-10, atol=1e-18,
                 )
     for n in (3, 8, 11, 21, 61, 200):
         resp = rng.random((n, 5, 5))
@@ -372,7 +424,7 @@ def test_weighted_covariance_kernel_matches_numpy_bit_for_bit() -> None:
         floor = np.array([1e-6])
         got = _weighted_covariance(vals, thetas[:, None], float(vals.max()), floor)
         want = _numpy_weighted_covariance(vals, thetas[:, None], float(vals.max()), floor)
-        np.testing.assert_array_equal(got, want)
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-18)
     # nothing kept above the floor: the floor alone
     zero = np.zeros(9)
     np.testing.assert_array_equal(
@@ -381,29 +433,32 @@ def test_weighted_covariance_kernel_matches_numpy_bit_for_bit() -> None:
     )
 
 
-def test_eigh2_is_lapack_bit_for_bit() -> None:
-    from eddiebot.slam.scan_matcher import _eigh2
+def test_closed_form_pca_normals_match_lapack() -> None:
+    # the 2 × 2 eigenproblem in closed form against np.linalg.eigh: general, degenerate
+    # (axis-aligned lines, exact duplicates, a tiny off-diagonal) and widely scaled
+    from eddiebot.slam.scan_matcher.normals import _pca_normals
 
     rng = np.random.default_rng(17)
-    a = rng.normal(size=(4000, 2, 2)) * 10.0 ** rng.uniform(-6, 2, (4000, 1, 1))
-    spd = a @ a.transpose(0, 2, 1)
-    sym = a + a.transpose(0, 2, 1)
-    diag = np.zeros((200, 2, 2))
-    diag[:, 0, 0] = rng.random(200)
-    diag[100:, 1, 1] = rng.random(100)
-    tiny_off = spd[:200].copy()
-    tiny_off[:, 0, 1] = tiny_off[:, 1, 0] = 1e-20 * tiny_off[:, 0, 0]
-    mats = np.concatenate([spd, sym, diag, tiny_off, np.zeros((1, 2, 2))])
-    vals, vecs = np.linalg.eigh(mats)
-    got = np.array([_eigh2(m[0, 0], m[1, 0], m[1, 1]) for m in mats])
-    assert got[:, 6].all()
-    np.testing.assert_array_equal(got[:, :2], vals)
-    np.testing.assert_array_equal(got[:, [2, 4, 3, 5]].reshape(-1, 2, 2), vecs)
-    assert not _eigh2(1e-200, 0.0, 1e-200)[-1]  # LAPACK would rescale: numpy's path
+    k = 6
+    hoods = [rng.normal(size=(k, 2)) * 10.0 ** rng.uniform(-6, 2) for _ in range(2000)]
+    line = np.stack([np.linspace(0.0, 1.0, k), np.zeros(k)], axis=-1)
+    hoods += [line, line[:, ::-1], line + 1e-20 * rng.normal(size=(k, 2))]
+    hoods += [line @ np.array([[math.cos(a), math.sin(a)], [-math.sin(a), math.cos(a)]])
+              + rng.normal(0.0, 0.003, (k, 2)) for a in rng.uniform(-math.pi, math.pi, 200)]
+    pts = np.concatenate(hoods)
+    nn = np.arange(pts.shape[0]).reshape(-1, k)
+    nn = np.repeat(nn, k, axis=0)  # each point's neighbourhood: its own group
+    got = _pca_normals(pts, nn)
+    want = _numpy_normals(pts, nn)
+    _assert_same_normals(got, want)
+    assert np.isfinite(want[:, 0]).sum() > 1000  # line-like ones among them
+    first_line = 2000 * k
+    np.testing.assert_allclose(np.abs(got[first_line]), [0.0, 1.0], atol=1e-15)  # y = 0
+    np.testing.assert_allclose(np.abs(got[first_line + k]), [1.0, 0.0], atol=1e-15)  # x = 0
 
 
-def test_compiled_normals_match_numpy_pca_bit_for_bit() -> None:
-    from eddiebot.slam.scan_matcher import _nearest_sweep, point_normals
+def test_compiled_normals_match_numpy_pca() -> None:
+    from eddiebot.slam.scan_matcher.normals import _nearest_sweep, point_normals
 
     rng = np.random.default_rng(19)
     for trial in range(24):
@@ -416,12 +471,7 @@ def test_compiled_normals_match_numpy_pca_bit_for_bit() -> None:
         else:
             pts = rng.normal(size=(n, 2)) * 10.0 ** rng.uniform(-4, 2)
         nn = _nearest_sweep(pts, np.argsort(pts[:, 0], kind="stable").astype(np.int64), k)
-        nb = pts[nn]
-        centred = nb - nb.mean(axis=1, keepdims=True)
-        vals, vecs = np.linalg.eigh(np.einsum("mki,mkj->mij", centred, centred))
-        want = vecs[:, :, 0].copy()
-        want[~(vals[:, 0] < 0.1 * vals[:, 1] + 1e-12)] = np.nan
-        np.testing.assert_array_equal(point_normals(pts, neighbours=k), want)
+        _assert_same_normals(point_normals(pts, neighbours=k), _numpy_normals(pts, nn))
 
 
 def test_pyramid_levels_are_the_anchored_dilation() -> None:
@@ -446,37 +496,11 @@ def test_pyramid_levels_are_the_anchored_dilation() -> None:
             np.testing.assert_array_equal(grid.levels[h], want)
 
 
-def test_phased_response_block_matches_strided_block() -> None:
-    from eddiebot.slam.scan_matcher import (
-        _column_phases,
-        _response_block,
-        _response_block_phased,
-    )
-
-    rng = np.random.default_rng(29)
-    for _ in range(40):
-        h, w = (int(v) for v in rng.integers(5, 90, 2))
-        grid = rng.random((h, w)).astype(np.float32)
-        step = int(rng.integers(2, 5))
-        n = int(rng.integers(1, 14))
-        px = rng.integers(-60, 150, 30)
-        py = rng.integers(-60, 150, 30)
-        x0, y0 = (int(v) for v in rng.integers(-40, 40, 2))
-        phases = _column_phases(grid, step)
-        np.testing.assert_array_equal(
-            _response_block_phased(phases, w, px, py, x0, y0, n, step),
-            _response_block(grid, px, py, x0, y0, n, step),
-        )
-
-
 def test_window_near_best_keeps_every_candidate_the_covariance_uses() -> None:
-    from eddiebot.slam.scan_matcher import (
-        _cells_for_angles,
-        _exhaustive,
-        _weighted_covariance,
-        _window_near_best,
-        _window_offsets,
-    )
+    from eddiebot.slam.scan_matcher.branch_and_bound import _window_near_best
+    from eddiebot.slam.scan_matcher.covariance import _weighted_covariance
+    from eddiebot.slam.scan_matcher.lookup import _cells_for_angles, _window_offsets
+    from eddiebot.slam.scan_matcher.search import _exhaustive
 
     rng = np.random.default_rng(31)
     pruned = 0
