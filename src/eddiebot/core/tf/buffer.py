@@ -1,35 +1,24 @@
-"""A tf2-like transform buffer, listener and broadcasters.
-
-``Buffer`` keeps, for every child frame, a time-sorted history of its transform to its
-parent (``cache_time`` long) and, separately, static transforms that hold at every time.
-``lookup_transform(target, source, time)`` walks both frames up to their common ancestor,
-interpolating each edge at ``time`` (linear in translation, slerp in rotation), and
-returns the geometry_msgs/TransformStamped that maps points in ``source`` into ``target``
-(``header.frame_id = target``, ``child_frame_id = source``), as tf2 does. ``time`` 0
-(``Time()``) means the latest time at which every edge of the chain is known.
-
-Failures raise tf2's exception types: ``LookupException`` (a frame nobody published),
-``ConnectivityException`` (frames in two trees), ``ExtrapolationException`` (a time
-outside the cached range, into the past or the future) and ``TimeoutException``.
-
-Frame ids carry no leading ``/`` (one is stripped, as tf2 does). Times are integer
-nanoseconds internally; the public API accepts ``Time``, builtin_interfaces/Time, or
-int nanoseconds.
-"""
+"""The transform buffer (tf2_ros.Buffer): stores transforms and answers lookups."""
 
 from __future__ import annotations
 
-import bisect
 import logging
 import math
 import threading
 import time as _time
-from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from eddiebot.core.qos import DurabilityPolicy, QoSProfile
 from eddiebot.core.task import Future
+from eddiebot.core.tf._algebra import _IDENTITY, _compose, _inverse, _Tf
+from eddiebot.core.tf._cache import _Edge, _fmt, _FrameCache, _strip, _timeout_s, _to_ns
+from eddiebot.core.tf.errors import (
+    ConnectivityException,
+    ExtrapolationException,
+    InvalidArgumentException,
+    LookupException,
+    TimeoutException,
+    TransformException,
+)
 from eddiebot.core.time import (
     NS_PER_S,
     Duration,
@@ -44,245 +33,10 @@ from eddiebot.core.time import (
 if TYPE_CHECKING:
     from eddiebot.core.node import Node
 
-__all__ = [
-    "Buffer",
-    "ConnectivityException",
-    "ExtrapolationException",
-    "InvalidArgumentException",
-    "LookupException",
-    "StaticTransformBroadcaster",
-    "TimeoutException",
-    "TransformBroadcaster",
-    "TransformException",
-    "TransformListener",
-    "make_transform",
-    "make_transform_2d",
-]
-
 _log = logging.getLogger("eddiebot.tf")
 
 #: Longest parent chain followed before a loop is assumed (tf2's MAX_GRAPH_DEPTH).
 MAX_GRAPH_DEPTH = 1000
-
-#: /tf and /tf_static QoS as tf2_ros: depth 100, static ones transient-local.
-TF_QOS = QoSProfile(depth=100)
-TF_STATIC_QOS = QoSProfile(depth=100, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-TF_STATIC_BROADCASTER_QOS = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-# -- exceptions ---------------------------------------------------------------------------
-class TransformException(Exception):
-    """Base class of tf errors (tf2.TransformException)."""
-
-
-class LookupException(TransformException):
-    """A frame that is not in the buffer."""
-
-
-class ConnectivityException(TransformException):
-    """The two frames are in trees that are not connected."""
-
-
-class ExtrapolationException(TransformException):
-    """The requested time is outside the time range cached for an edge of the chain."""
-
-
-class InvalidArgumentException(TransformException):
-    """A malformed frame id, time or transform."""
-
-
-class TimeoutException(TransformException):
-    """No transform became available within the timeout; ``cause`` says why."""
-
-    def __init__(self, message: str, cause: TransformException | None = None) -> None:
-        super().__init__(message)
-        self.cause = cause
-
-
-# -- small pure-Python rigid-transform algebra (faster than numpy for single poses) --------
-# A transform is (tx, ty, tz, qx, qy, qz, qw): p_parent = R(q) p_child + t.
-_Tf = tuple[float, float, float, float, float, float, float]
-_IDENTITY: _Tf = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
-
-
-def _qmul(ax: float, ay: float, az: float, aw: float,
-          bx: float, by: float, bz: float, bw: float) -> tuple[float, float, float, float]:
-    return (
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-        aw * bw - ax * bx - ay * by - az * bz,
-    )
-
-
-def _qrot(qx: float, qy: float, qz: float, qw: float,
-          vx: float, vy: float, vz: float) -> tuple[float, float, float]:
-    # v' = v + 2w (q×v) + 2 q×(q×v)
-    cx = qy * vz - qz * vy
-    cy = qz * vx - qx * vz
-    cz = qx * vy - qy * vx
-    return (
-        vx + 2.0 * (qw * cx + qy * cz - qz * cy),
-        vy + 2.0 * (qw * cy + qz * cx - qx * cz),
-        vz + 2.0 * (qw * cz + qx * cy - qy * cx),
-    )
-
-
-def _compose(a: _Tf, b: _Tf) -> _Tf:
-    """a ∘ b: first b, then a."""
-    rx, ry, rz = _qrot(a[3], a[4], a[5], a[6], b[0], b[1], b[2])
-    q = _qmul(a[3], a[4], a[5], a[6], b[3], b[4], b[5], b[6])
-    return (a[0] + rx, a[1] + ry, a[2] + rz, q[0], q[1], q[2], q[3])
-
-
-def _inverse(a: _Tf) -> _Tf:
-    ix, iy, iz, iw = -a[3], -a[4], -a[5], a[6]
-    tx, ty, tz = _qrot(ix, iy, iz, iw, a[0], a[1], a[2])
-    return (-tx, -ty, -tz, ix, iy, iz, iw)
-
-
-def _slerp(a: Sequence[float], b: Sequence[float], t: float) -> tuple[float, float, float, float]:
-    ax, ay, az, aw = a
-    bx, by, bz, bw = b
-    dot = ax * bx + ay * by + az * bz + aw * bw
-    if dot < 0.0:
-        bx, by, bz, bw, dot = -bx, -by, -bz, -bw, -dot
-    if dot > 0.9995:
-        s0, s1 = 1.0 - t, t
-    else:
-        theta = math.acos(min(1.0, dot))
-        s = math.sin(theta)
-        s0, s1 = math.sin((1.0 - t) * theta) / s, math.sin(t * theta) / s
-    x, y, z, w = s0 * ax + s1 * bx, s0 * ay + s1 * by, s0 * az + s1 * bz, s0 * aw + s1 * bw
-    n = math.sqrt(x * x + y * y + z * z + w * w)
-    return x / n, y / n, z / n, w / n
-
-
-def _interpolate(a: _Tf, b: _Tf, t: float) -> _Tf:
-    q = _slerp(a[3:], b[3:], t)
-    return (
-        a[0] + (b[0] - a[0]) * t,
-        a[1] + (b[1] - a[1]) * t,
-        a[2] + (b[2] - a[2]) * t,
-        q[0], q[1], q[2], q[3],
-    )
-
-
-def _to_ns(time: Any) -> int:
-    """Time, builtin_interfaces/Time, Duration-free int ns, or float seconds → int ns."""
-    if time is None:
-        return 0
-    if isinstance(time, Time):
-        return time.nanoseconds
-    if isinstance(time, bool):
-        raise InvalidArgumentException(f"not a time: {time!r}")
-    if isinstance(time, int):
-        return time
-    if isinstance(time, float):
-        return round(time * NS_PER_S)
-    if hasattr(time, "sec") and hasattr(time, "nanosec"):
-        return stamp_to_ns(time)
-    raise InvalidArgumentException(f"not a time: {time!r}")
-
-
-def _timeout_s(timeout: Any) -> float:
-    if timeout is None:
-        return 0.0
-    if isinstance(timeout, Duration):
-        return timeout.to_seconds()
-    if hasattr(timeout, "sec") and hasattr(timeout, "nanosec"):
-        return Duration.from_msg(timeout).to_seconds()
-    return float(timeout)
-
-
-def _fmt(ns: int) -> str:
-    return f"{ns / NS_PER_S:.6f}"
-
-
-def _strip(frame_id: str) -> str:
-    return frame_id[1:] if frame_id.startswith("/") else frame_id
-
-
-# -- storage ------------------------------------------------------------------------------
-@dataclass
-class _Edge:
-    """One stored transform child → parent."""
-
-    parent: str
-    tf: _Tf
-    authority: str
-
-
-class _FrameCache:
-    """Time-sorted history of one child frame (a tf2 TimeCache)."""
-
-    __slots__ = ("edges", "stamps")
-
-    def __init__(self) -> None:
-        self.stamps: list[int] = []
-        self.edges: list[_Edge] = []
-
-    def insert(self, stamp: int, edge: _Edge, cache_ns: int) -> bool:
-        stamps = self.stamps
-        if stamps and stamp < stamps[-1] - cache_ns:
-            return False  # older than the window: tf2's TF_OLD_DATA
-        if not stamps or stamp > stamps[-1]:
-            stamps.append(stamp)
-            self.edges.append(edge)
-        else:
-            i = bisect.bisect_left(stamps, stamp)
-            if i < len(stamps) and stamps[i] == stamp:
-                self.edges[i] = edge
-            else:
-                stamps.insert(i, stamp)
-                self.edges.insert(i, edge)
-        # prune what fell out of the window (keep at least one entry)
-        cutoff = stamps[-1] - cache_ns
-        k = bisect.bisect_left(stamps, cutoff)
-        if k > 0:
-            del stamps[:k]
-            del self.edges[:k]
-        return True
-
-    def latest(self) -> tuple[int, _Edge]:
-        return self.stamps[-1], self.edges[-1]
-
-    def parent_at(self, time_ns: int) -> str:
-        if time_ns == 0:
-            return self.edges[-1].parent
-        i = bisect.bisect_right(self.stamps, time_ns) - 1
-        return self.edges[max(i, 0)].parent
-
-    def get(self, time_ns: int, frame: str) -> tuple[str, _Tf] | str:
-        """(parent, transform) at ``time_ns`` (0: latest), or an error message."""
-        stamps = self.stamps
-        if time_ns == 0:
-            e = self.edges[-1]
-            return e.parent, e.tf
-        first, last = stamps[0], stamps[-1]
-        if time_ns > last:
-            return (
-                f"Lookup would require extrapolation into the future. Requested time "
-                f"{_fmt(time_ns)} but the latest data is at time {_fmt(last)}, "
-                f"when looking up transform from frame [{frame}] to frame "
-                f"[{self.edges[-1].parent}]"
-            )
-        if time_ns < first:
-            return (
-                f"Lookup would require extrapolation into the past. Requested time "
-                f"{_fmt(time_ns)} but the earliest data is at time {_fmt(first)}, "
-                f"when looking up transform from frame [{frame}] to frame "
-                f"[{self.edges[0].parent}]"
-            )
-        i = bisect.bisect_left(stamps, time_ns)
-        if stamps[i] == time_ns:
-            e = self.edges[i]
-            return e.parent, e.tf
-        t0, t1 = stamps[i - 1], stamps[i]
-        e0, e1 = self.edges[i - 1], self.edges[i]
-        if e0.parent != e1.parent:
-            return e0.parent, e0.tf  # reparented between samples: no interpolation, as tf2
-        return e0.parent, _interpolate(e0.tf, e1.tf, (time_ns - t0) / (t1 - t0))
 
 
 class Buffer:
@@ -651,106 +405,3 @@ class Buffer:
         self._waiters = still
         for fut, msg in done:
             fut.set_result(msg)
-
-
-# -- ROS plumbing -------------------------------------------------------------------------
-class TransformListener:
-    """Fills a ``Buffer`` from ``/tf`` and ``/tf_static`` (tf2_ros.TransformListener)."""
-
-    def __init__(
-        self,
-        buffer: Buffer,
-        node: Node,
-        *,
-        qos: QoSProfile | int = TF_QOS,
-        static_qos: QoSProfile | int = TF_STATIC_QOS,
-        spin_thread: bool = False,
-    ) -> None:
-        from eddiebot.msgs.tf2_msgs import TFMessage
-
-        del spin_thread  # the node's executor delivers; kept for the tf2_ros signature
-        self.buffer = buffer
-        self.node = node
-        if buffer.node is None:
-            buffer.set_node(node)
-        self.tf_sub = node.create_subscription(TFMessage, "/tf", self._on_tf, qos)
-        self.tf_static_sub = node.create_subscription(
-            TFMessage, "/tf_static", self._on_tf_static, static_qos
-        )
-
-    def _on_tf(self, msg: Any) -> None:
-        for t in msg.transforms:
-            self.buffer.set_transform(t, "default_authority")
-
-    def _on_tf_static(self, msg: Any) -> None:
-        for t in msg.transforms:
-            self.buffer.set_transform_static(t, "default_authority")
-
-    def unregister(self) -> None:
-        self.node.destroy_subscription(self.tf_sub)
-        self.node.destroy_subscription(self.tf_static_sub)
-
-
-def _as_list(transform: Any | Iterable[Any]) -> list[Any]:
-    if hasattr(transform, "child_frame_id"):
-        return [transform]
-    return list(transform)
-
-
-class TransformBroadcaster:
-    """Publishes transforms on ``/tf`` (tf2_ros.TransformBroadcaster)."""
-
-    def __init__(self, node: Node, qos: QoSProfile | int = TF_QOS) -> None:
-        from eddiebot.msgs.tf2_msgs import TFMessage
-
-        self._msg_type = TFMessage
-        self.pub = node.create_publisher(TFMessage, "/tf", qos)
-
-    def sendTransform(self, transform: Any | Iterable[Any]) -> None:
-        """Publish one geometry_msgs/TransformStamped or a list of them."""
-        self.pub.publish(self._msg_type(transforms=_as_list(transform)))
-
-    send_transform = sendTransform
-
-
-class StaticTransformBroadcaster:
-    """Latches static transforms on ``/tf_static``; every call republishes all frames it
-    was given so far in one TFMessage, as tf2_ros does."""
-
-    def __init__(self, node: Node, qos: QoSProfile | int = TF_STATIC_BROADCASTER_QOS) -> None:
-        from eddiebot.msgs.tf2_msgs import TFMessage
-
-        self._msg_type = TFMessage
-        self._frames: dict[str, Any] = {}
-        self.pub = node.create_publisher(TFMessage, "/tf_static", qos)
-
-    def sendTransform(self, transform: Any | Iterable[Any]) -> None:
-        for t in _as_list(transform):
-            self._frames[_strip(t.child_frame_id)] = t
-        self.pub.publish(self._msg_type(transforms=list(self._frames.values())))
-
-    send_transform = sendTransform
-
-
-def make_transform(
-    parent: str, child: str, stamp_ns: int, x: float = 0.0, y: float = 0.0, z: float = 0.0,
-    qx: float = 0.0, qy: float = 0.0, qz: float = 0.0, qw: float = 1.0,
-) -> Any:
-    """A geometry_msgs/TransformStamped from numbers (child pose in the parent frame)."""
-    from eddiebot.msgs.geometry_msgs import TransformStamped
-
-    msg = TransformStamped()
-    msg.header.stamp = ns_to_stamp(stamp_ns)
-    msg.header.frame_id = parent
-    msg.child_frame_id = child
-    t, r = msg.transform.translation, msg.transform.rotation
-    t.x, t.y, t.z = float(x), float(y), float(z)
-    r.x, r.y, r.z, r.w = float(qx), float(qy), float(qz), float(qw)
-    return msg
-
-
-def make_transform_2d(parent: str, child: str, stamp_ns: int, x: float, y: float, yaw: float) -> Any:
-    """A planar TransformStamped: child at (x, y) with heading ``yaw`` in the parent (m, rad)."""
-    return make_transform(parent, child, stamp_ns, x, y, 0.0, 0.0, 0.0,
-                          math.sin(yaw / 2.0), math.cos(yaw / 2.0))
-
