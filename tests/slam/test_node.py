@@ -30,6 +30,7 @@ from eddiebot.msgs.slam_toolbox import (
 )
 from eddiebot.msgs.std_msgs import String
 from eddiebot.msgs.tf2_msgs import TFMessage
+from eddiebot.msgs.visualization_msgs import MarkerArray
 from eddiebot.slam.node import SlamNode
 
 BEAMS = 181
@@ -488,3 +489,20 @@ def test_clear_localization_buffer_service(rig_factory: Any, session: Any) -> No
     assert len(rig.node.core._loc_buffer) == 0
     mapping = rig_factory()
     assert not [s for s in mapping.node.services if s.service_name.endswith("clear_localization_buffer")]
+
+
+def test_graph_markers_leave_out_marginalised_nodes_and_their_edges(rig_factory: Any) -> None:
+    rig = rig_factory()
+    _mapped(rig)
+    seen: list[Any] = []
+    rig.probe.create_subscription(MarkerArray, rig.node.graph_pub.topic_name, seen.append, 10)
+    graph = rig.node.core.graph
+    n = len(rig.node.core.nodes)
+    assert graph.marginalize([3, 4]) == 2
+    rig.node._publish_graph()
+    rig.ex.spin_for(0.1)
+    nodes, edges = seen[-1].markers
+    assert len(nodes.points) == n - 2
+    live = [e for k, e in enumerate(graph.edges) if k not in set(graph.removed_edges)]
+    assert len(edges.points) == 2 * len(live)
+    assert all(3 not in (e.i, e.j) and 4 not in (e.i, e.j) for e in live)

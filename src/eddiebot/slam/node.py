@@ -430,14 +430,20 @@ class SlamNode(Node):
         nodes.scale.x = nodes.scale.y = nodes.scale.z = 0.08
         nodes.color.r, nodes.color.g, nodes.color.b, nodes.color.a = 0.1, 0.3, 1.0, 1.0
         nodes.pose.orientation.w = 1.0
-        nodes.points = [Point(x=float(p[0]), y=float(p[1]), z=0.0) for p in poses]
+        graph = self.core.graph
+        removed = set(graph.removed_nodes)  # lifelong mode marginalised them out
+        nodes.points = [Point(x=float(p[0]), y=float(p[1]), z=0.0)
+                        for k, p in enumerate(poses) if k not in removed]
         edges = Marker(ns="slam_toolbox_edges", id=1, type=Marker.LINE_LIST, action=Marker.ADD)
         edges.header.frame_id = self.config.map_frame
         edges.scale.x = 0.02
         edges.color.g, edges.color.a = 0.8, 0.8
         edges.pose.orientation.w = 1.0
         pts = []
-        for e in self.core.graph.edges:
+        dropped = set(graph.removed_edges)
+        for k, e in enumerate(graph.edges):
+            if k in dropped:
+                continue
             a, b = poses[e.i], poses[e.j]
             pts += [
                 Point(x=float(a[0]), y=float(a[1]), z=0.0),
