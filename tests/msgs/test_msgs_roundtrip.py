@@ -8,7 +8,7 @@ from _msgtools import NUMPY_DTYPES, assert_equal, fields, sample_message
 from rosbags.interfaces import Nodetype
 
 from eddiebot.msgs import TYPESTORE, deserialize, serialize
-from eddiebot.msgs._store import _FILE_DEFAULTS
+from eddiebot.msgs._defaults import _FILE_DEFAULTS
 
 ALL_TYPES = sorted(TYPESTORE.types)
 

@@ -10,6 +10,7 @@ up once, when first asked for, in the ``.msg``/``.srv``/``.action`` files under 
 ``EDDIE_INTERFACE_PATH`` and ``AMENT_PREFIX_PATH`` (``share/<pkg>/msg/...``) and registered.
 """
 
+from eddiebot.msgs._described import register_type_description
 from eddiebot.msgs._store import (
     ACTIONS,
     SERVICES,
@@ -24,7 +25,6 @@ from eddiebot.msgs._store import (
     message_definition,
     normalize_type_name,
     raw_message_type,
-    register_type_description,
     serialize,
     type_hash,
     type_name,
