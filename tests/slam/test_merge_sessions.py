@@ -4,6 +4,7 @@ matching or by hand, the merged graph against the truth, refusals; and the node'
 from __future__ import annotations
 
 import logging
+import pickle
 import threading
 import time
 from pathlib import Path
@@ -17,10 +18,17 @@ from test_node import MOUNT, _map_odom_count, rig_factory  # noqa: F401  (the fi
 from eddiebot.geometry import se2_compose, se2_inverse
 from eddiebot.msgs.slam_toolbox import AddSubmap, MergeMaps, SerializePoseGraph
 from eddiebot.msgs.visualization_msgs import InteractiveMarkerFeedback
-from eddiebot.slam import Scan, SlamConfig, SlamCore, load_session, node_editing, save_session
+from eddiebot.slam import Scan, SlamConfig, SlamCore, load_session, save_session
 from eddiebot.slam.errors import MergeError
-from eddiebot.slam.merge import map_snapshot, merge_session, place_session, rebase_placement
+from eddiebot.slam.merge import (
+    map_snapshot,
+    merge_session,
+    place_copy,
+    place_session,
+    rebase_placement,
+)
 from eddiebot.slam.node_editing import _load_and_place
+from eddiebot.slam.placement_process import PlacementProcess
 
 CONFIG = SlamConfig(minimum_travel_distance=0.5, loop_match_minimum_chain_size=6)
 #: the second session's map frame in the first one's (where its odometry started)
@@ -128,10 +136,11 @@ def test_a_placement_found_on_a_snapshot_follows_its_anchors(halves: Any) -> Non
     core = load_session(first_path, CONFIG)
     other = load_session(second_path, CONFIG)
     snapshot = map_snapshot(core)
-    assert len(snapshot.nodes) == len(core.nodes) and snapshot.graph.edges == []
-    assert np.array_equal(snapshot.graph.poses, core.node_poses())
-    searched = snapshot.graph.poses.copy()
-    placement = place_session(snapshot, other)
+    copy = pickle.loads(pickle.dumps(snapshot))  # sent to the placement process
+    assert len(copy.nodes) == len(core.nodes) and copy.core().graph.edges == []
+    assert np.array_equal(copy.core().graph.poses, core.node_poses())
+    searched = copy.poses.copy()
+    placement = place_copy(copy, map_snapshot(other))
     assert np.hypot(*(placement.transform[:2] - expected[:2])) < 0.03
     # meanwhile the live map moved as a whole (as after a loop closure far away): the links,
     # kept relative to their anchor nodes, move with it
@@ -149,15 +158,21 @@ def test_a_placement_found_on_a_snapshot_follows_its_anchors(halves: Any) -> Non
         lk.anchor == gone for lk in placement.links)
 
 
-def test_loading_and_placing_touches_only_the_snapshot(halves: Any) -> None:
+def test_a_session_is_placed_in_a_process_of_its_own(halves: Any) -> None:
     first_path, second_path, _, expected = halves
     core = load_session(first_path, CONFIG)
     poses = core.node_poses().copy()
-    placed = _load_and_place(str(second_path), map_snapshot(core))
+    placer = PlacementProcess()
+    placed = _load_and_place(str(second_path), map_snapshot(core), placer.run)
     assert placed.placement is not None and placed.unplaced == ""
     assert np.hypot(*(placed.placement.transform[:2] - expected[:2])) < 0.03
+    assert len(placed.placement.links) >= 6
     assert np.array_equal(core.node_poses(), poses)
     assert core._global is None and core.relocalizations == []
+    # a refusal comes back as the MergeError the search raised
+    empty = map_snapshot(SlamCore(CONFIG))
+    with pytest.raises(MergeError, match="the current graph is empty"):
+        _load_and_place(str(second_path), empty, placer.run)
 
 
 # -- the node's services ---------------------------------------------------------------------
@@ -244,19 +259,19 @@ def test_scans_are_processed_while_a_submap_is_placed(
     rig = rig_factory()
     rig.drive(17)  # along y = 4 from x = 2 to 6
     n = len(rig.node.core.nodes)
-    # the placement search is held until the robot has driven on: however fast the machine,
-    # the scans below arrive while it runs
+    # the placement is held (then run in its process) until the robot has driven on: however
+    # fast the machine, the scans below arrive while it is pending
     started, release = threading.Event(), threading.Event()
     searched_on: list[str] = []
-    real_place = node_editing.place_session
+    real_place = rig.node.editing.place_copies  # the placement process
 
-    def held(core: SlamCore, other: SlamCore, **kwargs: Any) -> Any:
+    def held(map_copy: Any, session: Any) -> Any:
         searched_on.append(threading.current_thread().name)
         started.set()
         assert release.wait(120)
-        return real_place(core, other, **kwargs)
+        return real_place(map_copy, session)
 
-    monkeypatch.setattr(node_editing, "place_session", held)
+    monkeypatch.setattr(rig.node.editing, "place_copies", held)
     answers = _add_submap(rig, path)
     _spin_until(rig, started.is_set)
     tf_before, processed = _map_odom_count(rig), rig.node.scans_processed
@@ -290,14 +305,14 @@ def test_merge_submaps_leaves_a_submap_still_being_placed(
     rig.drive(17)
     n = len(rig.node.core.nodes)
     started, release = threading.Event(), threading.Event()
-    real_place = node_editing.place_session
+    real_place = rig.node.editing.place_copies
 
-    def held(core: SlamCore, other: SlamCore, **kwargs: Any) -> Any:
+    def held(map_copy: Any, session: Any) -> Any:
         started.set()
         assert release.wait(120)
-        return real_place(core, other, **kwargs)
+        return real_place(map_copy, session)
 
-    monkeypatch.setattr(node_editing, "place_session", held)
+    monkeypatch.setattr(rig.node.editing, "place_copies", held)
     answers = _add_submap(rig, path)
     _spin_until(rig, started.is_set)
     caplog.set_level(logging.WARNING)

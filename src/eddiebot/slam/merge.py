@@ -25,7 +25,7 @@ The merged nodes keep their own odometry frame: the next scan of a running mappe
 new chain linked by scan matching to the nodes it is matched against, as after a start pose.
 
 A running node searches on a copy: `map_snapshot` copies the map as it is (on the node's
-executor, cheap: the scans are shared), `place_session` runs on the copy on another thread
+executor, cheap: the scans are shared), `place_copy` runs on the copy in another process
 while the live graph goes on growing, and `rebase_placement` re-expresses the placement
 against the live graph as it is when it is merged (each link kept relative to its anchor
 node, which loop closures may have moved meanwhile).
@@ -36,13 +36,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from eddiebot.geometry import se2_between, se2_compose, se2_inverse
+from eddiebot.slam.config import SlamConfig
 from eddiebot.slam.errors import MergeError
-from eddiebot.slam.mapper import SlamCore
+from eddiebot.slam.mapper import NodeRecord, SlamCore
 from eddiebot.slam.mapper.measurement import _rotate_covariance
 from eddiebot.slam.pose_graph import EdgeKind
 
@@ -53,10 +55,12 @@ __all__ = [
     "LOCAL_VIEW_NODES",
     "MINIMUM_LINK_RESPONSE",
     "RELOCALIZATION_CONSENSUS",
+    "MapCopy",
     "MergeLink",
     "Placement",
     "map_snapshot",
     "merge_session",
+    "place_copy",
     "place_session",
     "rebase_placement",
 ]
@@ -279,16 +283,39 @@ def place_session(
     return Placement(final, tuple(keep), transform is None, relocalized)
 
 
-def map_snapshot(core: SlamCore) -> SlamCore:
-    """A copy of ``core``'s map for `place_session` to search while ``core`` goes on mapping:
-    the same parameters and laser mount, every node at its current pose (retired ones
-    retired), no edges (placement reads poses and scans only). Node records are copied, their
-    scans and points shared (a node's scan is never changed in place)."""
-    snap = SlamCore(core.config, sensor_offset=core.sensor_offset)
-    if core.nodes:
-        poses = core.node_poses().copy()
-        snap._restore([dataclasses.replace(n) for n in core.nodes], poses, [])
-    return snap
+@dataclass(frozen=True)
+class MapCopy:
+    """What placement reads of a graph, copied (`map_snapshot`): picklable, so the search can
+    run in another process while the graph goes on growing."""
+
+    config: SlamConfig
+    sensor_offset: FloatArray
+    nodes: tuple[NodeRecord, ...]
+    """The node records (retired ones retired); scans and points shared with the graph's."""
+    poses: FloatArray
+    """The nodes' robot poses in its map frame (N, 3)."""
+
+    def core(self) -> SlamCore:
+        """A `SlamCore` holding the copy: its nodes at their poses, no edges (placement reads
+        poses and scans only)."""
+        out = SlamCore(self.config, sensor_offset=self.sensor_offset)
+        if self.nodes:
+            out._restore(list(self.nodes), self.poses.copy(), [])
+        return out
+
+
+def map_snapshot(core: SlamCore) -> MapCopy:
+    """``core``'s map as it is now, for `place_copy` (cheap: node records are copied, their
+    scans and points shared — a node's scan is never changed in place)."""
+    poses = core.node_poses().copy() if core.nodes else np.zeros((0, 3))
+    nodes = tuple(dataclasses.replace(n) for n in core.nodes)
+    return MapCopy(core.config, core.sensor_offset.copy(), nodes, poses)
+
+
+def place_copy(map_copy: MapCopy, session: MapCopy, **kwargs: Any) -> Placement:
+    r"""`place_session` of ``session`` on ``map_copy`` (both `map_snapshot`\ s): what the
+    node's placement process runs."""
+    return place_session(map_copy.core(), session.core(), **kwargs)
 
 
 def rebase_placement(

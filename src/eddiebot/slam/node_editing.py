@@ -28,17 +28,20 @@ localization):
 * ``~/manual_loop_closure`` (slam_toolbox/LoopClosure) applies the staged moves and
   re-optimises (`eddiebot.slam.editing`: each move is a constraint the graph keeps, where
   upstream's Ceres only re-seeds the node's estimate), then drops them.
-* ``~/clear_changes`` (slam_toolbox/Clear) drops the staged moves; the graph is untouched.
+* ``~/clear_changes`` (slam_toolbox/Clear) drops the staged moves and puts dragged markers
+  back on their nodes; the graph is untouched.
 
 Merging (slam_toolbox's ``merge_maps_kinematic`` tool, served here by the SLAM node itself and
 merging graphs, not only grids; `eddiebot.slam.merge`):
 
 * ``~/add_submap`` (slam_toolbox/AddSubmap): loads a saved session and places it in the
   current map by scan matching. One that does not relocalise stays pending at its own origin
-  until placed by hand. The search (seconds to tens of seconds of CPU on a large map) runs on
-  a worker thread against `eddiebot.slam.merge.map_snapshot` of the map at the request, so
-  scans go on being processed and map → odom published meanwhile; requests are placed one
-  at a time, in order. The call is answered when the submap is added (or refused), as
+  until placed by hand. The search (seconds to tens of seconds of CPU on a large map) runs in
+  a spawned process (`eddiebot.slam.placement_process`; a thread would hold the GIL in the
+  scan-matching kernels) against `eddiebot.slam.merge.map_snapshot` of the map at the request,
+  driven from a worker thread that hands the result back through a guard condition, so scans
+  go on being processed and map → odom published meanwhile; requests are placed one at a
+  time, in order. The call is answered when the submap is added (or refused), as
   upstream's merge tool answers once the submap is loaded: a client that waits for the
   answer, then calls ``~/merge_submaps``, merges it.
 * ``merge_maps_tool/feedback`` (InteractiveMarkerFeedback; upstream's merge tool's marker
@@ -82,12 +85,14 @@ from eddiebot.slam.errors import GraphEditError, MergeError, SlamError
 from eddiebot.slam.interactive_markers import MarkerServer, graph_node_marker
 from eddiebot.slam.mapper import SlamCore
 from eddiebot.slam.merge import (
+    MapCopy,
     Placement,
     map_snapshot,
     merge_session,
     place_session,
     rebase_placement,
 )
+from eddiebot.slam.placement_process import PlacementProcess
 from eddiebot.slam.session import load_session
 
 if TYPE_CHECKING:
@@ -128,22 +133,23 @@ class _Placed:
     """Why scan matching did not place it ('' when it did)."""
 
 
-def _load_and_place(filename: str, snapshot: SlamCore) -> _Placed:
-    """Load ``filename`` and place it on ``snapshot`` (on the worker thread: touches no live
-    state); `MergeError` when it cannot be read or does not fit this map."""
+def _load_and_place(
+    filename: str, map_copy: MapCopy, place: Callable[[MapCopy, MapCopy], Placement]
+) -> _Placed:
+    """Load ``filename`` and place it on ``map_copy`` with ``place`` (on the worker thread:
+    touches no live state); `MergeError` when it cannot be read or does not fit this map."""
     if not filename:
         raise MergeError("add_submap: no file name given")
     try:
-        other = load_session(Path(filename).expanduser(), snapshot.config)
+        other = load_session(Path(filename).expanduser(), map_copy.config)
     except SlamError as exc:
         raise MergeError(f"add_submap: {exc}") from exc
-    searched = snapshot.graph.poses.copy()
     try:
-        return _Placed(other, place_session(snapshot, other), searched, "")
+        return _Placed(other, place(map_copy, map_snapshot(other)), map_copy.poses, "")
     except MergeError as exc:
-        if not snapshot.nodes or not other.nodes or "mounted" in str(exc):
+        if not map_copy.nodes or not other.nodes or "mounted" in str(exc):
             raise MergeError(f"add_submap {filename}: {exc}") from exc
-        return _Placed(other, None, searched, str(exc))
+        return _Placed(other, None, map_copy.poses, str(exc))
 
 
 class _Worker:
@@ -223,6 +229,10 @@ class GraphEditing:
         self._initial_pose_sub: Any = None
         self._clear_buffer_srv: Any = None
         self._placer = _Worker(node, "slam-add-submap")
+        self._process = PlacementProcess()
+        self.place_copies: Callable[[MapCopy, MapCopy], Placement] = self._process.run
+        """How the worker thread places a session copy on a map copy: in a spawned process
+        (`eddiebot.slam.placement_process`)."""
         self.markers = MarkerServer(node, "~")
         """slam_toolbox's interactive marker server: a marker per graph node in interactive mode."""
         self._markers_shown: tuple[tuple[int, float, float], ...] | None = None
@@ -377,8 +387,9 @@ class GraphEditing:
         submap joins `submaps` and ``on_added(submap)`` runs (``on_added(None)``, the reason
         logged, when it cannot be read or does not fit this map)."""
         core = self.node.core
-        snapshot = map_snapshot(core)
+        map_copy = map_snapshot(core)
         first = core.nodes[0] if core.nodes else None
+        place = self.place_copies
 
         def done(placed: _Placed | None, error: BaseException | None) -> None:
             sub = None
@@ -393,7 +404,7 @@ class GraphEditing:
             if on_added is not None:
                 on_added(sub)
 
-        self._placer.submit(lambda: _load_and_place(filename, snapshot), done)
+        self._placer.submit(lambda: _load_and_place(filename, map_copy, place), done)
 
     def _accept(self, filename: str, placed: _Placed, first: Any) -> PendingSubmap:
         """A placed session joins the pending submaps."""
@@ -426,6 +437,7 @@ class GraphEditing:
 
     def close(self) -> None:
         """Stop the placement worker (a search in flight is abandoned)."""
+        self._process.stop()
         self._placer.close()
 
     def _on_submap_feedback(self, msg: Any) -> None:
