@@ -45,6 +45,11 @@ import zenoh
 from eddiebot.core.errors import ServiceCallTimeoutError, TopicTypeMismatchError
 from eddiebot.core.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, duration_ns
 from eddiebot.msgs import deserialize, serialize
+from eddiebot.transport._session_thread import (
+    _call_in_thread,
+    _close_quietly,
+    sessions_still_closing,
+)
 from eddiebot.transport.config import ZenohConfig
 from eddiebot.transport.errors import RemoteServiceError
 from eddiebot.transport.graph import GraphCache
@@ -73,67 +78,6 @@ if TYPE_CHECKING:
 __all__ = ["ZenohTransport", "publisher_congestion_control", "sessions_still_closing"]
 
 log = logging.getLogger("eddiebot.transport")
-
-#: Helper threads still opening or closing a session that nobody waits for any more.
-_LEFT_RUNNING: set[threading.Thread] = set()
-
-
-def sessions_still_closing() -> bool:
-    """True while a session open or close that the caller stopped waiting for still runs.
-
-    Python joins no daemon thread at exit, but such a thread returning from Zenoh during
-    interpreter shutdown can abort the process; exit with ``os._exit`` instead.
-    """
-    return any(t.is_alive() for t in list(_LEFT_RUNNING))
-
-
-def _call_in_thread(fn: Callable[[], Any], what: str, timeout_s: float | None,
-                    on_late_result: Callable[[Any], None] | None = None) -> tuple[bool, Any]:
-    """Run ``fn`` in a daemon thread and wait for it, interruptibly (Ctrl-C), for at most
-    ``timeout_s`` (None: until it returns). Returns (finished, result); re-raises what ``fn``
-    raised. When the wait ends first, ``on_late_result`` gets the result once ``fn`` returns.
-    """
-    lock = threading.Lock()
-    box: dict[str, Any] = {}
-
-    def target() -> None:
-        try:
-            value = fn()
-        except BaseException as exc:
-            with lock:
-                box["error"] = exc
-            return
-        with lock:
-            box["value"] = value
-            late = box.get("abandoned", False)
-        if late and on_late_result is not None:
-            on_late_result(value)
-
-    thread = threading.Thread(target=target, name=f"eddie-zenoh-{what}", daemon=True)
-    thread.start()
-    deadline = None if timeout_s is None else time.monotonic() + timeout_s
-    try:
-        while thread.is_alive():
-            remaining = None if deadline is None else deadline - time.monotonic()
-            if remaining is not None and remaining <= 0:
-                break
-            thread.join(0.05 if remaining is None else min(0.05, remaining))
-    finally:
-        with lock:
-            done = "value" in box or "error" in box
-            if not done:
-                box["abandoned"] = True
-                _LEFT_RUNNING.add(thread)
-    if "error" in box:
-        raise box["error"]
-    return done, box.get("value")
-
-
-def _close_quietly(session: Any) -> None:
-    try:
-        session.close()
-    except Exception as exc:  # pragma: no cover
-        log.debug("closing the zenoh session: %s", exc)
 
 #: A call that finds no queryable within this time of its start is retried, not failed.
 _QUERYABLE_GRACE_S = 3.0
