@@ -21,7 +21,8 @@ controller; no recoveries (the navigator's backup, spin, costmap clearing) are r
 
     .venv/bin/python benchmarks/bench_mppi.py                       # both parts
     .venv/bin/python benchmarks/bench_mppi.py --parts cycle --repeat 41
-    .venv/bin/python benchmarks/bench_mppi.py --parts goals --goals 10 --seed 0
+    .venv/bin/python benchmarks/bench_mppi.py --parts goals --goals 10 --seed 0 \
+        --out benchmarks/results/mppi_goals.json
 
 Prints tables and writes ``benchmarks/results/mppi.json`` (``--out`` to change).
 """
