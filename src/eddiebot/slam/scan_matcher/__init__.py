@@ -11,8 +11,7 @@ Translations are searched by branch and bound over precomputed max-pooled grids
 (Olson's multi-resolution idea in Cartographer's form: level h holds the maximum of the
 2^h × 2^h cells it covers, an upper bound on every finer candidate beneath it), so wide
 windows cost little. The best coarse candidate is refined on a fine angular step
-(``fine_search_angle_offset``) over ±½ coarse step and ±2 cells (optionally re-centred while
-its best sits on the box's edge: ``fine_search_climb``), then to sub-cell accuracy by
+(``fine_search_angle_offset``) over ±½ coarse step and ±2 cells, then to sub-cell accuracy by
 Gauss–Newton on the bilinearly interpolated grid. Karto's distance/angle penalties are
 applied to candidate responses when ``penalize`` is set (sequential matching).
 

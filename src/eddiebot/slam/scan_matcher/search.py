@@ -55,9 +55,6 @@ class MatcherParams:
     use_response_expansion: bool = True
     refine: bool = True
     """Sub-cell Gauss–Newton refinement after the discrete search."""
-    fine_search_climb: int = 0
-    """Re-centre the fine search on its best up to this many times while that best lies on
-    the edge of its translation box (0: one box around the coarse best, as Karto)."""
     coarse_heading_variance: bool = False
     """Heading variance from every coarse heading's best response over the whole window
     (headings within 0.1 of the best count), not only the fine headings next to the best:
@@ -341,19 +338,6 @@ def match_scan(
     )
     resp = _exhaustive(grid.likelihood, fpx, fpy, fdth, bx, by, radius, res, *penalties)
     fa, fix, fiy = np.unravel_index(int(np.argmax(resp)), resp.shape)
-    # Heading and translation are coupled (the scan turns about the sensor, metres away from
-    # most end points): the best fine heading can want a translation outside the box around
-    # the coarse best. Follow the best to the box's edge until it is inside (bounded).
-    for _ in range(params.fine_search_climb):
-        at_edge = fix in (0, 2 * radius) or fiy in (0, 2 * radius)
-        if not at_edge:
-            break
-        nx, ny = bx - radius + int(fix), by - radius + int(fiy)
-        if max(abs(nx), abs(ny)) > window:
-            break
-        bx, by = nx, ny
-        resp = _exhaustive(grid.likelihood, fpx, fpy, fdth, bx, by, radius, res, *penalties)
-        fa, fix, fiy = np.unravel_index(int(np.argmax(resp)), resp.shape)
     best_resp = float(resp[fa, fix, fiy])
     dx = bx - radius + int(fix)
     dy = by - radius + int(fiy)
