@@ -929,15 +929,16 @@ def main(argv: list[str] | None = None) -> int:
                     _write(args, rows, doors, details)
                 continue
             if kind in SPECIAL_KINDS:
-                if "static" in args.runs:
-                    continue  # sent after the static run's goals
-                kind = "static"
-            worlds = [w for w in args.worlds if kind == "static" or w in PERSON_WORLDS]
+                if "static" in args.runs or kind != next(k for k in args.runs
+                                                         if k in SPECIAL_KINDS):
+                    continue  # sent after the static run's goals, all kinds in one run
+                kind = "special"  # a static run of these goals alone
+            worlds = [w for w in args.worlds if kind != "person" or w in PERSON_WORLDS]
             for w in worlds:
                 wf = world_variant(w, tmp, people=kind == "person")
-                n = args.goals if kind == "static" else args.person_goals
+                n = {"static": args.goals, "special": 0}.get(kind, args.person_goals)
                 for setup, allowed, special in _static_setups(args, kind, w, wf, tmp):
-                    for controller in (args.controllers if kind == "static" else ["rpp"]):
+                    for controller in (args.controllers if kind != "person" else ["rpp"]):
 
                         def save(r: RunResult, final: bool = False,
                                  info: dict[str, Any] = setup.info) -> None:
@@ -975,7 +976,7 @@ def _static_setups(args: argparse.Namespace, kind: str, world_name: str, world_f
     from eddiebot.sim.worlds import load_world
 
     truth = truth_setup(world_name, tmp)
-    if kind != "static":
+    if kind == "person":
         return [(truth, None, [])]
     slam = None
     if "slam" in args.maps or args.slam_goals:
