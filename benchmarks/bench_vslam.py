@@ -12,6 +12,21 @@ Synthetic data: a textured corridor rendered by the pinhole ray-caster of the te
         [--set NAME=VALUE ...]  (further RTAB-Map parameters for the loop-closure run)
         [--records FILE]  (every node's loop decision, CPU time and closure error, as JSON)
         [--compare-records A B]  (two --records files: same decisions? largest pose difference?)
+        [--depth-scale UNITS_PER_M] [--fx FX --fy FY --cx CX --cy CY | --camera-info FILE.yaml]
+            (the --tum folder's depth units and intrinsics, as `eddie vslam replay` reads them)
+        [--tum-speed] [--tum-cycles 3] [--tum-nodes 1000]  (with --tum: time the folder alone,
+            no synthetic run: odometry F2M and F2F per frame, then loop closure + graph update
+            per node over the sequence played forward-backward --tum-cycles times, every frame
+            a node, timed from --tum-nodes nodes in working memory on; memory per node)
+
+        [--icl]  (--tum is the shared ICL-NUIM living-room sample, listed as a TUM folder in a
+            temporary directory by `tests/vslam/icl_data.py`; nothing copied)
+
+ICL-NUIM living room (depth 1000 units per metre), one core, written to
+`benchmarks/results/vslam_icl_speed.json`:
+
+    .venv/bin/python benchmarks/bench_vslam.py --icl --depth-scale 1000 --tum-speed \
+        --out benchmarks/results/vslam_icl_speed.json
 """
 
 from __future__ import annotations
@@ -26,6 +41,7 @@ import os
 import platform
 import pstats
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -33,12 +49,16 @@ from typing import Any
 import cv2
 import numpy as np
 
+from eddiebot.cli.vslam import _tum_setup
+from eddiebot.vslam.camera import check_depth_plausible
+from eddiebot.vslam.errors import DepthScaleError
 from eddiebot.vslam.features import FeatureExtractor
 from eddiebot.vslam.odometry import VisualOdometry
 from eddiebot.vslam.parameters import RtabmapParameters
-from eddiebot.vslam.replay import replay_tum
+from eddiebot.vslam.replay import CameraSetup, replay_tum
 from eddiebot.vslam.rtabmap import Rtabmap
 from eddiebot.vslam.transforms import se3_inverse
+from eddiebot.vslam.tum import load_tum_frame, read_tum_sequence
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results" / "vslam.json"
@@ -46,6 +66,19 @@ REPORT_PARAMS = {
     "Reg/Force3DoF": "true", "Vis/MinInliers": "12", "RGBD/ProximityBySpace": "false",
     "RGBD/AngularUpdate": "0.01", "RGBD/LinearUpdate": "0.01",
 }
+
+
+def _icl_tum_folder(work: Path) -> Path:
+    """The shared ICL-NUIM sample (frames 0-210) listed as a TUM folder under `work`."""
+    spec = importlib.util.spec_from_file_location("icl_data",
+                                                  ROOT / "tests" / "vslam" / "icl_data.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["icl_data"] = mod
+    spec.loader.exec_module(mod)
+    if not (mod.ICL / "image").is_dir():
+        raise OSError(f"ICL-NUIM sample not found at {mod.ICL} (set EDDIE_ICL_LIVINGROOM)")
+    return Path(mod.write_icl_tum(work / "icl_livingroom1", range(mod.ICL_FRAMES)))
 
 
 def _synthetic():
@@ -272,6 +305,77 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
     }
 
 
+def bench_tum_speed(folder: Path, setup: CameraSetup, cycles: int, wm_target: int,
+                    overrides: dict[str, str]) -> dict[str, Any]:
+    """Odometry per frame (F2M, F2F) on a TUM folder, then loop closure + graph update per
+    node over the sequence played forward-backward `cycles` times, every frame a node."""
+    listed = read_tum_sequence(folder).frames
+    check_depth_plausible(load_tum_frame(listed[0], setup.depth_scale)[1], setup.depth_scale,
+                          "give the depth images' units per metre with --depth-scale")
+    frames = [load_tum_frame(f, setup.depth_scale) for f in listed]
+    cam = setup.camera
+    out: dict[str, Any] = {
+        "folder": str(folder), "frames": len(frames),
+        "intrinsics": [cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height],
+        "intrinsics_source": setup.intrinsics_source, "depth_scale": setup.depth_scale,
+        "depth_scale_source": setup.depth_scale_source, "load_avg_start": list(os.getloadavg()),
+    }
+    forward: list[Any] = []
+    for name, strategy in (("F2M", "0"), ("F2F", "1")):
+        vo = VisualOdometry(RtabmapParameters.from_dict({"Odom/Strategy": strategy}))
+        vo.process(*frames[0], cam, 0)  # warm-up (numba, first map)
+        vo.reset()
+        wall, cpu, results = [], [], []
+        for k, (rgb, depth) in enumerate(frames):
+            t0, c0 = time.perf_counter(), time.process_time()
+            r = vo.process(rgb, depth, cam, k * 33_333_333)
+            wall.append((time.perf_counter() - t0) * 1e3)
+            cpu.append((time.process_time() - c0) * 1e3)
+            results.append(r)
+        out[f"vo_{name}"] = {"cpu": _stats(cpu[1:]), "wall": _stats(wall[1:]),
+                             "lost": sum(r.pose is None for r in results)}
+        if name == "F2M":
+            forward = results
+    out["load_avg_after_vo"] = list(os.getloadavg())
+    # forward-backward: frame k is revisited at the same pose, so the odometry of the forward
+    # pass (pose, covariance, features) stands for the backward pass too
+    order = list(range(len(frames))) + list(range(len(frames) - 2, 0, -1))
+    order = order * cycles
+    params = RtabmapParameters.from_dict({"RGBD/LinearUpdate": "0", "RGBD/AngularUpdate": "0",
+                                          **overrides})
+    slam = Rtabmap(params)
+    cpu, wall, wm = [], [], []
+    loops = 0
+    for n, k in enumerate(order):
+        r = forward[k]
+        if r.pose is None:
+            continue
+        rgb, depth = frames[k]
+        t0, c0 = time.perf_counter(), time.process_time()
+        res = slam.process(rgb, depth, cam, r.pose, n * 33_333_333,
+                           odom_covariance=r.covariance, features=r.frame_features)
+        wall.append((time.perf_counter() - t0) * 1e3)
+        cpu.append((time.process_time() - c0) * 1e3)
+        wm.append(int(res.statistics["Memory/Working_memory_size/"]))
+        loops += bool(res.loop_closure_id)
+    near = [i for i, w in enumerate(wm) if w >= wm_target]
+    in_ram = [nd.data.nbytes for nd in slam.memory.nodes.values() if nd.data is not None]
+    out["loop_closure"] = {
+        "order": f"frames 0..{len(frames) - 1}..1, {cycles} times (forward-backward)",
+        "parameters": {"RGBD/LinearUpdate": "0", "RGBD/AngularUpdate": "0", **overrides},
+        "nodes": len(cpu), "wm_final": wm[-1] if wm else 0, "loop_closures": loops,
+        "timed_from_wm": wm_target, "timed_nodes": len(near),
+        "cpu": _stats([cpu[i] for i in near] or cpu[-50:]),
+        "wall": _stats([wall[i] for i in near] or wall[-50:]),
+        "cpu_all": _stats(cpu),
+        "node_kb_mean": float(np.mean(in_ram)) / 1e3 if in_ram else 0.0,
+        "node_kb_max": float(np.max(in_ram)) / 1e3 if in_ram else 0.0,
+        "nodes_with_data": len(in_ram),
+    }
+    out["load_avg_end"] = list(os.getloadavg())
+    return out
+
+
 def _print_vo(vo: dict[str, dict[str, Any]]) -> None:
     print(f"{'measure':44s} {'median':>9s} {'p95':>9s} {'goal':>8s}")
     for name in vo:
@@ -331,6 +435,21 @@ def main() -> int:
                     help="every node's loop-closure decision and CPU time, as JSON, in FILE")
     ap.add_argument("--compare-records", type=Path, nargs=2, metavar=("A", "B"),
                     help="compare two --records files (decisions, poses) and exit")
+    ap.add_argument("--depth-scale", type=float, default=None, metavar="UNITS_PER_M",
+                    help="--tum depth PNG units per metre (default 5000, ICL-NUIM 1000)")
+    for name in ("fx", "fy", "cx", "cy"):
+        ap.add_argument(f"--{name}", type=float, default=None,
+                        help=f"--tum intrinsic {name} in pixels (give all four)")
+    ap.add_argument("--camera-info", type=Path, default=None, metavar="FILE.yaml",
+                    help="--tum intrinsics from a ROS camera_info YAML")
+    ap.add_argument("--icl", action="store_true",
+                    help="--tum is the shared ICL-NUIM living-room sample (give --depth-scale 1000)")
+    ap.add_argument("--tum-speed", action="store_true",
+                    help="time the --tum folder alone (odometry, loop closure, memory per node)")
+    ap.add_argument("--tum-cycles", type=int, default=3,
+                    help="forward-backward plays of the --tum folder for --tum-speed")
+    ap.add_argument("--tum-nodes", type=int, default=1000,
+                    help="--tum-speed times loop closure from this working-memory size on")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args()
     if args.compare_records:
@@ -338,6 +457,48 @@ def main() -> int:
         return 0
     overrides = dict(kv.split("=", 1) for kv in args.set)
     cv2.setNumThreads(1)  # one core, as the published figures
+    setup = None
+    if args.icl:
+        try:
+            args.tum = _icl_tum_folder(Path(tempfile.mkdtemp(prefix="bench_vslam_icl_")))
+        except OSError as exc:
+            print(f"bench_vslam: {exc}", file=sys.stderr)
+            return 2
+    if args.tum:
+        try:
+            setup = _tum_setup(args.tum, args)
+        except (ValueError, OSError) as exc:
+            print(f"bench_vslam: {exc}", file=sys.stderr)
+            return 2
+    if args.tum_speed:
+        if setup is None:
+            print("bench_vslam: --tum-speed needs --tum FOLDER", file=sys.stderr)
+            return 2
+        try:
+            speed = bench_tum_speed(args.tum, setup, args.tum_cycles, args.tum_nodes, overrides)
+        except DepthScaleError as exc:
+            print(f"bench_vslam: {args.tum}: {exc}", file=sys.stderr)
+            return 2
+        speed = {"machine": platform.processor() or platform.machine(),
+                 "python": platform.python_version(), "cpus": os.cpu_count(),
+                 "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
+                 "clock": "cpu = time.process_time (one thread: cv2.setNumThreads(1))",
+                 **speed}
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        args.out.write_text(json.dumps(speed, indent=2))
+        for name in ("F2M", "F2F"):
+            v = speed[f"vo_{name}"]
+            print(f"VO {name} per frame: CPU median {v['cpu']['median_ms']:.1f} / p95 "
+                  f"{v['cpu']['p95_ms']:.1f} ms, wall median {v['wall']['median_ms']:.1f} ms, "
+                  f"lost {v['lost']}  (<= 20)")
+        lc = speed["loop_closure"]
+        print(f"loop closure + update per node at WM >= {lc['timed_from_wm']} ({lc['timed_nodes']} "
+              f"nodes, WM final {lc['wm_final']}): CPU median {lc['cpu']['median_ms']:.1f} / p95 "
+              f"{lc['cpu']['p95_ms']:.1f} ms, wall median {lc['wall']['median_ms']:.1f} ms "
+              f"(<= 50); loop closures {lc['loop_closures']}")
+        print(f"memory per node {lc['node_kb_mean']:.1f} kB (<= 100); load average "
+              f"{speed['load_avg_end']}; wrote {args.out}")
+        return 0
     syn = _synthetic()
     world = syn.BoxRoom(size_x=30.0, size_y=5.0, height=2.5, seed=7)
     results: dict[str, object] = {
@@ -374,7 +535,7 @@ def main() -> int:
     lc["breakdown_clock"] = "cpu" if args.cpu_parts else "wall"
     results["loop_closure"] = lc
     if args.tum:
-        rep = replay_tum(args.tum, ROOT / "benchmarks" / "results" / "vslam_tum")
+        rep = replay_tum(args.tum, ROOT / "benchmarks" / "results" / "vslam_tum", setup=setup)
         results["tum"] = {"folder": str(args.tum), **rep.__dict__}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(results, indent=2))
