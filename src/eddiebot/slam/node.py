@@ -35,7 +35,10 @@ nav2 map_server files), ``~/serialize_map`` and ``~/deserialize_map`` (the sessi
 as markers on ``~/graph_visualization`` (node ``i`` is point ``i`` of the sphere list).
 Interactive editing (``~/toggle_interactive_mode``, ``~/feedback``, ``~/manual_loop_closure``,
 ``~/clear_changes``), merging a second session (``~/add_submap``, ``~/merge_submaps``) and
-``~/set_localization_mode``: `eddiebot.slam.node_editing`.
+``~/set_localization_mode``: `eddiebot.slam.node_editing`. The publishing (TF, ``pose``, the
+map, the graph markers) is in `eddiebot.slam.node_outputs`, the session and map files
+(``~/save_map``, ``~/serialize_map``, ``~/deserialize_map``, ``map_file_name``) in
+`eddiebot.slam.node_session`; both are bases of `SlamNode`.
 
 ``odom_session`` (eddiebot) names the odometry the node maps on (the ``/odom`` publisher's
 process and node, set by ``eddie slam``); with it, a map written by ``~/save_map`` or
@@ -62,26 +65,22 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import math
 import time
 from collections import deque
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from eddiebot.core.node import Node
 from eddiebot.core.qos import (
     HistoryPolicy,
     QoSProfile,
     qos_profile_latched,
     qos_profile_sensor_data,
 )
-from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener, make_transform_2d
-from eddiebot.core.time import ns_to_stamp, stamp_to_ns
+from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener
+from eddiebot.core.time import stamp_to_ns
 from eddiebot.geometry import quaternion_to_yaw, yaw_to_quaternion
-from eddiebot.maps import MapAnchor, map_to_msg, save_anchor, save_map
-from eddiebot.msgs.geometry_msgs import Point, PoseWithCovarianceStamped
+from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
 from eddiebot.msgs.nav_msgs import MapMetaData, OccupancyGrid
 from eddiebot.msgs.sensor_msgs import LaserScan
 from eddiebot.msgs.slam_toolbox import (
@@ -93,12 +92,13 @@ from eddiebot.msgs.slam_toolbox import (
     SerializePoseGraph,
 )
 from eddiebot.msgs.std_srvs import Empty
-from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
+from eddiebot.msgs.visualization_msgs import MarkerArray
 from eddiebot.slam.config import SlamConfig, parameter_warnings
 from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning, warm_up
 from eddiebot.slam.node_editing import GraphEditing
+from eddiebot.slam.node_outputs import SlamOutputs
+from eddiebot.slam.node_session import SlamSessionFiles, _fmt_pose, _same_mount
 from eddiebot.slam.scan import Scan
-from eddiebot.slam.session import load_session, save_session
 
 __all__ = ["LOW_FEATURE_CLEAR_MATCHES", "SlamNode"]
 
@@ -109,7 +109,7 @@ _NODE_ONLY = {"extra"}
 LOW_FEATURE_CLEAR_MATCHES = 3
 
 
-class SlamNode(Node):
+class SlamNode(SlamOutputs, SlamSessionFiles):
     default_node_name = "slam_toolbox"
 
     def __init__(self, node_name: str = default_node_name, **kwargs: Any) -> None:
@@ -358,30 +358,7 @@ class SlamNode(Node):
             self._low_feature_active = False
             self.get_logger().info("scan matches well constrained again")
 
-    # -- outputs ---------------------------------------------------------------------------
-    def _publish_transform(self) -> None:
-        x, y, th = (float(v) for v in self.core.map_to_odom)
-        # as slam_toolbox: stamped a little in the future so consumers never extrapolate
-        stamp = self.get_clock().now_ns() + round(self.config.transform_timeout * 1e9)
-        self.tf_broadcaster.sendTransform(
-            make_transform_2d(self.config.map_frame, self.config.odom_frame, stamp, x, y, th)
-        )
-
-    def _publish_pose(self, pose: np.ndarray, cov: np.ndarray | None, stamp: int) -> None:
-        msg = PoseWithCovarianceStamped()
-        msg.header.frame_id = self.config.map_frame
-        msg.header.stamp = ns_to_stamp(stamp)
-        msg.pose.pose.position.x, msg.pose.pose.position.y = float(pose[0]), float(pose[1])
-        q = yaw_to_quaternion(float(pose[2]))
-        o = msg.pose.pose.orientation
-        o.x, o.y, o.z, o.w = q
-        c = np.zeros((6, 6))
-        if cov is not None:
-            ix = [0, 1, 5]
-            c[np.ix_(ix, ix)] = np.asarray(cov, dtype=np.float64)[:3, :3]
-        msg.pose.covariance = c.reshape(36)
-        self.pose_pub.publish(msg)
-
+    # -- localization ----------------------------------------------------------------------
     def _on_initial_pose(self, msg: Any) -> None:
         """slam_toolbox's ``localizePoseCallback``: the next scan starts at this pose."""
         frame = msg.header.frame_id
@@ -408,210 +385,7 @@ class SlamNode(Node):
         self.get_logger().info("clearing the localization buffer")
         return res
 
-    def _publish_map(self) -> None:
-        if not self._map_dirty and self.map_pub.sequence > 0:
-            return
-        if len(self.core.nodes) == 0:
-            return
-        cpu0 = time.thread_time()
-        self.core.update_map()
-        grid = self.core.occupancy_map()
-        self.map_update_cpu_s.append(time.thread_time() - cpu0)
-        msg = map_to_msg(grid, frame_id=self.config.map_frame, stamp_ns=self.get_clock().now_ns())
-        self.map_pub.publish(msg)
-        self.meta_pub.publish(msg.info)
-        self._map_dirty = False
-        self._publish_graph()
-
-    def _publish_graph(self) -> None:
-        poses = self.core.node_poses()
-        nodes = Marker(ns="slam_toolbox", id=0, type=Marker.SPHERE_LIST, action=Marker.ADD)
-        nodes.header.frame_id = self.config.map_frame
-        nodes.scale.x = nodes.scale.y = nodes.scale.z = 0.08
-        nodes.color.r, nodes.color.g, nodes.color.b, nodes.color.a = 0.1, 0.3, 1.0, 1.0
-        nodes.pose.orientation.w = 1.0
-        graph = self.core.graph
-        removed = set(graph.removed_nodes)  # lifelong mode marginalised them out
-        nodes.points = [Point(x=float(p[0]), y=float(p[1]), z=0.0)
-                        for k, p in enumerate(poses) if k not in removed]
-        edges = Marker(ns="slam_toolbox_edges", id=1, type=Marker.LINE_LIST, action=Marker.ADD)
-        edges.header.frame_id = self.config.map_frame
-        edges.scale.x = 0.02
-        edges.color.g, edges.color.a = 0.8, 0.8
-        edges.pose.orientation.w = 1.0
-        pts = []
-        dropped = set(graph.removed_edges)
-        for k, e in enumerate(graph.edges):
-            if k in dropped:
-                continue
-            a, b = poses[e.i], poses[e.j]
-            pts += [
-                Point(x=float(a[0]), y=float(a[1]), z=0.0),
-                Point(x=float(b[0]), y=float(b[1]), z=0.0),
-            ]
-        edges.points = pts
-        self.graph_pub.publish(MarkerArray(markers=[nodes, edges]))
-        self.editing.publish_markers()
-
     # -- services --------------------------------------------------------------------------
-    def _save_map(self, req: Any, res: Any) -> Any:
-        name = str(req.name.data) or "map"
-        if len(self.core.nodes) == 0:
-            res.result = SaveMap.Response.RESULT_NO_MAP_RECEIEVD
-            return res
-        try:
-            self.core.update_map()
-            base = Path(name).expanduser()
-            save_map(self.core.occupancy_map(), base, anchor=self.map_anchor())
-            res.result = SaveMap.Response.RESULT_SUCCESS
-            self.get_logger().info(f"saved the map to {name}.yaml / {name}.pgm")
-        except Exception as exc:
-            self.get_logger().error(f"save_map {name!r} failed: {exc}")
-            res.result = SaveMap.Response.RESULT_UNDEFINED_FAILURE
-        return res
-
-    def map_anchor(self) -> MapAnchor | None:
-        """Where the map frame stands against the odometry now (None without
-        ``odom_session``)."""
-        if not self.odom_session:
-            return None
-        x, y, th = (float(v) for v in self.core.map_to_odom)
-        return MapAnchor((x, y, th), self.odom_session)
-
-    def save_outputs(self, folder: Path) -> dict[str, Path]:
-        """Write the session (``session.eslam``, with the anchor beside it as
-        ``session.eslam.anchor.yaml``) and the map (``map.yaml`` + ``map.pgm``) into
-        ``folder``, each file atomically; returns them by kind (only the session while no
-        scan is processed yet)."""
-        folder.mkdir(parents=True, exist_ok=True)
-        out = {"session": save_session(self.core, folder / "session.eslam")}
-        anchor = self.map_anchor()
-        if anchor is not None:
-            side = folder / "session.eslam.anchor.yaml"
-            out["anchor"] = save_anchor(side, anchor)
-        if len(self.core.nodes):
-            self.core.update_map()
-            out["map"] = save_map(self.core.occupancy_map(), folder / "map", anchor=anchor)
-        return out
-
-    def _serialize(self, req: Any, res: Any) -> Any:
-        try:
-            path = save_session(self.core, Path(str(req.filename)).expanduser())
-            self.get_logger().info(f"serialized the session to {path}")
-            res.result = SerializePoseGraph.Response.RESULT_SUCCESS
-        except Exception as exc:
-            self.get_logger().error(f"serialize_map {req.filename!r} failed: {exc}")
-            res.result = SerializePoseGraph.Response.RESULT_FAILED_TO_WRITE_FILE
-        return res
-
-    def _deserialize(self, req: Any, res: Any) -> Any:
-        p = req.initial_pose
-        self.load_session_file(
-            str(req.filename), int(req.match_type), (float(p.x), float(p.y), float(p.theta))
-        )
-        return res
-
-    def _load_at_start(self) -> None:
-        """slam_toolbox's ``loadPoseGraphByParams``: ``map_file_name`` at start-up."""
-        cfg = self.config
-        request = DeserializePoseGraph.Request
-        pose: tuple[float, ...] | None = tuple(cfg.map_start_pose or (0.0, 0.0, 0.0))
-        if cfg.mode == "localization":
-            if not cfg.map_start_pose:
-                pose = None  # relocalised globally on the first scan
-            if cfg.map_start_at_dock and not cfg.map_start_pose:
-                self.get_logger().warning(
-                    "map_start_at_dock: localization does not start at the first node; "
-                    "starting at map_start_pose (the origin when unset)"
-                )
-            match = request.LOCALIZE_AT_POSE
-        elif cfg.map_start_pose:
-            match = request.START_AT_GIVEN_POSE
-        elif cfg.map_start_at_dock:
-            match = request.START_AT_FIRST_NODE
-        else:
-            match = request.START_AT_GIVEN_POSE
-            self.get_logger().info(
-                "map_file_name without map_start_pose or map_start_at_dock: starting at the "
-                "map origin"
-            )
-        if not self.load_session_file(cfg.map_file_name, match, pose):
-            self.get_logger().error(
-                f"map_file_name {cfg.map_file_name!r} not loaded; starting with an empty map"
-            )
-
-    def load_session_file(
-        self, filename: str, match_type: int, pose: tuple[float, ...] | None = (0.0, 0.0, 0.0)
-    ) -> bool:
-        """Load a saved session as ``~/deserialize_map`` does; False (and a log line) when
-        refused or unreadable, the current session kept.
-
-        ``match_type``: START_AT_FIRST_NODE (the robot is at the session's first node),
-        START_AT_GIVEN_POSE (at ``pose``, map frame x, y, theta) — mapping and lifelong;
-        LOCALIZE_AT_POSE (at ``pose``) — localization only. The next scan is placed there,
-        whatever its odometry, and matched against the nodes near it. LOCALIZE_AT_POSE with
-        ``pose`` None: the next scan is relocalised over the whole map."""
-        request = DeserializePoseGraph.Request
-        names = {
-            request.START_AT_FIRST_NODE: "START_AT_FIRST_NODE",
-            request.START_AT_GIVEN_POSE: "START_AT_GIVEN_POSE",
-            request.LOCALIZE_AT_POSE: "LOCALIZE_AT_POSE",
-        }
-        mode = self.config.mode
-        if match_type not in names:
-            self.get_logger().error(
-                f"deserialize_map {filename!r}: match_type {match_type} is not set "
-                "(START_AT_FIRST_NODE 1, START_AT_GIVEN_POSE 2, LOCALIZE_AT_POSE 3); not loaded"
-            )
-            return False
-        if mode == "localization" and match_type != request.LOCALIZE_AT_POSE:
-            self.get_logger().error(
-                f"deserialize_map {filename!r}: {names[match_type]} refused in localization "
-                "mode (use LOCALIZE_AT_POSE); not loaded"
-            )
-            return False
-        if mode != "localization" and match_type == request.LOCALIZE_AT_POSE:
-            self.get_logger().error(
-                f"deserialize_map {filename!r}: LOCALIZE_AT_POSE refused in {mode} mode (it "
-                "needs mode localization; use START_AT_GIVEN_POSE); not loaded"
-            )
-            return False
-        if not filename:
-            self.get_logger().warning("deserialize_map: no map file given")
-            return False
-        try:
-            core = load_session(Path(filename).expanduser(), self.config, mode=mode)
-        except Exception as exc:
-            self.get_logger().error(
-                f"deserialize_map {filename!r} failed: {exc}; kept the current session"
-            )
-            return False
-        if self._laser is not None and not _same_mount(core.sensor_offset, self._laser[1]):
-            self.get_logger().error(
-                f"deserialize_map {filename!r}: the session's laser was mounted at "
-                f"{_fmt_pose(core.sensor_offset)}, {self._laser[0]} is at "
-                f"{_fmt_pose(self._laser[1])}; not loaded"
-            )
-            return False
-        core.on_warning = self._on_warning
-        where = "at the pose global relocalisation finds"
-        if match_type == request.START_AT_FIRST_NODE and core.nodes:
-            start = core.node_poses()[0]
-        elif pose is not None:
-            start = np.asarray(pose, dtype=np.float64)
-        else:
-            start = None
-        if start is not None:
-            core.start_at(start)
-            where = f"at {_fmt_pose(start)}"
-        self.core = core
-        self._last_scan_ns = None
-        self._map_dirty = True
-        self.get_logger().info(
-            f"loaded session {filename} ({len(core.nodes)} nodes), {names[match_type]} {where}"
-        )
-        return True
-
     def _pause(self, req: Any, res: Any) -> Any:
         self.paused = not self.paused
         if not self.paused:
@@ -653,14 +427,3 @@ class SlamNode(Node):
 
     def map_to_odom_quaternion(self) -> tuple[float, float, float, float]:
         return yaw_to_quaternion(float(self.core.map_to_odom[2]))
-
-
-def _same_mount(a: np.ndarray, b: np.ndarray) -> bool:
-    """Two laser mounts (x, y, yaw) equal to within 1 mm and 1 mrad."""
-    dx, dy = float(a[0] - b[0]), float(a[1] - b[1])
-    dyaw = math.remainder(float(a[2] - b[2]), math.tau)
-    return math.hypot(dx, dy) <= 1e-3 and abs(dyaw) <= 1e-3
-
-
-def _fmt_pose(p: Any) -> str:
-    return f"({float(p[0]):.3f}, {float(p[1]):.3f}, {float(p[2]):.3f})"
