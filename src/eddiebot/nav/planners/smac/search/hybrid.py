@@ -1,298 +1,32 @@
-"""Search kernels of the Smac planners (numba): the 2D A* of ``SmacPlanner2D``, the
-obstacle heuristic and the Hybrid-A* of ``SmacPlannerHybrid``.
-
-Status codes returned by the searches: ``FOUND``, ``NO_PATH`` (queue exhausted),
-``MAX_ITERATIONS`` (``max_iterations`` expansions), ``TIMED_OUT`` (``max_planning_time``,
-checked every ``terminal_checking_interval`` expansions as upstream does).
-"""
+"""``SmacPlannerHybrid``'s search (numba): Hybrid-A* over (x, y, heading bin) with the
+footprint collision check, upstream's traversal cost and analytic expansions."""
 
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
-from numba import njit, objmode, types
+from numba import njit, types
 from numba.typed import Dict
 
 from eddiebot.nav.costmap._kernels import polygon_outline_cost
 from eddiebot.nav.planners.smac.curves import curve_path, curve_sample
-
-FOUND = 0
-NO_PATH = 1
-MAX_ITERATIONS = 2
-TIMED_OUT = 3
-
-UNKNOWN = 255
-OCCUPIED = 254
-INSCRIBED = 253
-
-# turn directions (upstream's TurnDirection)
-FORWARD = 0
-LEFT = 1
-RIGHT = 2
-REVERSE = 3
-REV_LEFT = 4
-REV_RIGHT = 5
-
-
-@njit(cache=True)
-def _now() -> float:
-    with objmode(t="float64"):
-        t = time.perf_counter()
-    return t
-
-
-@njit(cache=True)
-def _grow(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """The heap's arrays, doubled when full (call before :func:`_push`)."""
-    if size < hk.shape[0]:
-        return hk, hv
-    return (np.concatenate((hk, np.empty(hk.shape[0]))),
-            np.concatenate((hv, np.empty(hv.shape[0], dtype=np.int64))))
-
-
-@njit(cache=True)
-def _push(hk: np.ndarray, hv: np.ndarray, size: int, key: float, val: int) -> int:
-    i = size
-    hk[i] = key
-    hv[i] = val
-    while i > 0:
-        p = (i - 1) >> 1
-        if hk[p] <= hk[i]:
-            break
-        hk[p], hk[i] = hk[i], hk[p]
-        hv[p], hv[i] = hv[i], hv[p]
-        i = p
-    return size + 1
-
-
-@njit(cache=True)
-def _pop(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[int, int]:
-    top = hv[0]
-    size -= 1
-    hk[0] = hk[size]
-    hv[0] = hv[size]
-    i = 0
-    while True:
-        left = 2 * i + 1
-        r = left + 1
-        m = i
-        if left < size and hk[left] < hk[m]:
-            m = left
-        if r < size and hk[r] < hk[m]:
-            m = r
-        if m == i:
-            break
-        hk[m], hk[i] = hk[i], hk[m]
-        hv[m], hv[i] = hv[i], hv[m]
-        i = m
-    return top, size
-
-
-# --------------------------------------------------------------------------------------
-# SmacPlanner2D
-# --------------------------------------------------------------------------------------
-
-@njit(cache=True)
-def astar_2d(grid: np.ndarray, sx: int, sy: int, gx: float, gy: float, cost_penalty: float,
-             allow_unknown: bool, tolerance: float, max_iterations: int,
-             max_on_approach_iterations: int, terminal_checking_interval: int,
-             max_planning_time: float) -> tuple[int, np.ndarray, int]:
-    """``AStarAlgorithm<Node2D>::createPath``: (status, cells (K, 2) start -> end, expansions).
-
-    Travel cost ``(1 or √2)·(1 + cost_penalty·cost/252)`` (``Node2D::getTraversalCost``),
-    heuristic the Euclidean distance to the goal's continuous cell coordinates; the node of
-    least heuristic seen is returned when it lies within ``tolerance`` (cells) after
-    ``max_on_approach_iterations`` further expansions or when the queue runs dry.
-    """
-    t0 = _now()
-    h, w = grid.shape
-    n = h * w
-    # per-cell travel factor 1 + cost_penalty·cost/252; -1 where the cell cannot be entered
-    fac = np.empty(n)
-    flat = grid.ravel()
-    for i in range(n):
-        c = flat[i]
-        fac[i] = 1.0 + cost_penalty * c / 252.0 if (c < INSCRIBED or (c == UNKNOWN and
-                                                                   allow_unknown)) else -1.0
-    g = np.full(n, np.inf)
-    parent = np.full(n, -1, dtype=np.int64)
-    visited = np.zeros(n, dtype=np.bool_)
-    hk = np.empty(1024)
-    hv = np.empty(1024, dtype=np.int64)
-    size = 0
-    start = sy * w + sx
-    goal = int(gy) * w + int(gx)
-    g[start] = 0.0
-    if size == hk.shape[0]:
-        hk, hv = _grow(hk, hv, size)
-    size = _push(hk, hv, size, 0.0, start)
-    best_h = np.inf
-    best_i = -1
-    iterations = 0
-    approach = 0
-    end = -1
-    status = NO_PATH
-    sqrt2 = math.sqrt(2.0)
-    while size > 0:
-        if iterations >= max_iterations:
-            status = MAX_ITERATIONS
-            break
-        if iterations % terminal_checking_interval == 0 and _now() - t0 >= max_planning_time:
-            status = TIMED_OUT
-            break
-        cur, size = _pop(hk, hv, size)
-        if visited[cur]:
-            continue
-        iterations += 1
-        visited[cur] = True
-        if cur == goal:
-            end = cur
-            status = FOUND
-            break
-        if best_h < tolerance:
-            approach += 1
-            if approach >= max_on_approach_iterations:
-                end = best_i
-                status = FOUND
-                break
-        cx = cur % w
-        cy = cur // w
-        for k in range(8):
-            dx = (-1, 1, 0, 0, -1, 1, -1, 1)[k]
-            dy = (0, 0, -1, 1, -1, -1, 1, 1)[k]
-            mx = cx + dx
-            my = cy + dy
-            if mx < 0 or my < 0 or mx >= w or my >= h:
-                continue
-            m = my * w + mx
-            if visited[m]:
-                continue
-            fm = fac[m]
-            if fm < 0.0:
-                continue
-            gc = g[cur] + (sqrt2 * fm if k >= 4 else fm)
-            if gc < g[m]:
-                g[m] = gc
-                parent[m] = cur
-                hh = math.hypot(gx - mx, gy - my)
-                if hh < best_h:
-                    best_h = hh
-                    best_i = m
-                if size == hk.shape[0]:
-                    hk, hv = _grow(hk, hv, size)
-                size = _push(hk, hv, size, gc + hh, m)
-    if status != FOUND and best_h < tolerance and status != TIMED_OUT:
-        end = best_i
-        status = FOUND
-    if status != FOUND:
-        return status, np.zeros((0, 2), dtype=np.int64), iterations
-    count = 1
-    c2 = end
-    while c2 != start:
-        c2 = parent[c2]
-        count += 1
-    out = np.empty((count, 2), dtype=np.int64)
-    c2 = end
-    for i in range(count - 1, -1, -1):
-        out[i, 0] = c2 % w
-        out[i, 1] = c2 // w
-        c2 = parent[c2]
-    return status, out, iterations
-
-
-@njit(cache=True)
-def downsample_max(grid: np.ndarray, factor: int) -> np.ndarray:
-    """``CostmapDownsampler``: each cell of the coarse grid is the largest of its block."""
-    h, w = grid.shape
-    hh = (h + factor - 1) // factor
-    ww = (w + factor - 1) // factor
-    out = np.zeros((hh, ww), dtype=np.uint8)
-    for y in range(h):
-        for x in range(w):
-            c = grid[y, x]
-            if c > out[y // factor, x // factor]:
-                out[y // factor, x // factor] = c
-    return out
-
-
-# --------------------------------------------------------------------------------------
-# SmacPlannerHybrid
-# --------------------------------------------------------------------------------------
-
-@njit(cache=True)
-def obstacle_heuristic(grid: np.ndarray, goal_x: float, goal_y: float, cost_penalty: float,
-                       downsample: bool, quadratic: bool) -> np.ndarray:
-    """``NodeHybrid::getObstacleHeuristic``'s wavefront, run to completion: cost-aware 2D
-    Dijkstra from the goal (on the 2x-downsampled grid, each coarse cell the cheapest of its
-    block, when ``downsample``). Cells at INSCRIBED or above, unknown included, are walls;
-    cells within 3 of the border are not entered, as upstream. Values are in full-grid cells
-    (doubled when downsampled); ``inf`` where the wavefront does not reach."""
-    h, w = grid.shape
-    if downsample:
-        sh = (h + 1) // 2
-        sw = (w + 1) // 2
-        cg = np.full((sh, sw), 255, dtype=np.uint8)
-        for y in range(h):
-            for x in range(w):
-                c = grid[y, x]
-                if c < cg[y // 2, x // 2]:
-                    cg[y // 2, x // 2] = c
-        gx = math.floor(goal_x / 2.0)
-        gy = math.floor(goal_y / 2.0)
-    else:
-        sh = h
-        sw = w
-        cg = grid
-        gx = math.floor(goal_x)
-        gy = math.floor(goal_y)
-    n = sh * sw
-    dist = np.full(n, np.inf)
-    done = np.zeros(n, dtype=np.bool_)
-    hk = np.empty(1024)
-    hv = np.empty(1024, dtype=np.int64)
-    size = 0
-    s = gy * sw + gx
-    dist[s] = 0.0
-    if size == hk.shape[0]:
-        hk, hv = _grow(hk, hv, size)
-    size = _push(hk, hv, size, 0.0, s)
-    sqrt2 = math.sqrt(2.0)
-    while size > 0:
-        cur, size = _pop(hk, hv, size)
-        if done[cur]:
-            continue
-        done[cur] = True
-        cx = cur % sw
-        cy = cur // sw
-        for k in range(8):
-            dx = (1, -1, 0, 0, 1, -1, 1, -1)[k]
-            dy = (0, 0, 1, -1, 1, 1, -1, -1)[k]
-            mx = cx + dx
-            my = cy + dy
-            if mx <= 3 or my <= 3 or mx >= sw - 3 or my >= sh - 3:
-                continue
-            m = my * sw + mx
-            if done[m]:
-                continue
-            c = cg[my, mx]
-            if c >= INSCRIBED:
-                continue
-            step = 1.0 if k < 4 else sqrt2
-            if quadratic:
-                nc = dist[cur] + step * (1.0 + cost_penalty * c * c / 63504.0)
-            else:
-                nc = dist[cur] + step * (1.0 + cost_penalty * c / 252.0)
-            if nc < dist[m]:
-                dist[m] = nc
-                if size == hk.shape[0]:
-                    hk, hv = _grow(hk, hv, size)
-                size = _push(hk, hv, size, nc, m)
-    out = dist.reshape(sh, sw)
-    if downsample:
-        out = out * 2.0
-    return out
+from eddiebot.nav.planners.smac.search.common import (
+    FORWARD,
+    FOUND,
+    INSCRIBED,
+    MAX_ITERATIONS,
+    NO_PATH,
+    OCCUPIED,
+    REV_LEFT,
+    REV_RIGHT,
+    REVERSE,
+    TIMED_OUT,
+    UNKNOWN,
+    _now,
+)
+from eddiebot.nav.planners.smac.search.heap import _grow, _pop, _push
+from eddiebot.nav.planners.smac.search.heuristics import _heuristic
 
 
 @njit(cache=True)
@@ -332,47 +66,6 @@ def _in_collision(grid: np.ndarray, x: float, y: float, bin_: int, allow_unknown
     if center == UNKNOWN and allow_unknown:
         return False, center
     return center >= INSCRIBED, center
-
-
-@njit(cache=True)
-def _heuristic(x: float, y: float, th_bin: float, gx: float, gy: float, gbin: int,
-               h_obs: np.ndarray, downsample: bool, bins: int, rho: float, rs: bool,
-               lookup_dim: float) -> float:
-    """``NodeHybrid::getHeuristicCost``: max(obstacle heuristic, motion heuristic). The
-    motion heuristic is the Dubins/Reeds-Shepp length from the node, expressed in the goal's
-    frame and rounded to whole cells and bins, when it lies inside the ``lookup_table_size``
-    window (upstream reads the same value from its precomputed table); outside it, it counts
-    only when the obstacle heuristic has no value there."""
-    if downsample:
-        hx = math.floor(x / 2.0)
-        hy = math.floor(y / 2.0)
-    else:
-        hx = math.floor(x)
-        hy = math.floor(y)
-    ho = 0.0
-    if 0 <= hy < h_obs.shape[0] and 0 <= hx < h_obs.shape[1]:
-        v = h_obs[hy, hx]
-        if v < np.inf:
-            ho = v
-    bin_size = 2.0 * math.pi / bins
-    gth = gbin * bin_size
-    c = math.cos(gth)
-    s = -math.sin(gth)
-    dx = x - gx
-    dy = y - gy
-    rx = round(dx * c - dy * s)
-    ry = round(dx * s + dy * c)
-    dth = th_bin - gbin
-    if dth < 0:
-        dth += bins
-    rth = round(dth)
-    floored = math.floor(lookup_dim / 2.0)
-    hm = 0.0
-    if abs(rx) < floored and abs(ry) < floored:
-        hm = curve_path(rx, ry, rth * bin_size, 0.0, 0.0, 0.0, rho, rs)[2]
-    elif ho <= 0.0:
-        hm = curve_path(x, y, th_bin * bin_size, gx, gy, gth, rho, rs)[2]
-    return max(ho, hm)
 
 
 @njit(cache=True)
@@ -708,14 +401,4 @@ def hybrid_astar(
     return status, out, iterations
 
 
-__all__ = [
-    "FOUND",
-    "MAX_ITERATIONS",
-    "NO_PATH",
-    "TIMED_OUT",
-    "astar_2d",
-    "downsample_max",
-    "hybrid_astar",
-    "obstacle_heuristic",
-    "traversal_cost",
-]
+__all__ = ["_in_collision", "hybrid_astar", "traversal_cost"]
