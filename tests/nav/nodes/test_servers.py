@@ -1,6 +1,8 @@
 """Single servers: velocity smoother limits, collision monitor, lifecycle errors, lost TF."""
 
 
+import pytest
+
 from eddiebot.core import Context, Node, SingleThreadedExecutor
 from eddiebot.core.action import ActionClient, GoalStatus
 from eddiebot.msgs.geometry_msgs import Twist
@@ -184,3 +186,19 @@ def test_is_path_valid_finds_the_first_blocked_pose(make_stack):
     back.poses = [pose_stamped(3.0, 3.0, 0.0, "map"), pose_stamped(1.0, 1.0, 0.0, "map"),
                   pose_stamped(1.5, 1.0, 0.0, "map")]
     assert check(back).is_valid
+
+
+def test_the_planner_plans_from_the_latest_pose_however_old(make_stack):
+    """As Nav2's planner (Costmap2DROS::getRobotPose: the latest transform, the tolerance a
+    wait): a robot pose older than transform_tolerance still plans; the controller, which
+    drives on it, refuses it (test above)."""
+    stack = make_stack(servers=("map_server", "planner_server"))
+    stack.spin(0.5)
+    stack.robot.publish_tf = False
+    stack.spin(1.0)  # the latest robot pose is now 1 s old (transform_tolerance 0.3 s)
+    host = stack.nodes["planner_server"].host
+    assert host.robot_pose() is None
+    path = _plan(stack, 4.5, 1.0)
+    assert len(path.poses) > 10
+    end = path.poses[-1].pose.position
+    assert (end.x, end.y) == pytest.approx((4.5, 1.0), abs=0.05)

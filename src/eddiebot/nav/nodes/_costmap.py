@@ -237,6 +237,13 @@ class CostmapHost:
         return robot_pose(self.buffer, self.global_frame, self.base_frame,
                           self.node.now().nanoseconds, self.costmap.config.transform_tolerance)
 
+    def latest_robot_pose(self) -> npt.NDArray[np.float64] | None:
+        """The robot's pose from the latest transform however old, as Nav2's
+        ``Costmap2DROS::getRobotPose`` gives it to the planner (``transform_tolerance`` is a
+        wait there, not an age limit); the controller keeps the age check of `robot_pose`."""
+        return robot_pose(self.buffer, self.global_frame, self.base_frame,
+                          self.node.now().nanoseconds, math.inf)
+
     def update(self) -> None:
         pose = self.robot_pose()
         if pose is None:

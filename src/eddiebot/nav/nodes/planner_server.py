@@ -120,7 +120,7 @@ class PlannerServer(NavServer):
         if not poses:
             return response
         xy = np.array([(p.pose.position.x, p.pose.position.y) for p in poses], dtype=np.float64)
-        robot = self.host.robot_pose()
+        robot = self.host.latest_robot_pose()
         first = 0 if robot is None else int(np.argmin(np.sum((xy - robot[:2]) ** 2, axis=1)))
         self.host.update()
         invalid = is_path_invalid_from(self.costmap, poses, first)
@@ -151,7 +151,7 @@ class PlannerServer(NavServer):
         assert self.host is not None
         if goal.use_start:
             return self._in_global(goal.start, "start")
-        pose = self.host.robot_pose()
+        pose = self.host.latest_robot_pose()
         if pose is None:
             raise PlannerTFError(f"no robot pose ({self.host.global_frame} -> {self.host.base_frame})")
         return pose
