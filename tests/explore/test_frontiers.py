@@ -194,6 +194,58 @@ def test_goals_keep_away_from_avoided_spots() -> None:
     assert math.dist(after.entry, spot) > config.avoid_radius
 
 
+def door_wall(grid: OccupancyMap) -> OccupancyMap:
+    """``grid`` (a `room`) with a wall across it at x = 2.5 m and two 0.7 m gaps in it,
+    y 1.3-1.95 m (south) and 3.0-3.65 m (north)."""
+    d = grid.data.copy()
+    d[20:80, 50] = 100
+    d[26:40, 50] = 0
+    d[60:74, 50] = 0
+    return OccupancyMap(d, RES, grid.origin)
+
+
+def test_after_no_progress_viewpoints_are_reached_without_passing_the_blocked_spot() -> None:
+    config = ExploreConfig()
+    grid = door_wall(room())
+    robot = (1.0, 1.6, 0.0)
+    before = search_frontiers(grid, robot, config).frontiers[0]
+    assert before.viewpoint[1] < 2.6  # nearest by path: through the south gap
+    # the robot stood blocked in the south gap (a chair below the scan): the viewpoint is
+    # now one whose shortest path runs through the north gap
+    after = search_frontiers(grid, robot, config, blocked=[(2.5, 1.625)]).frontiers[0]
+    assert after.viewpoint[1] > 2.9
+    passable = reachable_mask(grid, config)
+    rows, cols = np.mgrid[0:passable.shape[0], 0:passable.shape[1]]
+    closed = passable & (np.hypot(rows - 32, cols - 50) * RES > 0.3)  # the blocked disc
+    start = (20, 32)
+    col, row = int(after.viewpoint[0] / RES), int(after.viewpoint[1] / RES)
+    assert distance_field(closed, start, RES)[row, col] == pytest.approx(
+        distance_field(passable, start, RES)[row, col], abs=0.05)
+    # with nothing else to choose (a blocked spot every way round) the viewpoint stays
+    both = search_frontiers(grid, robot, config, blocked=[(2.5, 1.625), (2.5, 3.325)])
+    assert both.frontiers[0].viewpoint == before.viewpoint
+
+
+def test_viewpoints_keep_the_preferred_clearance_when_the_frontier_has_room() -> None:
+    from scipy import ndimage
+
+    grid = room()
+    occupied = grid.data >= 65
+    clearance = ndimage.distance_transform_edt(~occupied) * RES
+    robot = (1.0, 1.35, 0.0)  # beside the south wall
+    for preferred in (0.5, 1.2):
+        f = search_frontiers(grid, robot, ExploreConfig(preferred_clearance=preferred)).frontiers[0]
+        col, row = int(f.viewpoint[0] / RES), int(f.viewpoint[1] / RES)
+        assert clearance[row, col] >= preferred - 1e-9
+    # a narrow room has no such spot: the viewpoint keeps goal_clearance only
+    narrow = room(height_cells=18)  # 0.8 m between the walls
+    occupied = narrow.data >= 65
+    clearance = ndimage.distance_transform_edt(~occupied) * RES
+    f = search_frontiers(narrow, (1.0, 1.4, 0.0), ExploreConfig()).frontiers[0]
+    col, row = int(f.viewpoint[0] / RES), int(f.viewpoint[1] / RES)
+    assert ExploreConfig().goal_clearance <= clearance[row, col] < 0.5
+
+
 def test_progress_monitor_times_out_without_getting_closer() -> None:
     m = ProgressMonitor(timeout=30.0)
     m.reset(0.0)

@@ -37,6 +37,10 @@ class ExploreConfig:
     """Cells closer than this to an occupied cell are not reachable (Nav2's inscribed radius)."""
     goal_clearance: float = 0.35
     """Goals (viewpoints, entries) keep this far from known obstacles, m."""
+    preferred_clearance: float = 0.5
+    """Viewpoints keep this far from known obstacles when the frontier has such a spot, m:
+    out of a 0.9 m door's gap and off the walls, where the controller and the base's range
+    veto stall the robot."""
     free_threshold: int = 19
     """A map cell with 0 ≤ value ≤ this is free (map_server's free_thresh 0.196)."""
     occupied_threshold: int = 65
@@ -75,7 +79,7 @@ class ExploreConfig:
             if not float(getattr(self, name)) > 0.0:
                 raise ExploreConfigError(f"{name} must be > 0, got {getattr(self, name)!r}")
         for name in ("potential_scale", "orientation_scale", "gain_scale", "min_frontier_size",
-                     "robot_radius", "sensor_min_range", "min_gain", "goal_clearance", "standoff", "blacklist_radius",
+                     "robot_radius", "sensor_min_range", "min_gain", "goal_clearance", "preferred_clearance", "standoff", "blacklist_radius",
                      "time_limit"):
             if float(getattr(self, name)) < 0.0:
                 raise ExploreConfigError(f"{name} must be ≥ 0, got {getattr(self, name)!r}")

@@ -70,6 +70,11 @@ _COARSE_RAYS = 24
 #: Viewpoint choice: a pose is a frontier's viewpoint only if it shows at least this share
 #: of the most any candidate pose of that frontier shows.
 _GAIN_SHARE = 0.5
+#: Viewpoint choice after a goal made no progress: a disc this wide (radius, m) where the
+#: robot stood blocked; a viewpoint whose shortest path grows by more than this (m) when the
+#: disc is closed passes there (grid paths tie, so one beside the disc grows by nothing).
+_BLOCK_RADIUS = 0.3
+_DETOUR_SLACK = 0.03
 _EIGHT = np.ones((3, 3), dtype=bool)
 _FOUR = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], dtype=bool)
 
@@ -434,15 +439,25 @@ def _padded(grid: OccupancyMap, passable: npt.NDArray[np.bool_] | None, pad: int
 def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: ExploreConfig,
                      passable: npt.NDArray[np.bool_] | None = None,
                      avoid: Sequence[Sequence[float]] = (),
-                     looked: Sequence[Sequence[float]] | npt.NDArray[np.float64] | None = None
-                     ) -> FrontierSearch:
+                     looked: Sequence[Sequence[float]] | npt.NDArray[np.float64] | None = None,
+                     blocked: Sequence[Sequence[float]] = ()) -> FrontierSearch:
     """Every reachable frontier of ``grid`` seen from the robot at ``robot`` (x, y, yaw),
     cheapest first.
 
     ``passable``: where the robot's centre may go (default `reachable_mask`); a caller with
     a costmap passes its non-lethal, non-inscribed cells here. ``avoid``: spots (x, y) the
     robot could not get to; no goal (viewpoint, entry) lies within ``avoid_radius`` of one.
-    ``looked``: the robot's poses (N, 3) so far; see `looked_mask`.
+    ``looked``: the robot's poses (N, 3) so far; see `looked_mask`. ``blocked``: spots
+    (x, y) where the robot stood blocked on the way to a goal (an obstacle the map does not
+    show, below the scan: a chair seen only by the range sensors).
+
+    A frontier's viewpoint is taken, in this order of preference, from the candidate spots
+    (a) with ``preferred_clearance`` from known obstacles whose shortest path does not go
+    round a ``blocked`` spot by more than ``_DETOUR_SLACK`` (the planner's path to them
+    does not pass there), (b) with such a path, (c) with that clearance, (d) any: a spot
+    with room on every side is one the controller reaches and turns on without the base's
+    range veto or the collision monitor holding it, unlike a spot in a door's gap or
+    beside a desk.
     The ``distance`` field refers to the grid padded with 2 unknown cells on every side.
     """
     res = grid.resolution
@@ -511,6 +526,20 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
     candidate = goal_ok & (edt >= standoff) & (edt <= view_max)
     cand_flat = np.flatnonzero(candidate)
     cand_owner = owner.ravel()[cand_flat]
+    cand_roomy = clearance.ravel()[cand_flat] >= config.preferred_clearance
+    cand_direct = np.ones(cand_flat.size, dtype=bool)
+    if len(blocked):
+        spots = world_to_map(grid, np.asarray(blocked, dtype=np.float64).reshape(-1, 2))
+        marks = np.zeros(passable.shape, dtype=bool)
+        inside = is_inside(grid, spots)
+        marks[spots[inside, 1], spots[inside, 0]] = True
+        if marks.any():
+            around = ndimage.distance_transform_edt(~marks) * res <= _BLOCK_RADIUS
+            start_rc = (int(start[0]), int(start[1]))
+            detour = distance_field(passable & ~around, start_rc, res)
+            cand_direct = (detour.ravel()[cand_flat]
+                           <= dist.ravel()[cand_flat] + _DETOUR_SLACK)
+    tiers = (cand_roomy & cand_direct, cand_direct, cand_roomy)
     # nearer the standoff is better: a step closer costs a step but shows more beyond
     cand_score = dist.ravel()[cand_flat] + _CLOSER_WEIGHT * (edt.ravel()[cand_flat] - standoff)
     looked_cells = looked_mask(grid, looked, config) if looked is not None and len(looked) else None
@@ -538,7 +567,12 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
         # band, spread out (nearest by path first), each with nine headings, scored by
         # the frontier cost; a spot the camera has looked from along a heading gains
         # nothing more that way (`looked_mask`)
-        stands = _spread(cand_flat[cand_owner == k], cand_score[cand_owner == k], grid.width,
+        mine = cand_owner == k
+        for tier in tiers:
+            if (mine & tier).any():
+                mine = mine & tier
+                break
+        stands = _spread(cand_flat[mine], cand_score[mine], grid.width,
                          _SPOT_SPACING / res, _VIEW_CANDIDATES)
         if not stands:
             stands = [_walk_back(dist, (er, ec), cells, standoff / res)]

@@ -56,6 +56,8 @@ _IDLE_VISITS = 3
 #: The look memory keeps a pose every this many metres or radians.
 _LOOK_STEP = 0.1
 _LOOK_TURN = 0.15
+#: A goal without progress marks the spot this far ahead of the robot as blocked (m).
+_BLOCK_AHEAD = 0.4
 #: After an arrival the next plan waits for a map made since, at most this long (s).
 _MAP_WAIT_S = 10.0
 #: Attempts at getting home (each after a recovery but the first) before giving up.
@@ -157,6 +159,9 @@ class ExploreNode(Node):
         self._resume_at: tuple[float, Any] | None = None
         self.avoid: list[tuple[float, float]] = []
         """Goal spots given up for no progress; later goals keep ``avoid_radius`` from them."""
+        self.blocked: list[tuple[float, float]] = []
+        """Spots just ahead of the robot where a goal made no progress (an obstacle the map
+        may not show); viewpoints whose path passes there are avoided when others exist."""
         self.retries = 0
         self.transient_failures = 0
         """Goals failed for want of the robot's pose (TF), not blamed on their frontier."""
@@ -289,10 +294,16 @@ class ExploreNode(Node):
                     self.get_logger().info(f"no progress for {self.config.progress_timeout:.0f} s "
                                            f"towards ({goal[0]:.2f}, {goal[1]:.2f}): avoiding it")
                 self.avoid.append((goal[0], goal[1]))
+                # what held the robot is most likely just ahead of it (the range veto stops
+                # forward motion within 0.25 m of its front): later viewpoints are chosen
+                # among those whose path does not pass there
+                self.blocked.append((pose[0] + _BLOCK_AHEAD * math.cos(pose[2]),
+                                     pose[1] + _BLOCK_AHEAD * math.sin(pose[2])))
                 self.goals[-1].outcome = "no progress"
                 self._cancel_goal()
         swept = mark_swept(self.grid, [(x, y) for x, y, _ in self.path], self.config.robot_radius)
-        search = search_frontiers(swept, pose, self.config, avoid=self.avoid, looked=self.looks)
+        search = search_frontiers(swept, pose, self.config, avoid=self.avoid, looked=self.looks,
+                                  blocked=self.blocked)
         self.last_search = search
         self.searches += 1
         known = float(np.count_nonzero(self.grid.data >= 0)) * self.grid.resolution**2
