@@ -30,6 +30,7 @@ from eddiebot.nav.errors import (
     StartOutsideMapBounds,
 )
 from eddiebot.nav.params import require
+from eddiebot.nav.planners._heap import _grow, _pop, _push
 from eddiebot.nav.types import as_pose
 
 
@@ -156,45 +157,6 @@ def _line_of_sight(los: np.ndarray, x0: int, y0: int, x1: int, y1: int) -> float
     return cost
 
 
-@njit(cache=True)
-def _heap_push(hk: np.ndarray, hv: np.ndarray, size: int, key: float, val: int) -> int:
-    i = size
-    hk[i] = key
-    hv[i] = val
-    while i > 0:
-        p = (i - 1) >> 1
-        if hk[p] <= hk[i]:
-            break
-        hk[p], hk[i] = hk[i], hk[p]
-        hv[p], hv[i] = hv[i], hv[p]
-        i = p
-    return size + 1
-
-
-@njit(cache=True)
-def _heap_pop(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[float, int, int]:
-    key = hk[0]
-    top = hv[0]
-    size -= 1
-    hk[0] = hk[size]
-    hv[0] = hv[size]
-    i = 0
-    while True:
-        left = 2 * i + 1
-        r = left + 1
-        m = i
-        if left < size and hk[left] < hk[m]:
-            m = left
-        if r < size and hk[r] < hk[m]:
-            m = r
-        if m == i:
-            break
-        hk[m], hk[i] = hk[i], hk[m]
-        hv[m], hv[i] = hv[i], hv[m]
-        i = m
-    return key, top, size
-
-
 _MOVES_X = np.array([0, 0, 1, -1, 1, -1, 1, -1])
 _MOVES_Y = np.array([1, -1, 0, 0, -1, 1, 1, -1])
 
@@ -228,11 +190,11 @@ def theta_star_search(
     g[s] = w_trav * step[sy, sx]
     f[s] = g[s] + w_heur * math.hypot(gx - sx, gy - sy)
     parent[s] = s
-    size = _heap_push(hk, hv, size, f[s], s)
+    size = _push(hk, hv, size, f[s], s)
     expansions = 0
     found = False
     while size > 0:
-        key, n, size = _heap_pop(hk, hv, size)
+        key, n, size = _pop(hk, hv, size)
         if key > f[n]:
             continue  # superseded by a cheaper entry
         if n == goal:
@@ -265,10 +227,8 @@ def theta_star_search(
                 g[m] = gc
                 f[m] = cal
                 parent[m] = n
-                if size == hk.shape[0]:
-                    hk = np.concatenate((hk, np.empty(hk.shape[0])))
-                    hv = np.concatenate((hv, np.empty(hv.shape[0], dtype=np.int64)))
-                size = _heap_push(hk, hv, size, cal, m)
+                hk, hv = _grow(hk, hv, size)
+                size = _push(hk, hv, size, cal, m)
     if not found:
         return np.zeros((0, 2), dtype=np.int64)
     count = 1

@@ -6,7 +6,7 @@ Status codes returned by the searches: ``FOUND``, ``NO_PATH`` (queue exhausted),
 checked every ``terminal_checking_interval`` expansions as upstream does).
 
 The kernels live by idea: :mod:`.common` (status codes, cell costs, turn directions),
-:mod:`.heap` (the open set), :mod:`.grid_2d` (the 2D A*), :mod:`.heuristics` and
+:mod:`eddiebot.nav.planners._heap` (the open set, shared with Theta*), :mod:`.grid_2d` (the 2D A*), :mod:`.heuristics` and
 :mod:`.hybrid` (the Hybrid-A*); this package re-exports them.
 """
 

@@ -8,6 +8,7 @@ import math
 import numpy as np
 from numba import njit
 
+from eddiebot.nav.planners._heap import _grow, _pop, _push
 from eddiebot.nav.planners.smac.search.common import (
     FOUND,
     INSCRIBED,
@@ -17,7 +18,6 @@ from eddiebot.nav.planners.smac.search.common import (
     UNKNOWN,
     _now,
 )
-from eddiebot.nav.planners.smac.search.heap import _grow, _pop, _push
 
 
 @njit(cache=True)
@@ -68,7 +68,7 @@ def astar_2d(grid: np.ndarray, sx: int, sy: int, gx: float, gy: float, cost_pena
         if iterations % terminal_checking_interval == 0 and _now() - t0 >= max_planning_time:
             status = TIMED_OUT
             break
-        cur, size = _pop(hk, hv, size)
+        _, cur, size = _pop(hk, hv, size)
         if visited[cur]:
             continue
         iterations += 1

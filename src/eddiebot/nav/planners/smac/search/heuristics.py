@@ -9,9 +9,9 @@ import math
 import numpy as np
 from numba import njit
 
+from eddiebot.nav.planners._heap import _grow, _pop, _push
 from eddiebot.nav.planners.smac.curves import curve_path
 from eddiebot.nav.planners.smac.search.common import INSCRIBED
-from eddiebot.nav.planners.smac.search.heap import _grow, _pop, _push
 
 
 @njit(cache=True)
@@ -53,7 +53,7 @@ def obstacle_heuristic(grid: np.ndarray, goal_x: float, goal_y: float, cost_pena
     size = _push(hk, hv, size, 0.0, s)
     sqrt2 = math.sqrt(2.0)
     while size > 0:
-        cur, size = _pop(hk, hv, size)
+        _, cur, size = _pop(hk, hv, size)
         if done[cur]:
             continue
         done[cur] = True

@@ -10,6 +10,7 @@ from numba import njit, types
 from numba.typed import Dict
 
 from eddiebot.nav.costmap._kernels import polygon_outline_cost
+from eddiebot.nav.planners._heap import _grow, _pop, _push
 from eddiebot.nav.planners.smac.curves import curve_path, curve_sample
 from eddiebot.nav.planners.smac.search.common import (
     FORWARD,
@@ -25,7 +26,6 @@ from eddiebot.nav.planners.smac.search.common import (
     UNKNOWN,
     _now,
 )
-from eddiebot.nav.planners.smac.search.heap import _grow, _pop, _push
 from eddiebot.nav.planners.smac.search.heuristics import _heuristic
 
 
@@ -225,7 +225,7 @@ def hybrid_astar(
         if iterations % terminal_checking_interval == 0 and _now() - t0 >= max_planning_time:
             status = TIMED_OUT
             break
-        cur, size = _pop(hk, hv, size)
+        _, cur, size = _pop(hk, hv, size)
         if nvis[cur]:
             continue
         iterations += 1

@@ -1,5 +1,5 @@
-"""The binary min-heap of the Smac searches' open sets, as parallel key/value arrays
-(numba)."""
+"""The binary min-heap of the planners' open sets (Theta*, Smac), as parallel key/value
+arrays (numba)."""
 
 from __future__ import annotations
 
@@ -32,7 +32,9 @@ def _push(hk: np.ndarray, hv: np.ndarray, size: int, key: float, val: int) -> in
 
 
 @njit(cache=True)
-def _pop(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[int, int]:
+def _pop(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[float, int, int]:
+    """The smallest key, its value and the new size."""
+    key = hk[0]
     top = hv[0]
     size -= 1
     hk[0] = hk[size]
@@ -51,7 +53,7 @@ def _pop(hk: np.ndarray, hv: np.ndarray, size: int) -> tuple[int, int]:
         hk[m], hk[i] = hk[i], hk[m]
         hv[m], hv[i] = hv[i], hv[m]
         i = m
-    return top, size
+    return key, top, size
 
 
 __all__ = ["_grow", "_pop", "_push"]
