@@ -306,9 +306,10 @@ def bench_loop_closure(syn, world, n_nodes: int, extra: int,
 
 
 def bench_tum_speed(folder: Path, setup: CameraSetup, cycles: int, wm_target: int,
-                    overrides: dict[str, str]) -> dict[str, Any]:
+                    overrides: dict[str, str], profile: Path | None = None) -> dict[str, Any]:
     """Odometry per frame (F2M, F2F) on a TUM folder, then loop closure + graph update per
-    node over the sequence played forward-backward `cycles` times, every frame a node."""
+    node over the sequence played forward-backward `cycles` times, every frame a node.
+    `profile`: cProfile (CPU clock) of the updates with WM >= `wm_target`."""
     listed = read_tum_sequence(folder).frames
     check_depth_plausible(load_tum_frame(listed[0], setup.depth_scale)[1], setup.depth_scale,
                           "give the depth images' units per metre with --depth-scale")
@@ -346,24 +347,37 @@ def bench_tum_speed(folder: Path, setup: CameraSetup, cycles: int, wm_target: in
     slam = Rtabmap(params)
     cpu, wall, wm = [], [], []
     loops = 0
+    decisions = hashlib.md5()
+    profiler = cProfile.Profile(time.process_time) if profile is not None else None
     for n, k in enumerate(order):
         r = forward[k]
         if r.pose is None:
             continue
         rgb, depth = frames[k]
+        if profiler is not None and wm and wm[-1] >= wm_target:
+            profiler.enable()
         t0, c0 = time.perf_counter(), time.process_time()
         res = slam.process(rgb, depth, cam, r.pose, n * 33_333_333,
                            odom_covariance=r.covariance, features=r.frame_features)
         wall.append((time.perf_counter() - t0) * 1e3)
         cpu.append((time.process_time() - c0) * 1e3)
+        if profiler is not None:
+            profiler.disable()
         wm.append(int(res.statistics["Memory/Working_memory_size/"]))
         loops += bool(res.loop_closure_id)
+        decisions.update(f"{res.loop_closure_id};".encode())
+    if profiler is not None and profile is not None:
+        profiler.dump_stats(str(profile))
+        pstats.Stats(profiler).sort_stats("cumulative").print_stats(40)
+    final = np.array([p[:3, 3] for p in slam.optimized_poses.values()]).reshape(-1, 3)
     near = [i for i, w in enumerate(wm) if w >= wm_target]
     in_ram = [nd.data.nbytes for nd in slam.memory.nodes.values() if nd.data is not None]
     out["loop_closure"] = {
         "order": f"frames 0..{len(frames) - 1}..1, {cycles} times (forward-backward)",
         "parameters": {"RGBD/LinearUpdate": "0", "RGBD/AngularUpdate": "0", **overrides},
         "nodes": len(cpu), "wm_final": wm[-1] if wm else 0, "loop_closures": loops,
+        "decisions_md5": decisions.hexdigest(),
+        "optimized_xyz_mean_m": [round(float(v), 6) for v in final.mean(axis=0)],
         "timed_from_wm": wm_target, "timed_nodes": len(near),
         "cpu": _stats([cpu[i] for i in near] or cpu[-50:]),
         "wall": _stats([wall[i] for i in near] or wall[-50:]),
@@ -475,7 +489,8 @@ def main() -> int:
             print("bench_vslam: --tum-speed needs --tum FOLDER", file=sys.stderr)
             return 2
         try:
-            speed = bench_tum_speed(args.tum, setup, args.tum_cycles, args.tum_nodes, overrides)
+            speed = bench_tum_speed(args.tum, setup, args.tum_cycles, args.tum_nodes, overrides,
+                                    args.profile)
         except DepthScaleError as exc:
             print(f"bench_vslam: {args.tum}: {exc}", file=sys.stderr)
             return 2

@@ -3,8 +3,9 @@
 With `Reg/Force3DoF` (the report's setting) the graph is SE(2) and runs incrementally in gtsam's
 iSAM2: `IncrementalPose2Graph` keeps the graph between calls and folds in only the nodes and
 links that are new, so a loop closure costs an iSAM2 update (a few ms at 1,000 nodes) instead of
-a batch re-solve of the whole graph. Without Force3DoF the graph is Pose3, solved in batch by
-gtsam Levenberg–Marquardt (`GtsamPoseGraph`).
+a batch re-solve of the whole graph. Without Force3DoF the graph is Pose3, kept in iSAM2 the
+same way (`IncrementalPose3Graph`); `GTSAM/Incremental false` (and, for Pose3,
+`Optimizer/Robust`) re-solves it in batch with gtsam Levenberg–Marquardt (`GtsamPoseGraph`).
 
 Everything the core needs is `PoseGraphOptimizer.optimize` and `optimized_link_errors` (the
 `RGBD/OptimizeMaxError` residuals). Poses and link transforms are 4×4 (m); informations are 6×6
@@ -14,7 +15,7 @@ in (x, y, z, roll, pitch, yaw).
 constraints (`eddiebot.vslam.switchable`).
 
 Modules: `graph_links` (link types, residuals), `graph_batch` (Levenberg–Marquardt),
-`graph_incremental` (iSAM2), `switchable` (Vertigo factors); this module puts them behind
+`graph_incremental` (iSAM2, SE(2)), `graph_incremental3` (iSAM2, Pose3), `switchable` (Vertigo factors); this module puts them behind
 `GtsamPoseGraph` and `make_optimizer`.
 """
 
@@ -27,6 +28,7 @@ from numpy.typing import NDArray
 
 from eddiebot.vslam.graph_batch import BatchPoseGraph
 from eddiebot.vslam.graph_incremental import IncrementalPose2Graph
+from eddiebot.vslam.graph_incremental3 import IncrementalPose3Graph
 from eddiebot.vslam.graph_links import (
     F64,
     GraphLink,
@@ -41,6 +43,7 @@ __all__ = [
     "GraphLink",
     "GtsamPoseGraph",
     "IncrementalPose2Graph",
+    "IncrementalPose3Graph",
     "LinkError",
     "LinkLike",
     "PoseGraphOptimizer",
@@ -57,9 +60,9 @@ __all__ = [
 class GtsamPoseGraph(BatchPoseGraph):
     """Pose3 (or, with `three_dof`, Pose2) pose graph.
 
-    With `three_dof` and `incremental` (the default) every call is delegated to an
-    `IncrementalPose2Graph` (gtsam iSAM2); otherwise each call
-    re-solves the whole graph with Levenberg–Marquardt. `robust`: `Optimizer/Robust`.
+    With `incremental` (the default) every call is delegated to an `IncrementalPose2Graph`
+    (`three_dof`) or, unless `robust`, an `IncrementalPose3Graph` (gtsam iSAM2); otherwise each
+    call re-solves the whole graph with Levenberg–Marquardt. `robust`: `Optimizer/Robust`.
     """
 
     def __init__(self, three_dof: bool, epsilon: float = 1e-5, *,
@@ -68,6 +71,10 @@ class GtsamPoseGraph(BatchPoseGraph):
         self.incremental: IncrementalPose2Graph | None = (
             IncrementalPose2Graph(epsilon, robust=robust) if three_dof and incremental else None
         )
+        #: Pose3 in iSAM2 (`GTSAM/Incremental`); switchable links are solved in batch
+        self.incremental3: IncrementalPose3Graph | None = (
+            IncrementalPose3Graph(epsilon) if not three_dof and incremental and not robust
+            else None)
 
     def optimize(
         self,
@@ -79,6 +86,8 @@ class GtsamPoseGraph(BatchPoseGraph):
         """Optimise the component of `root_id`; nodes not connected to it are left out."""
         if self.incremental is not None:
             return self.incremental.optimize(poses, links, root_id, iterations)
+        if self.incremental3 is not None:
+            return self.incremental3.optimize(poses, links, root_id, iterations)
         return self.optimize_batch(poses, links, root_id, iterations)
 
 
@@ -104,6 +113,9 @@ def optimized_link_errors(
     inner = optimizer.incremental if isinstance(optimizer, GtsamPoseGraph) else optimizer
     if isinstance(inner, IncrementalPose2Graph) and inner.node_count:
         return inner.link_error_ratios()
+    inner3 = optimizer.incremental3 if isinstance(optimizer, GtsamPoseGraph) else optimizer
+    if isinstance(inner3, IncrementalPose3Graph) and inner3.node_count:
+        return inner3.link_error_ratios()
     errors = link_errors(optimized, links)
     ids = np.array([(e.from_id, e.to_id) for e in errors], np.int64).reshape(-1, 2)
     return (ids, np.array([e.linear_ratio for e in errors], np.float64),

@@ -248,6 +248,10 @@ class RtabmapParameters:
     # --- optimiser ---
     optimizer_iterations: int = _p("Optimizer/Iterations", 20, "")
     optimizer_epsilon: float = _p("Optimizer/Epsilon", 1e-5, "")
+    gtsam_incremental: bool = _p(
+        "GTSAM/Incremental", True,
+        "graph updates in iSAM2 (SE(2) under Reg/Force3DoF, else Pose3) instead of a "
+        "Levenberg–Marquardt re-solve of the whole graph; upstream default false")
     optimizer_robust: bool = _p(
         "Optimizer/Robust", False,
         "loop closures as Vertigo switchable constraints, switched off when the graph "

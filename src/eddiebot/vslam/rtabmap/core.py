@@ -64,7 +64,8 @@ class Rtabmap(ProximityDetection, GraphUpdate, Localize, MemoryManagement, Odome
         )
         self._icp = IcpSettings.from_parameters(params)
         self.optimizer: PoseGraphOptimizer = optimizer or GtsamPoseGraph(
-            params.reg_force_3dof, params.optimizer_epsilon, robust=params.optimizer_robust
+            params.reg_force_3dof, params.optimizer_epsilon,
+            incremental=params.gtsam_incremental, robust=params.optimizer_robust
         )
         self.optimized_poses: dict[int, F64] = {}
         self.map_to_odom = np.eye(4)
