@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from eddiebot.vslam.graph_batch import BatchPoseGraph
+from eddiebot.vslam.graph_isam import IsamGraph, keyed_links
 from eddiebot.vslam.graph_links import (
     _IDX_POSE2,
     F64,
@@ -27,7 +28,7 @@ _PRIOR_NOISE = gtsam.noiseModel.Diagonal.Sigmas(np.array([1e-4, 1e-4, 1e-5]))
 _RELINEARIZE_THRESHOLD = 0.01  # iSAM2 relinearisation of the incremental graph (m or rad)
 
 
-class IncrementalPose2Graph:
+class IncrementalPose2Graph(IsamGraph):
     """SE(2) graph kept between calls in gtsam's iSAM2, with its links held as arrays.
 
     Each `optimize` call receives the whole connected graph (as the batch optimiser does); only
@@ -84,51 +85,6 @@ class IncrementalPose2Graph:
         self._root_pose: F64 | None = None
         self._closing = False
 
-    def optimize(
-        self,
-        poses: Mapping[int, F64],
-        links: Iterable[LinkLike],
-        root_id: int,
-        iterations: int,
-    ) -> dict[int, F64]:
-        """Optimised poses of the component of `root_id` (root fixed at its first pose)."""
-        link_list = links if isinstance(links, list) else list(links)
-        keyed: dict[tuple[int, int, int], LinkLike] = {
-            (lk.from_id, lk.to_id, 0): lk for lk in link_list}
-        if len(keyed) != len(link_list):  # parallel links between two nodes
-            keyed = {}
-            for lk in link_list:
-                key = (lk.from_id, lk.to_id, 0)
-                while key in keyed:
-                    key = (key[0], key[1], key[2] + 1)
-                keyed[key] = lk
-        root_pose = np.asarray(poses[root_id], dtype=np.float64)
-        if (self._root_pose is not None and root_id == self._root
-                and not np.allclose(root_pose, self._root_pose, rtol=0.0, atol=1e-3)):
-            # the root is re-anchored every call (OptimizeFromGraphEnd): nothing to keep
-            self.reset()
-            return self._batch.optimize_batch(poses, link_list, root_id, iterations)
-        # keys not in the graph; every graph key was given again iff the others number as many
-        new_keys = keyed.keys() - self._links.keys()
-        if (self._isam is None or root_id != self._root
-                or len(keyed) - len(new_keys) != len(self._links)
-                or not poses.keys() >= self._index.keys()):
-            if self._isam is not None:
-                self.rebuilds += 1
-            self._start(root_id, root_pose)
-            new_keys = set(keyed)
-        try:
-            self._update(poses, keyed, new_keys)
-        except RuntimeError:
-            # gtsam reports an ill-conditioned incremental update (a loop edge far from the
-            # current linearisation) as IndeterminateSystemException: re-solve in batch and
-            # restart iSAM2 from that optimum
-            self.recoveries += 1
-            solved = self._batch.optimize_batch(poses, link_list, root_id, max(iterations, 100))
-            self._start(root_id, root_pose)
-            self._update({**poses, **solved}, keyed)
-        return dict(zip(self._ids, self.poses_array()))
-
     def extend(
         self,
         new_poses: Mapping[int, F64],
@@ -151,12 +107,7 @@ class IncrementalPose2Graph:
         root_pose = np.asarray(root_pose, dtype=np.float64)
         if not np.allclose(root_pose, self._root_pose, rtol=0.0, atol=1e-3):
             return False
-        keyed: dict[tuple[int, int, int], LinkLike] = {}
-        for lk in new_links:
-            key = (lk.from_id, lk.to_id, 0)
-            while key in keyed:
-                key = (key[0], key[1], key[2] + 1)
-            keyed[key] = lk
+        keyed = keyed_links(new_links)
         new_keys = keyed.keys() - self._links.keys()
         try:
             self._update(new_poses, keyed, new_keys)
@@ -164,21 +115,6 @@ class IncrementalPose2Graph:
             poses, link_list = whole()
             self._recover(poses, link_list, root_id, root_pose, iterations)
         return True
-
-    def _recover(self, poses: Mapping[int, F64], links: Sequence[LinkLike], root_id: int,
-                 root_pose: F64, iterations: int) -> None:
-        """Re-solve in batch after a failed iSAM2 update and restart iSAM2 from that optimum."""
-        link_list = list(links)
-        keyed: dict[tuple[int, int, int], LinkLike] = {}
-        for lk in link_list:
-            key = (lk.from_id, lk.to_id, 0)
-            while key in keyed:
-                key = (key[0], key[1], key[2] + 1)
-            keyed[key] = lk
-        self.recoveries += 1
-        solved = self._batch.optimize_batch(poses, link_list, root_id, max(iterations, 100))
-        self._start(root_id, root_pose)
-        self._update({**poses, **solved}, keyed)
 
     @property
     def node_count(self) -> int:
@@ -198,6 +134,9 @@ class IncrementalPose2Graph:
     def node_ids(self) -> list[int]:
         """Ids in the graph, in the order of `poses_array`."""
         return list(self._ids)
+
+    def _estimate(self) -> F64:
+        return self.poses_array()
 
     def poses_array(self) -> F64:
         """Current estimates as 4×4 matrices (N, 4, 4), z kept from each node's input pose."""
@@ -233,17 +172,6 @@ class IncrementalPose2Graph:
         return ids[self._lk_slots[:n]], lin, ang
 
     # -- internals --------------------------------------------------------------------------
-    def _start(self, root_id: int, root_pose: F64) -> None:
-        self.reset()
-        params = gtsam.ISAM2Params()
-        # 0.01 by default (gtsam's own default is 0.1); 0.05 was faster on a synthetic circle
-        # but not on the 1,000-node benchmark (docs/benchmarks/vslam.md#vslam-loop)
-        params.setRelinearizeThreshold(self.relinearize_threshold)
-        params.relinearizeSkip = 1
-        self._isam = gtsam.ISAM2(params)
-        self._root = root_id
-        self._root_pose = root_pose.copy()
-
     def _update(self, poses: Mapping[int, F64],
                 keyed: Mapping[tuple[int, int, int], LinkLike],
                 new_keys: Iterable[tuple[int, int, int]] | None = None) -> None:

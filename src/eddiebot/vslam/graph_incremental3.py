@@ -11,6 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from eddiebot.vslam.graph_batch import BatchPoseGraph
+from eddiebot.vslam.graph_isam import IsamGraph
 from eddiebot.vslam.graph_links import (
     _FIXED_SIGMA,
     F64,
@@ -25,7 +26,7 @@ __all__ = ["IncrementalPose3Graph"]
 _RELINEARIZE_THRESHOLD = 0.01  # as the SE(2) graph and upstream GTSAM/IncRelinearizeThreshold
 
 
-class IncrementalPose3Graph:
+class IncrementalPose3Graph(IsamGraph):
     """Pose3 graph kept between calls in gtsam's iSAM2, with its links held as arrays.
 
     Each `optimize` call receives the whole connected graph (as the batch optimiser does); the
@@ -70,42 +71,8 @@ class IncrementalPose3Graph:
         """Nodes in the graph."""
         return len(self._ids)
 
-    def optimize(
-        self,
-        poses: Mapping[int, F64],
-        links: Iterable[LinkLike],
-        root_id: int,
-        iterations: int,
-    ) -> dict[int, F64]:
-        """Optimised poses of the component of `root_id` (root fixed at its given pose)."""
-        link_list = links if isinstance(links, list) else list(links)
-        keyed: dict[tuple[int, int, int], LinkLike] = {}
-        for lk in link_list:
-            key = (lk.from_id, lk.to_id, 0)
-            while key in keyed:
-                key = (key[0], key[1], key[2] + 1)
-            keyed[key] = lk
-        root_pose = np.asarray(poses[root_id], dtype=np.float64)
-        if (self._root_pose is not None and root_id == self._root
-                and not np.allclose(root_pose, self._root_pose, rtol=0.0, atol=1e-3)):
-            self.reset()
-            return self._batch.optimize_batch(poses, link_list, root_id, iterations)
-        new_keys = keyed.keys() - self._links
-        if (self._isam is None or root_id != self._root
-                or len(keyed) - len(new_keys) != len(self._links)
-                or not poses.keys() >= self._index.keys()):
-            if self._isam is not None:
-                self.rebuilds += 1
-            self._start(root_id, root_pose)
-            new_keys = set(keyed)
-        try:
-            self._update(poses, keyed, new_keys)
-        except RuntimeError:
-            self.recoveries += 1
-            solved = self._batch.optimize_batch(poses, link_list, root_id, max(iterations, 100))
-            self._start(root_id, root_pose)
-            self._update({**poses, **solved}, keyed, set(keyed))
-        return dict(zip(self._ids, self._est))
+    def _estimate(self) -> F64:
+        return self._est
 
     def link_error_ratios(self) -> tuple[NDArray[np.int64], F64, F64]:
         """`RGBD/OptimizeMaxError` residuals of every link in the graph at the current estimate:
@@ -118,15 +85,6 @@ class IncrementalPose3Graph:
         return ids[slots], lin, ang
 
     # -- internals --------------------------------------------------------------------------
-    def _start(self, root_id: int, root_pose: F64) -> None:
-        self.reset()
-        params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(self.relinearize_threshold)
-        params.relinearizeSkip = 1
-        self._isam = gtsam.ISAM2(params)
-        self._root = root_id
-        self._root_pose = root_pose.copy()
-
     def _update(self, poses: Mapping[int, F64], keyed: Mapping[tuple[int, int, int], LinkLike],
                 new_keys: Iterable[tuple[int, int, int]]) -> None:
         isam = self._isam
