@@ -173,3 +173,20 @@ def test_navfn_allow_unknown() -> None:
     with pytest.raises(NoValidPath):
         NavfnPlanner(NavfnConfig(allow_unknown=False, tolerance=0.0)).create_plan(
             start, goal, cm.master)
+
+
+def test_navfn_goal_in_unknown_is_no_valid_path_as_upstream() -> None:
+    # Upstream NavFn raises GoalOccupied (206) only for a lethal goal; a goal in unknown space
+    # that the potential cannot reach is NoValidPathCouldBeFound (208), which the default BT's
+    # WouldAPlannerRecoveryHelp retries after clearing the costmap.
+    occ = np.zeros((60, 60), dtype=np.int8)
+    occ[20:40, 40:55] = -1  # an unknown room
+    occ[45:50, 10:15] = 100  # an obstacle
+    cm = make_costmap(occ, robot_radius=0.05, inflation_radius=0.0, track_unknown_space=True)
+    planner = NavfnPlanner(NavfnConfig(allow_unknown=False, tolerance=0.0))
+    with pytest.raises(NoValidPath) as unknown:
+        planner.create_plan((0.5, 0.5, 0.0), (2.4, 1.5, 0.0), cm.master)
+    assert unknown.value.result_code == 208
+    with pytest.raises(GoalOccupied) as lethal:
+        planner.create_plan((0.5, 0.5, 0.0), (0.6, 2.35, 0.0), cm.master)
+    assert lethal.value.result_code == 206

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from eddiebot.nav.cost_values import LETHAL_OBSTACLE
+from eddiebot.nav.cost_values import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE
 from eddiebot.nav.costmap.costmap2d import Costmap2D
 from eddiebot.nav.errors import (
     GoalOccupied,
@@ -47,7 +47,9 @@ class NavfnPlanner:
     potential gradient in half-cell steps and its end is smoothed onto that goal
     (``smoothApproachToGoal``). Additions: a robot inside a lethal cell raises
     :class:`StartOccupied` (upstream clears it silently), and an unreachable goal whose cell
-    is lethal or inscribed raises :class:`GoalOccupied` instead of :class:`NoValidPath`.
+    is lethal or inscribed raises :class:`GoalOccupied` instead of :class:`NoValidPath` (a
+    goal in unknown space stays :class:`NoValidPath`, 208, as upstream, so the BT's planner
+    recoveries run: Nav2's ``WouldAPlannerRecoveryHelp`` retries 208, not 206).
     Path poses carry the heading of their segment; the last one the goal's yaw (or the
     final approach's with ``use_final_approach_orientation``).
     """
@@ -85,7 +87,7 @@ class NavfnPlanner:
         self.last_potential = pot
         best = self._legal_goal(g, pot, costmap)
         if best is None:
-            if costmap.get_cost(*cg) >= 253:
+            if costmap.get_cost(*cg) in (INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE):
                 raise GoalOccupied(
                     f"goal ({g[0]:.2f}, {g[1]:.2f}) is occupied and no free point lies within "
                     f"tolerance {self.config.tolerance} m"
