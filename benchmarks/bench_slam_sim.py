@@ -26,7 +26,11 @@ targets ≤ 10 ms / ≤ 50 ms), and the low-feature warnings (episodes logged, m
 writes ``benchmarks/results/slam_sim.json``.
 
     .venv/bin/python benchmarks/bench_slam_sim.py [--worlds office warehouse corridor office-demo]
-        [--seed 0] [--params FILE] [--keep DIR [--record]] [--noise-correlation-px N]
+        [--seed 0 [1 ...]] [--params FILE] [--keep DIR [--record]] [--noise-correlation-px N]
+
+Several seeds run one after another into one results file, rewritten after each run (with
+``--keep DIR`` each seed's runs go to ``DIR/s<seed>/<run>``, one drive folder per seed for
+``--replay``). Each row carries the CPU reference time and the 1-minute load average at its end.
 
 ``--replay DIR`` scores the bags a ``--keep DIR --record`` run left (``DIR/<run>/mapping_bag``)
 offline instead: each bag through `SlamCore` (as ``eddie slam replay`` does: every scan that
@@ -54,6 +58,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import tempfile
 import time
@@ -63,7 +68,7 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import print_table, write_results
+from _common import cpu_reference_ms, print_table, write_results
 from _slam_metrics import evo_ape_rmse
 
 from eddiebot.demo.mapping import aligned_position_errors, run_mapping
@@ -111,6 +116,7 @@ def _sim_parameters(values: dict[str, Any]) -> None:
 def run_one(name: str, out: Path, seed: int, params: Path | None,
             record: bool = False) -> dict[str, Any]:
     world, route = RUNS[name]
+    reference_ms = round(cpu_reference_ms(), 2)
     cpu0, wall0 = time.process_time(), time.perf_counter()
     r = run_mapping(out / name, world=world, route=route, seed=seed, record=record,
                     record_topics=RECORD_TOPICS, slam_params=params, wall_timeout_s=1800.0)
@@ -136,6 +142,8 @@ def run_one(name: str, out: Path, seed: int, params: Path | None,
                                      if r.map_update_cpu_ms.size else math.nan),
         "low_feature_episodes": r.low_feature_episodes,
         "low_feature_matches": r.low_feature_matches,
+        "cpu_reference_ms": reference_ms,
+        "load_average_1min": round(os.getloadavg()[0], 2),
     }
     if name == "corridor":
         row["meets"] = bool(row["end_ratio"] <= TARGETS["corridor_end_ratio"])
@@ -365,7 +373,8 @@ def _ensemble_row(members: list[dict[str, Any]]) -> dict[str, Any]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--worlds", nargs="+", default=list(RUNS), choices=list(RUNS))
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, nargs="+", default=[0],
+                    help="simulation seed(s); several run one after another into one file")
     ap.add_argument("--params", type=Path, default=None,
                     help="slam_toolbox parameter file (default: the package's config/slam.yaml)")
     ap.add_argument("--keep", type=Path, default=None,
@@ -405,13 +414,19 @@ def main() -> int:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         out = args.keep or Path(tmp)
-        for name in args.worlds:
-            row = run_one(name, out, args.seed, args.params, args.record and args.keep is not None)
-            rows.append(row)
-            print(f"{name}: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                                          for k, v in row.items() if k not in ("run",)), flush=True)
+        for seed in args.seed:
+            folder = out / f"s{seed}" if len(args.seed) > 1 else out
+            for name in args.worlds:
+                row = run_one(name, folder, seed, args.params,
+                              args.record and args.keep is not None)
+                rows.append(row)
+                write_results(args.name, rows)  # after each run: an interrupted set keeps its runs
+                print(f"{name}: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float)
+                                              else f"{k} {v}"
+                                              for k, v in row.items() if k not in ("run",)),
+                      flush=True)
     print()
-    print_table(rows, ["run", "finished", "distance_m", "sim_s", "nodes", "loop_closures",
+    print_table(rows, ["run", "seed", "finished", "distance_m", "sim_s", "nodes", "loop_closures",
                        "ate_rmse_m", "ate_max_m", "ate_aligned_rmse_m", "aligned_turn_deg",
                        "odom_ate_rmse_m", "slam_end_m", "odom_end_m", "agreement",
                        "scan_cpu_median_ms", "scan_cpu_p99_ms",
