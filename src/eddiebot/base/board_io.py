@@ -5,7 +5,13 @@ The board node never waits for the serial line on its executor. It hands each tr
 to a :class:`BoardIO` as a :class:`BoardOp` and gets the result back on the executor through
 ``op.done(result, error)``. Ops run one at a time in priority order; an op with
 ``priority=STOP`` also abandons the exchange in flight (a poll waiting on a mute board), so
-a stop is on the wire within one read slice instead of after the poll's timeout.
+a stop is on the wire within one read slice instead of after the poll's timeout. An
+abandoned op marked ``rerun_after_stop`` (a query: ``DIST``, ``PING``, ``ADC``) goes back to
+the head of its priority and runs again once the stop is through, instead of failing: the
+robot's odometry is one ``DIST`` reply, and a driver that lost its poll to every stop (a
+controller hovering around zero sends one every other command) left ``odom → base_footprint``
+older than a controller's ``transform_tolerance`` (0.45 s between samples at a 12 Hz poll
+rate; docs/benchmarks/nav.md#pose-age).
 
 Two implementations, one behaviour:
 
@@ -51,6 +57,8 @@ class BoardOp:
     run: Callable[[Board], Any]
     done: Done | None = None
     priority: Priority = Priority.ROUTINE
+    #: abandoned for a stop, run again right after it (only for requests without effects)
+    rerun_after_stop: bool = False
     cancelled: bool = field(default=False, init=False)
 
 
@@ -77,6 +85,15 @@ class BoardIO(Protocol):
 def _insert(queue: deque[BoardOp], op: BoardOp) -> None:
     for i, queued in enumerate(queue):
         if queued.priority > op.priority:
+            queue.insert(i, op)
+            return
+    queue.append(op)
+
+
+def _insert_first(queue: deque[BoardOp], op: BoardOp) -> None:
+    """``op`` ahead of every queued op of its priority (an abandoned op runs again next)."""
+    for i, queued in enumerate(queue):
+        if queued.priority >= op.priority:
             queue.insert(i, op)
             return
     queue.append(op)
@@ -141,7 +158,13 @@ class ThreadedBoardIO(_OpQueue):
                 error = exc
             with self._cond:
                 self._current = None
+                rerun = (isinstance(error, BoardInterrupted) and op.rerun_after_stop
+                         and not op.cancelled and not self._closing)
+                if rerun:
+                    _insert_first(self._queue, op)
                 self._cond.notify_all()
+            if rerun:
+                continue
             if op.done is not None and not op.cancelled:
                 done = op.done
                 self._post(lambda d=done, r=result, e=error: d(r, e))  # type: ignore[misc]
@@ -180,7 +203,9 @@ class TimedBoardIO(_OpQueue):
             # abandon the exchange in flight: its reply is never delivered
             self._token += 1
             self._current = None
-            if current.done is not None and not current.cancelled:
+            if current.rerun_after_stop and not current.cancelled:
+                _insert_first(self._queue, current)
+            elif current.done is not None and not current.cancelled:
                 current.done(None, BoardInterrupted(current.name))
         self._kick()
 

@@ -15,7 +15,8 @@ command arrives. So this node treats every stop as unfinished until the board co
   the IR/PING veto, a link that comes back, a low battery and shutdown send ``STOP 0``
   (power cut).
 - **Serial work is off the executor.** Requests go through a queue (:mod:`board_io`); a
-  stop jumps it and abandons a poll in flight, so a mute board does not delay a stop.
+  stop jumps it and abandons a poll in flight, so a mute board does not delay a stop; the
+  abandoned poll runs again right after the stop (odometry is never a stop short).
 - ``GOSPD`` is sent only when the wheel targets change (the firmware restarts its ramp from
   a 0.5 s-averaged speed on every GOSPD); the DIST poll keeps FW 1.3's WATCH fed.
 
@@ -327,7 +328,7 @@ class BoardNode(Node):
             elif self._silent_since_ns is None and not isinstance(error, BoardInterrupted):
                 self._silent_since_ns = self.get_clock().now_ns()
 
-        self.io.submit(BoardOp(name, run, done, Priority.ROUTINE))
+        self.io.submit(BoardOp(name, run, done, Priority.ROUTINE, rerun_after_stop=True))
 
     def _read_dist(self, board: Board) -> tuple[int, tuple[int, int]]:
         # The board reads its counters when "DIST\r" arrives, one USB frame and the request's
