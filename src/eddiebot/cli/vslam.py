@@ -9,7 +9,10 @@
                        --camera-info FILE.yaml]
     eddie vslam loops DIR -o FILE.csv
     eddie vslam db info FILE
-    eddie vslam db export FILE [--ply OUT.ply] [--poses OUT.tum]   (one file per unmerged map)
+    eddie vslam db export FILE [--ply OUT.ply] [--mesh OUT.ply|OUT.obj] [--poses OUT.tum]
+                          [--voxel M] [--decimation N] [--max_range M] [--poisson_depth N] ...
+                          (rtabmap-export's options; one file per unmerged map; --mesh needs
+                          the `mesh` extra, Open3D)
 
 With ``--world`` (or ``sim``, default world office) it runs the simulator, Eddie's base stack
 and the ``rtabmap`` node with the report's parameters (``launch/vslam.yaml``). Without
@@ -116,8 +119,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     exp.add_argument("file", type=Path)
     exp.add_argument("--ply", type=Path, default=None, help="assembled point cloud, map frame")
     exp.add_argument("--poses", type=Path, default=None, help="optimised node poses, TUM format")
-    exp.add_argument("--voxel", type=float, default=0.05, help="cloud voxel size (m)")
-
+    # cloud and mesh options: rtabmap-export's names (underscores) and defaults
+    exp.add_argument("--voxel", type=float, default=0.01, metavar="M",
+                     help="voxel size of the cloud (m, default 0.01; 0 = none)")
+    exp.add_argument("--decimation", type=int, default=4, metavar="N",
+                     help="depth image decimation before making the clouds (default 4)")
+    exp.add_argument("--min_range", "--min-range", dest="min_range", type=float, default=0.0,
+                     metavar="M", help="minimum range of the clouds (m, default 0)")
+    exp.add_argument("--max_range", "--max-range", dest="max_range", type=float, default=4.0,
+                     metavar="M", help="maximum range of the clouds (m, default 4; 0 = none)")
+    exp.add_argument("--mesh", type=Path, default=None, metavar="OUT.ply|OUT.obj",
+                     help="coloured Poisson mesh of the cloud, map frame (needs Open3D: "
+                          "pip install 'eddiebot[mesh]')")
+    exp.add_argument("--poisson_depth", "--poisson-depth", dest="poisson_depth", type=int,
+                     default=0, metavar="N",
+                     help="Poisson depth (default 0: from --poisson_size)")
+    exp.add_argument("--poisson_size", "--poisson-size", dest="poisson_size", type=float,
+                     default=0.03, metavar="M",
+                     help="target polygon size choosing the Poisson depth (m, default 0.03)")
+    exp.add_argument("--max_polygons", "--max-polygons", dest="max_polygons", type=int,
+                     default=300_000, metavar="N",
+                     help="maximum polygons of the mesh (default 300000; 0 = no limit)")
+    exp.add_argument("--color_radius", "--color-radius", dest="color_radius", type=float,
+                     default=0.05, metavar="M",
+                     help="radius colouring the mesh from the cloud; polygons with no cloud "
+                          "point within it are removed (m, default 0.05; 0 = nearest; -1 = off)")
+    exp.add_argument("--min_cluster", "--min-cluster", dest="min_cluster", type=int,
+                     default=200, metavar="N",
+                     help="drop mesh pieces of fewer polygons (default 200; -1 = largest only)")
 
 def _settings(items: list[str]) -> dict[str, str]:
     out: dict[str, str] = {}
@@ -504,11 +533,31 @@ def _db_export(args: argparse.Namespace) -> int:
     from eddiebot.vslam.database import SessionDatabase
     from eddiebot.vslam.errors import DatabaseError, VslamError
     from eddiebot.vslam.export import write_ply
+    from eddiebot.vslam.export_mesh import (
+        MESH_SUFFIXES,
+        MeshSettings,
+        MeshUnavailableError,
+        require_open3d,
+    )
     from eddiebot.vslam.rtabmap import Rtabmap
     from eddiebot.vslam.tum import write_tum_trajectory
 
-    if args.ply is None and args.poses is None:
-        print("eddie vslam db export: give --ply and/or --poses", file=sys.stderr)
+    if args.ply is None and args.poses is None and args.mesh is None:
+        print("eddie vslam db export: give --ply, --mesh and/or --poses", file=sys.stderr)
+        return 2
+    settings = MeshSettings(
+        decimation=args.decimation, min_range=args.min_range, max_range=args.max_range,
+        voxel=args.voxel, poisson_depth=args.poisson_depth, poisson_size=args.poisson_size,
+        max_polygons=args.max_polygons, color_radius=args.color_radius,
+        min_cluster=args.min_cluster)
+    try:
+        settings.check()
+        if args.mesh is not None:
+            if args.mesh.suffix.lower() not in MESH_SUFFIXES:
+                raise ValueError(f"--mesh {args.mesh}: the file must end in .ply or .obj")
+            require_open3d()
+    except (ValueError, MeshUnavailableError) as exc:
+        print(f"eddie vslam db export: {exc}", file=sys.stderr)
         return 2
     try:
         with SessionDatabase(args.file, read_only=True) as db:
@@ -534,43 +583,55 @@ def _db_export(args: argparse.Namespace) -> int:
                     write_tum_trajectory(out, [stamps[i] / 1e9 for i in ids],
                                          [poses[i] for i in ids])
                     print(f"wrote {len(ids)} poses to {out}")
+                if args.ply is None and args.mesh is None:
+                    continue
+                xyz, rgb, view, nodes = _cloud_from_db(db, poses, settings)
                 if args.ply is not None:
                     out = _map_path(args.ply, frame, k)
-                    xyz, rgb = _cloud_from_db(db, core, args.voxel, poses)
                     write_ply(out, xyz, rgb)
                     print(f"wrote {xyz.shape[0]} points to {out}")
+                if args.mesh is not None:
+                    _export_mesh(xyz, rgb, view, nodes, settings,
+                                 _map_path(args.mesh, frame, k))
     except (DatabaseError, VslamError, OSError) as exc:
         print(f"eddie vslam db export: {exc}", file=sys.stderr)
         return 1
     return 0
 
 
+def _cloud_from_db(db: Any, poses: dict[int, Any], settings: Any) -> tuple[Any, Any, Any, int]:
+    """The cloud of one map re-made from its nodes' stored RGB-D frames (loaded nodes carry
+    no cloud) at `poses` (its optimised poses): xyz, colours, the camera that saw each point,
+    and the number of frames used."""
+    from eddiebot.vslam.export_mesh import assemble_viewed_cloud
+
+    used = 0
+
+    def frames() -> Any:
+        nonlocal used
+        for node_id in sorted(poses):
+            rgb, depth, cam = db.frame(node_id)
+            if depth is not None and cam is not None:
+                used += 1
+                yield rgb, depth, cam, poses[node_id]
+
+    xyz, rgb, view = assemble_viewed_cloud(frames(), settings)
+    return xyz, rgb, view, used
+
+
+def _export_mesh(xyz: Any, rgb: Any, view: Any, nodes: int, settings: Any, out: Path) -> None:
+    import time
+
+    from eddiebot.vslam.export_mesh import poisson_mesh, write_mesh
+
+    t0 = time.perf_counter()
+    mesh = poisson_mesh(xyz, rgb, view, settings)
+    write_mesh(out, mesh)
+    print(f"wrote {mesh.vertices.shape[0]} vertices, {mesh.triangles.shape[0]} polygons to "
+          f"{out} ({nodes} nodes, {xyz.shape[0]} points, Poisson depth {mesh.poisson_depth}, "
+          f"{time.perf_counter() - t0:.1f} s)")
+
+
 def _map_path(path: Path, frame: int, rank: int) -> Path:
     """The export file of one map: `path` for the largest, `<stem>_map<id><suffix>` beside."""
     return path if rank == 0 else path.with_name(f"{path.stem}_map{frame}{path.suffix}")
-
-
-def _cloud_from_db(db: Any, core: Any, voxel: float, poses: dict[int, Any]) -> tuple[Any, Any]:
-    """Clouds re-made from the stored images (loaded nodes carry no cloud) at `poses` (the
-    optimised poses of one map)."""
-    import numpy as np
-
-    from eddiebot.vslam.database import camera_from_json
-    from eddiebot.vslam.occupancy import assemble_cloud, depth_cloud
-
-    clouds = {}
-    rows = db._conn.execute("SELECT id, calibration FROM Data").fetchall()
-    p = core.params
-    for node_id, calib in rows:
-        if node_id not in poses or not calib:
-            continue
-        rgb, depth = db.image(node_id)
-        if rgb is None or depth is None:
-            continue
-        cam = camera_from_json(calib)
-        xyz, colors = depth_cloud(depth, cam, p.grid_depth_decimation, p.grid_range_min,
-                                  p.grid_range_max, rgb)
-        clouds[node_id] = (xyz, colors)
-    if not clouds:
-        return np.zeros((0, 3)), np.zeros((0, 3), np.uint8)
-    return assemble_cloud(clouds, poses, voxel)

@@ -9,13 +9,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["read_ply", "write_ply"]
+__all__ = ["atomic_write", "read_ply", "write_ply"]
 
 
 def write_ply(path: str | Path, xyz: NDArray[np.float64], rgb: NDArray[np.uint8] | None = None) -> None:
     """Binary little-endian PLY with float32 x y z and optional uchar red green blue."""
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
     n = int(xyz.shape[0])
     fields = [("x", "<f4"), ("y", "<f4"), ("z", "<f4")]
     if rgb is not None:
@@ -28,11 +27,23 @@ def write_ply(path: str | Path, xyz: NDArray[np.float64], rgb: NDArray[np.uint8]
         vertices["red"], vertices["green"], vertices["blue"] = rgb[:, 0], rgb[:, 1], rgb[:, 2]
         header += ["property uchar red", "property uchar green", "property uchar blue"]
     header.append("end_header")
+    atomic_write(target, ("\n".join(header) + "\n").encode("ascii") + vertices.tobytes())
+
+
+def atomic_write(path: str | Path, data: bytes) -> None:
+    """Write `data` to a temporary file beside `path`, then rename it over `path`: a reader
+    never sees half a file and a failed write leaves the old one; mode 0644."""
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=target.name, suffix=".tmp")
-    with os.fdopen(fd, "wb") as f:
-        f.write(("\n".join(header) + "\n").encode("ascii"))
-        f.write(vertices.tobytes())
-    os.replace(tmp, target)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.chmod(tmp, 0o644)  # mkstemp makes it 0600
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def read_ply(path: str | Path) -> tuple[NDArray[np.float32], NDArray[np.uint8] | None]:
