@@ -40,7 +40,8 @@ get the same goals.
 
 Controllers (``--controllers``, static runs): the controller the navigator's trees call
 ``FollowPath`` — ``rpp`` (config/nav2.yaml), ``dwb`` (config/nav2.yaml's DWB section) or
-``mppi`` (Nav2 Jazzy's sample section with Eddie's limits, `MPPI_EDDIE`) — on the same goals.
+``mppi`` (Nav2 Jazzy's sample section with Eddie's limits, `MPPI_EDDIE`) or ``mppi_shim``
+(that MPPI behind Nav2's rotation shim controller, `SHIM_EDDIE`) — on the same goals.
 Each goal's time is reported beside an oracle time: the reference length at the
 controller's desired speed (0.4 m/s for all three).
 
@@ -370,7 +371,7 @@ def slam_setup(world_name: str, cache: Path, seed: int) -> MapSetup:
 
 
 # --------------------------------------------------------------------------- controllers
-CONTROLLERS = ("rpp", "mppi", "dwb")
+CONTROLLERS = ("rpp", "mppi", "mppi_shim", "dwb")
 #: Nav2 Jazzy's sample MPPI section (tests/data/nav2/nav2_params_jazzy.yaml) with Eddie's
 #: speeds (the velocity smoother's, RPP's and DWB's 0.4 m/s); the batch at MPPI's own default
 #: (1000) to keep the whole stack near real time on one core. The accelerations stay the
@@ -383,6 +384,12 @@ CONTROLLERS = ("rpp", "mppi", "dwb")
 #: holds Eddie's real limits (0.8 / -1.0 m/s^2, 2.0 rad/s^2), as for DWB.
 MPPI_EDDIE = {"vx_max": 0.4, "vx_min": -0.3, "wz_max": 1.5, "batch_size": 1000,
               "visualize": False}
+#: ``mppi_shim``: Nav2's rotation shim in front of that MPPI section (the shim's keys beside
+#: MPPI's in one block), Jazzy's shim defaults but the in-place rate and acceleration of
+#: Eddie's RPP section (1.2 rad/s, 3.2 rad/s^2)
+SHIM_EDDIE = {"plugin": "nav2_rotation_shim_controller::RotationShimController",
+              "primary_controller": "nav2_mppi_controller::MPPIController",
+              "rotate_to_heading_angular_vel": 1.2, "max_angular_accel": 3.2}
 
 
 def controller_params(controller: str, out_dir: Path) -> tuple[Path, float]:
@@ -395,11 +402,11 @@ def controller_params(controller: str, out_dir: Path) -> tuple[Path, float]:
     srv = doc["controller_server"]["ros__parameters"]
     if controller == "dwb":
         srv["FollowPath"] = dict(srv["DWB"])
-    elif controller == "mppi":
+    elif controller in ("mppi", "mppi_shim"):
         jazzy = yaml.safe_load((Path(__file__).resolve().parents[1] / "tests" / "data" / "nav2"
                                 / "nav2_params_jazzy.yaml").read_text())
         srv["FollowPath"] = {**jazzy["controller_server"]["ros__parameters"]["FollowPath"],
-                             **MPPI_EDDIE}
+                             **MPPI_EDDIE, **(SHIM_EDDIE if controller == "mppi_shim" else {})}
     elif controller != "rpp":
         raise ValueError(f"unknown controller {controller!r} (one of {', '.join(CONTROLLERS)})")
     section = srv["FollowPath"]

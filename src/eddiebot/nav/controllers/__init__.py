@@ -29,6 +29,11 @@ from eddiebot.nav.controllers.checkers import (
 )
 from eddiebot.nav.controllers.dwb import DWBConfig, DWBController, dwb_config_from_params
 from eddiebot.nav.controllers.mppi import MPPIConfig, MPPIController
+from eddiebot.nav.controllers.rotation_shim import (
+    SHIM_TYPE,
+    RotationShimConfig,
+    RotationShimController,
+)
 from eddiebot.nav.controllers.rpp import (
     RegulatedPurePursuitConfig,
     RegulatedPurePursuitController,
@@ -88,6 +93,8 @@ CONTROLLER_PLUGINS.register(
 # DWB's and MPPI's keys nest (critics' blocks), so no one config dataclass lists them
 CONTROLLER_PLUGINS.register("dwb_core::DWBLocalPlanner", _dwb, source="built-in")
 CONTROLLER_PLUGINS.register("nav2_mppi_controller::MPPIController", _mppi, source="built-in")
+# the shim's block also holds its primary's keys
+CONTROLLER_PLUGINS.register(SHIM_TYPE, RotationShimController.from_params, source="built-in")
 PROGRESS_CHECKER_PLUGINS.register(
     "nav2_controller::SimpleProgressChecker",
     _checker(SimpleProgressChecker, SimpleProgressCheckerConfig), SimpleProgressCheckerConfig,
@@ -195,6 +202,8 @@ __all__ = [
     "PoseProgressCheckerConfig",
     "RegulatedPurePursuitConfig",
     "RegulatedPurePursuitController",
+    "RotationShimConfig",
+    "RotationShimController",
     "SimpleGoalChecker",
     "SimpleGoalCheckerConfig",
     "SimpleProgressChecker",

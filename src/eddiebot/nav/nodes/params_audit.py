@@ -188,6 +188,21 @@ def _audit_mppi(a: _Audit, where: str, params: dict[str, Any]) -> None:
     a.keys(where, params, flat, nested)
 
 
+def _audit_rotation_shim(a: _Audit, where: str, params: dict[str, Any],
+                         kinds: Mapping[str, Callable[[str, dict[str, Any]], None]]) -> None:
+    # the shim's keys and its primary's share the block: the primary's are audited as its own
+    from eddiebot.nav.controllers.rotation_shim import split_params
+
+    server, _, name = where.partition(".")
+    own, primary, rest = split_params(params, server, name, CONTROLLER_PLUGINS)
+    if "plugin" in params:
+        rest["plugin"] = params["plugin"]
+    audit = kinds.get(primary) or a._config_keys(CONTROLLER_PLUGINS[primary])
+    audit(where, rest)
+    params.clear()
+    params.update({**rest, **own})
+
+
 def _audit_controller_server(a: _Audit, params: dict[str, Any]) -> None:
     server = "controller_server"
     cfg = ControllerServerConfig()
@@ -196,6 +211,8 @@ def _audit_controller_server(a: _Audit, params: dict[str, Any]) -> None:
             lambda w, d: a.keys(w, d, _fields(RegulatedPurePursuitConfig) | {"plugin"}),
         "dwb_core::DWBLocalPlanner": lambda w, d: _audit_dwb(a, w, d),
         "nav2_mppi_controller::MPPIController": lambda w, d: _audit_mppi(a, w, d),
+        "nav2_rotation_shim_controller::RotationShimController":
+            lambda w, d: _audit_rotation_shim(a, w, d, kinds),
         "nav2_controller::SimpleProgressChecker":
             lambda w, d: a.keys(w, d, _fields(SimpleProgressCheckerConfig) | {"plugin"}),
         "nav2_controller::PoseProgressChecker":
