@@ -123,3 +123,28 @@ def test_neighbour_link_refined_by_scan_matching():
     link = slam.memory.links[1][2]
     assert abs(link.transform[0, 3] - 0.3) < 0.02
     assert abs(np.arctan2(link.transform[1, 0], link.transform[0, 0]) - 0.05) < 0.01
+
+
+def test_node_data_keeps_points_in_float32_and_hands_out_float64():
+    from eddiebot.vslam.features import FrameFeatures
+    from eddiebot.vslam.nodes import NodeData
+
+    rng = np.random.default_rng(3)
+    n = 900
+    points = rng.uniform(-4.0, 4.0, (n, 3))
+    points[::10] = np.nan  # no depth
+    feats = FrameFeatures(rng.uniform(0, 640, (n, 2)).astype(np.float32),
+                          np.ones(n, np.float32), np.full(n, 31.0, np.float32),
+                          np.zeros(n, np.float32), np.zeros(n, np.int32),
+                          rng.integers(0, 256, (n, 32), dtype=np.uint8), points)
+    data = NodeData(feats, np.arange(n, dtype=np.int64))
+    out = data.features
+    assert out.points.dtype == np.float64
+    np.testing.assert_array_equal(np.isnan(out.points), np.isnan(points))
+    assert np.nanmax(np.abs(out.points - points)) < 3e-7  # float32 within 4 m
+    np.testing.assert_array_equal(out.descriptors, feats.descriptors)
+    # a feature costs 8 (uv) + 16 (response, size, angle, octave) + 32 (ORB) + 12 (point)
+    # + 8 (word id) bytes: 76 kB for 1,000 features
+    assert data.nbytes == n * 76
+    out.points[:] = 0.0  # handed-out arrays are the caller's
+    assert np.nanmax(np.abs(data.features.points - points)) < 3e-7
