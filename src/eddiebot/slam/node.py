@@ -25,7 +25,10 @@ map → odom transform. ``paused_new_measurements`` starts paused.
 Localization mode (slam_toolbox's localization node; `eddiebot.slam.mapper.localization`):
 ``initialpose`` (geometry_msgs/PoseWithCovarianceStamped, in ``map_frame``) places the next scan
 at that pose and clears the localization buffer; ``~/clear_localization_buffer``
-(std_srvs/Empty) clears it; a robot lost for ``scan_buffer_size`` scans is relocalised globally.
+(std_srvs/Empty) clears it; a robot lost for ``scan_buffer_size`` scans is relocalised globally,
+attempts backing off while the map does not cover the place. The whole-map search runs in a
+process of its own (`eddiebot.slam.relocalization_process`): the scan callback hands it over
+and returns, tracking goes on, and a later scan takes the answer.
 Every processed scan's pose is published on ``pose`` (geometry_msgs/PoseWithCovarianceStamped,
 the match's x, y, yaw covariance) in every mode, as upstream.
 
@@ -98,6 +101,7 @@ from eddiebot.slam.mapper import ProcessStatus, SlamCore, SlamWarning, warm_up
 from eddiebot.slam.node_editing import GraphEditing
 from eddiebot.slam.node_outputs import SlamOutputs
 from eddiebot.slam.node_session import SlamSessionFiles, _fmt_pose, _same_mount
+from eddiebot.slam.relocalization_process import RelocalizationProcess
 from eddiebot.slam.scan import Scan
 
 __all__ = ["LOW_FEATURE_CLEAR_MATCHES", "SlamNode"]
@@ -143,7 +147,10 @@ class SlamNode(SlamOutputs, SlamSessionFiles):
         self._well_constrained_run = 0
         self.scan_cpu_s: deque[float] = deque(maxlen=100_000)
         self.map_update_cpu_s: deque[float] = deque(maxlen=100_000)
+        self.relocalization_search = RelocalizationProcess()
+        """Runs localization's whole-map searches off the scan callback."""
         self.core = SlamCore(self.config, on_warning=self._on_warning)
+        self.core.global_search = self.relocalization_search
         # numba compiles the kernels on their first call: now, not on the first real scan
         seconds = warm_up(self.config)
         if seconds > 2.0:
@@ -419,6 +426,9 @@ class SlamNode(SlamOutputs, SlamSessionFiles):
         editing = getattr(self, "editing", None)  # None when __init__ failed before it
         if editing is not None:
             editing.close()
+        search = getattr(self, "relocalization_search", None)
+        if search is not None:
+            search.close()
         super().destroy_node()
 
     def mark_map_dirty(self) -> None:

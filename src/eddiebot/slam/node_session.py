@@ -173,6 +173,7 @@ class SlamSessionFiles(Node):
             )
             return False
         core.on_warning = self._on_warning
+        core.global_search = self.core.global_search
         where = "at the pose global relocalisation finds"
         if match_type == request.START_AT_FIRST_NODE and core.nodes:
             start = core.node_poses()[0]

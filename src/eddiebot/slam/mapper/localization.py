@@ -19,20 +19,31 @@ against the map's scans alone, and a scan whose *map support* is below that same
 counts as unsupported.
 
 Relocalisation: with no pose (localization started without ``map_start_pose`` or
-``/initialpose``), or after ``scan_buffer_size`` consecutive unsupported scans (retried after
-each further ``scan_buffer_size``; a place the map does not cover is tracked through the
-buffer meanwhile), the scan is searched over the whole map: one correlation grid of every
-active node's scan at the loop search's resolution and smear, every heading, every
-translation (branch and bound), then the loop closer's fine match against the nodes near the
-best pose. It is accepted as a loop closure is (Karto's two-stage check): the coarse response
-reaches ``loop_match_minimum_response_coarse`` with x and y variances below
-``loop_match_maximum_variance_coarse`` (a scan that fits several places of the map spreads its
-candidates: refused as ambiguous), and the fine response reaches
+``/initialpose``), or after ``scan_buffer_size`` consecutive unsupported scans (a place the map
+does not cover is tracked through the buffer meanwhile), the scan is searched over the whole
+map: one correlation grid of every active node's scan at the loop search's resolution and
+smear, every heading, every translation (branch and bound), then the loop closer's fine match
+against the nodes near the best pose. It is accepted as a loop closure is (Karto's two-stage
+check): the coarse response reaches ``loop_match_minimum_response_coarse`` with x and y
+variances below ``loop_match_maximum_variance_coarse`` (a scan that fits several places of the
+map spreads its candidates: refused as ambiguous), and the fine response reaches
 ``loop_match_minimum_response_fine``. When tracking was lost (rather than never had), the
 search uses the view of the buffered scans together (their poses relative to the newest hold
 even when the map frame went wrong), and the result must also fit that view better than the
 tracked pose does (the loop closer's fine match there). Otherwise it is refused: status
-``LOST`` without a pose to keep, else the tracked pose is kept. ``relocalizations`` records each attempt.
+``LOST`` without a pose to keep, else the tracked pose is kept. ``relocalizations`` records
+each attempt.
+
+Bounded cost: a whole-map search costs as much as tens to hundreds of tracked scans, and most
+where the map does not cover the place (the branch and bound prunes little). Attempts back
+off while they are refused: tracked, the unsupported scans before the next one double after
+each refusal (``scan_buffer_size``, 2×, 4× … up to `RELOCALIZATION_BACKOFF_LIMIT` ×), back to
+``scan_buffer_size`` once the map supports a scan; without a pose, the next attempt comes after
+1, 3, 7 … scans, at most ``scan_buffer_size``. With a `global_search` (the node's spawned
+process) the whole-map search runs off the scan's call: the scan returns at once (``LOST``,
+or tracked on at its pose), no second search starts while one runs, and the first scan after
+the answer takes it — accepted, the searched scan's pose carried by odometry to this one is
+its prior. A new pose or a cleared buffer drops a search in flight.
 """
 
 from __future__ import annotations
@@ -41,6 +52,7 @@ import dataclasses
 import math
 from collections import deque
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import numpy.typing as npt
@@ -76,6 +88,63 @@ class Relocalization:
     stamp_ns: int = 0
 
 
+#: while the map does not support the tracked scans, each refused relocalisation doubles the
+#: unsupported scans before the next attempt, from ``scan_buffer_size`` up to this many times it
+RELOCALIZATION_BACKOFF_LIMIT = 8
+
+
+@dataclass(frozen=True)
+class GlobalMap:
+    """What a whole-map search matches against: every active node's end points (map frame)
+    inside ``bounds``, searched from ``prior`` (the map's centre) with ``params``. ``key``
+    changes whenever the graph does."""
+
+    key: int
+    reference: FloatArray
+    bounds: tuple[float, float, float, float]
+    prior: FloatArray
+    params: MatcherParams
+
+    def grid(self) -> CorrelationGrid:
+        """The correlation grid (with the pyramid branch and bound reads)."""
+        p = self.params
+        return build_correlation_grid(
+            self.reference, self.bounds, p.resolution, p.smear_deviation, pyramid_levels(p)
+        )
+
+    def search(self, points: FloatArray, grid: CorrelationGrid | None = None) -> MatchResult:
+        """The best sensor pose of ``points`` (sensor frame) over the whole map."""
+        return match_scan(points, grid if grid is not None else self.grid(), self.prior, self.params)
+
+
+class GlobalSearch(Protocol):
+    """Runs `GlobalMap.search` away from the scan's call (a process of its own)."""
+
+    def submit(self, source: GlobalMap, points: FloatArray) -> int:
+        """Start a search; its ticket."""
+        ...
+
+    def poll(self) -> tuple[int, MatchResult] | None:
+        """A finished search's ticket and match, without waiting; None while none is ready."""
+        ...
+
+
+@dataclass
+class _Pending:
+    """A relocalisation whose whole-map search runs off the scan's call."""
+
+    points: FloatArray
+    """The scan's end points, sensor frame."""
+    view: FloatArray
+    """What is searched: the scan with the buffer's scans (tracked), sensor frame."""
+    odom: FloatArray
+    stamp: int
+    why: str
+    fallback: FloatArray | None
+    """The tracked pose at that scan (None: there was none)."""
+    ticket: int = -1
+
+
 @dataclass
 class _Buffered:
     points: FloatArray
@@ -89,18 +158,34 @@ class _Buffered:
 class Localization(Mapping):
     """`Mapping` with localization mode (see the module docstring)."""
 
+    global_search: GlobalSearch | None = None
+    """Runs the whole-map search of a relocalisation off the scan's call (the node's
+    `eddiebot.slam.relocalization_process.RelocalizationProcess`); None: in the call. Kept
+    by `clear`."""
+
     def clear(self) -> None:
         super().clear()
         self._loc_buffer: deque[_Buffered] = deque()
         self._weak_run = 0
-        self._global: tuple[CorrelationGrid, FloatArray, float] | None = None
+        self._reloc_wait = self.config.scan_buffer_size
+        self._lost_wait = 0
+        self._lost_refusals = 0
+        self._pending: _Pending | None = None
+        self._global: tuple[CorrelationGrid, GlobalMap] | None = None
+        self._global_map: tuple[int, GlobalMap] | None = None
+        self._global_key = 0
         self.relocalizations: list[Relocalization] = []
         """Every global relocalisation attempt, accepted or refused, in order."""
 
     def clear_localization_buffer(self) -> None:
-        """Forget the recent localised scans (slam_toolbox's ``clear_localization_buffer``)."""
+        """Forget the recent localised scans (slam_toolbox's ``clear_localization_buffer``)
+        and any relocalisation in flight; the next lost scans attempt one again at once."""
         self._loc_buffer.clear()
         self._weak_run = 0
+        self._reloc_wait = self.config.scan_buffer_size
+        self._lost_wait = 0
+        self._lost_refusals = 0
+        self._pending = None
 
     def set_initial_pose(
         self, pose: npt.ArrayLike, odom_pose: npt.ArrayLike | None = None
@@ -121,8 +206,9 @@ class Localization(Mapping):
             self._warn(warnings, "no_map", "localization mode without a loaded session", stamp)
             return ProcessResult(ProcessStatus.SKIPPED, self.map_to_odom, warnings=tuple(warnings))
         points = scan_points(scan, cfg.max_laser_range)
+        self._collect_search(warnings, stamp)
         if st.last_pose is None:
-            return self._relocalize_scan(points, odom, stamp, warnings, "no initial pose")
+            return self._lost(points, odom, stamp, warnings)
         prior = self._prior(odom)
         prior_sensor = _compose1(prior, self.sensor_offset)
         ref_nodes = self._nodes_near(prior_sensor[:2])
@@ -165,16 +251,34 @@ class Localization(Mapping):
             self._buffer(points, pose)
         if support >= self._weak_response:
             self._weak_run = 0
+            self._reloc_wait = cfg.scan_buffer_size
         else:
             self._weak_run += 1
-            if self._weak_run >= cfg.scan_buffer_size:
-                self._weak_run = 0
+            if self._weak_run >= self._reloc_wait and self._pending is None:
+                run, self._weak_run = self._weak_run, 0
+                # backs off while the map does not cover the place: the next attempt after
+                # twice as many unsupported scans, up to RELOCALIZATION_BACKOFF_LIMIT times
+                # scan_buffer_size (a whole-map search costs tens to hundreds of tracked scans)
+                self._reloc_wait = min(
+                    2 * self._reloc_wait, RELOCALIZATION_BACKOFF_LIMIT * cfg.scan_buffer_size
+                )
                 return self._relocalize_scan(
                     points, odom, stamp, warnings,
-                    f"{cfg.scan_buffer_size} consecutive scans the map does not support",
+                    f"{run} consecutive scans the map does not support",
                     fallback=pose, covariance=covariance,
                 )
         return self._localized(pose, odom, response, covariance, warnings)
+
+    def _lost(
+        self, points: FloatArray, odom: FloatArray, stamp: int, warnings: list[SlamWarning]
+    ) -> ProcessResult:
+        """A scan with no pose to track from: a whole-map search, unless one is running or
+        the last ones were refused (the next after 1, 3, 7 … scans, at most
+        ``scan_buffer_size``)."""
+        if self._pending is not None or self._lost_wait > 0:
+            self._lost_wait = max(0, self._lost_wait - 1)
+            return ProcessResult(ProcessStatus.LOST, self.map_to_odom, warnings=tuple(warnings))
+        return self._relocalize_scan(points, odom, stamp, warnings, "no initial pose")
 
     def _map_support(self, nodes: list[int], points: FloatArray, sensor: FloatArray) -> float:
         """Response of the scan at sensor pose ``sensor`` against the map's ``nodes`` alone
@@ -257,24 +361,64 @@ class Localization(Mapping):
         fallback: FloatArray | None = None,
         covariance: FloatArray | None = None,
     ) -> ProcessResult:
-        cfg = self.config
-        tracked = 0.0
+        # lost while tracking: search with the view of the recent scans (their poses relative
+        # to this one hold even when the map frame went wrong): a wider view fits fewer wrong
+        # places; and it must fit the map better than where the robot is tracked now
+        view = points if fallback is None else self._recent_view(points, fallback)
+        pending = _Pending(points, view, odom.copy(), stamp, why, fallback)
+        if self.global_search is not None:
+            self._pending = pending
+            pending.ticket = self.global_search.submit(self._global_source(), view)
+            if fallback is None:
+                return ProcessResult(ProcessStatus.LOST, self.map_to_odom, warnings=tuple(warnings))
+            return self._localized(fallback, odom, 0.0, covariance, warnings)
+        grid, source = self._global_grid()
+        found = self._conclude(pending, source.search(view, grid), warnings)
+        if found.accepted:
+            return self._localized(found.pose, odom, found.response, None, warnings)
         if fallback is None:
-            found = self.relocalize(points, stamp_ns=stamp)
-        else:
-            # lost while tracking: search with the view of the recent scans (their poses
-            # relative to this one hold even when the map frame went wrong): a wider view
-            # fits fewer wrong places; and it must fit the map better than where the robot
-            # is tracked now
-            view = self._recent_view(points, fallback)
-            found = self.relocalize(view, stamp_ns=stamp)
-            sensor = _compose1(fallback, self.sensor_offset)
+            return ProcessResult(ProcessStatus.LOST, self.map_to_odom, warnings=tuple(warnings))
+        return self._localized(fallback, odom, found.response, covariance, warnings)
+
+    def _collect_search(self, warnings: list[SlamWarning], stamp: int) -> None:
+        """Take the answer of a whole-map search running off the scan's call, if it came:
+        accepted, the robot is placed there at the searched scan's odometry (this scan is
+        then tracked from it)."""
+        pending, search = self._pending, self.global_search
+        if pending is None or search is None:
+            return
+        answer = search.poll()
+        if answer is None:
+            return
+        ticket, coarse = answer
+        if ticket != pending.ticket:
+            return  # a search whose request was dropped since (new pose, cleared buffer)
+        self._pending = None
+        found = self._conclude(pending, coarse, warnings)
+        if found.accepted:
+            st = self._state
+            st.last_pose = found.pose.copy()
+            st.last_processed_odom = pending.odom.copy()
+            st.map_to_odom = se2_compose(found.pose, se2_inverse(pending.odom))
+
+    def _conclude(
+        self, pending: _Pending, coarse: MatchResult, warnings: list[SlamWarning]
+    ) -> Relocalization:
+        """The loop closer's fine match after a whole-map ``coarse`` match of
+        ``pending.view``, the acceptance checks, the record and the warning; an accepted pose
+        restarts the buffer with the searched scan."""
+        cfg = self.config
+        found = self._finish_relocalization(coarse, pending.view, pending.stamp)
+        tracked = 0.0
+        if pending.fallback is not None:
+            sensor = _compose1(pending.fallback, self.sensor_offset)
             near = self._nodes_near(sensor[:2])
             if near:
-                tracked = self._match_against(near, view, sensor, self._loop_fine).response
+                tracked = self._match_against(near, pending.view, sensor, self._loop_fine).response
             if found.accepted and found.response <= tracked:
                 found = dataclasses.replace(found, accepted=False)
                 self.relocalizations[-1] = found
+        stamp, why = pending.stamp, pending.why
         if found.accepted:
             self._warn(
                 warnings,
@@ -284,8 +428,12 @@ class Localization(Mapping):
                 stamp,
             )
             self.clear_localization_buffer()
-            self._buffer(points, found.pose)
-            return self._localized(found.pose, odom, found.response, None, warnings)
+            self._buffer(pending.points, found.pose)
+            return found
+        if pending.fallback is None:
+            # no pose: the next attempts after 1, 3, 7 … scans, at most scan_buffer_size
+            self._lost_refusals += 1
+            self._lost_wait = min(2**self._lost_refusals - 1, cfg.scan_buffer_size)
         self._warn(
             warnings,
             "relocalization_failed",
@@ -296,9 +444,7 @@ class Localization(Mapping):
             f"{cfg.loop_match_minimum_response_fine}, and above the tracked pose's {tracked:.2f})",
             stamp,
         )
-        if fallback is None:
-            return ProcessResult(ProcessStatus.LOST, self.map_to_odom, warnings=tuple(warnings))
-        return self._localized(fallback, odom, found.response, covariance, warnings)
+        return found
 
     def _recent_view(self, points: FloatArray, pose: FloatArray) -> FloatArray:
         """The buffer's scans and ``points`` (taken at robot pose ``pose``), all in this
@@ -320,26 +466,36 @@ class Localization(Mapping):
             parts.append(moved)
         return np.ascontiguousarray(np.concatenate(parts))
 
-    def _global_grid(self) -> tuple[CorrelationGrid, FloatArray, float]:
-        """The correlation grid of every active node's scan (cached: the loaded graph does
-        not change while localising), its centre and the side of the square it spans."""
-        if self._global is not None:
-            return self._global
+    def _global_source(self) -> GlobalMap:
+        """What the whole-map search matches against: every active node's scan at its pose
+        (cached while the graph's nodes and poses stay as they are)."""
         poses = self.graph.poses
-        nodes = [int(i) for i in np.flatnonzero(self.active_mask())]
-        ref, _ = self._reference(nodes, poses)
+        active = np.flatnonzero(self.active_mask())
+        fingerprint = hash((len(self.nodes), active.tobytes(), poses.tobytes()))
+        cached = self._global_map
+        if cached is not None and cached[0] == fingerprint:
+            return cached[1]
+        ref, _ = self._reference([int(i) for i in active], poses)
         lo, hi = ref.min(axis=0), ref.max(axis=0)
         centre = 0.5 * (lo + hi)
         side = float(max(hi - lo)) + 2.0 * self.config.max_laser_range
-        params = self._global_params(side)
-        grid = build_correlation_grid(
-            ref,
-            (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
-            params.resolution,
-            params.smear_deviation,
-            pyramid_levels(params),
+        self._global_key += 1
+        source = GlobalMap(
+            key=self._global_key,
+            reference=np.ascontiguousarray(ref),
+            bounds=(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
+            prior=np.array([centre[0], centre[1], 0.0]),
+            params=self._global_params(side),
         )
-        self._global = (grid, centre, side)
+        self._global_map = (fingerprint, source)
+        self._global = None
+        return source
+
+    def _global_grid(self) -> tuple[CorrelationGrid, GlobalMap]:
+        """`_global_source` and its correlation grid (built once per source)."""
+        source = self._global_source()
+        if self._global is None or self._global[1] is not source:
+            self._global = (source.grid(), source)
         return self._global
 
     def _global_params(self, side: float) -> MatcherParams:
@@ -354,18 +510,24 @@ class Localization(Mapping):
     def relocalize(self, points: FloatArray, *, stamp_ns: int = 0) -> Relocalization:
         """Search the whole map for scan end points ``points`` (sensor frame): the best robot
         pose, its responses, and whether it passes the loop-closure thresholds. Recorded in
-        ``relocalizations``; the tracked pose is not changed."""
-        cfg = self.config
+        ``relocalizations``; the tracked pose is not changed. Runs in the call (also with a
+        `global_search`)."""
         if not self.nodes or points.shape[0] == 0:
             out = Relocalization(np.zeros(3), 0.0, 0.0, False, math.inf, stamp_ns)
             self.relocalizations.append(out)
             return out
-        grid, centre, side = self._global_grid()
-        prior = np.array([centre[0], centre[1], 0.0])
-        coarse: MatchResult = match_scan(points, grid, prior, self._global_params(side))
+        grid, source = self._global_grid()
+        return self._finish_relocalization(source.search(points, grid), points, stamp_ns)
+
+    def _finish_relocalization(
+        self, coarse: MatchResult, points: FloatArray, stamp_ns: int
+    ) -> Relocalization:
+        """The fine match after a whole-map ``coarse`` match and the loop-closure checks;
+        recorded in ``relocalizations``."""
+        cfg = self.config
         fine = coarse
         near = self._nodes_near(coarse.pose[:2])
-        if near:
+        if near and points.shape[0]:
             fine = self._match_against(near, points, coarse.pose, self._loop_fine)
         variance = float(max(coarse.covariance[0, 0], coarse.covariance[1, 1]))
         accepted = (
