@@ -33,6 +33,12 @@ class ExploreConfig:
     transform_tolerance: float = 0.3
 
     # eddiebot additions
+    costmap_topic: str = ""
+    """An OccupancyGrid costmap in the map's frame (``/global_costmap/costmap``) whose lethal
+    cells are added to the map as obstacles before the frontier search: what the costmap
+    marks from the depth cloud below the scan (chairs). explore_lite searches frontiers on
+    its ``costmap_topic``; here frontiers come from ``/map`` and this grid only adds
+    obstacles. "": none."""
     robot_radius: float = 0.23
     """Cells closer than this to an occupied cell are not reachable (Nav2's inscribed radius)."""
     goal_clearance: float = 0.35
@@ -120,4 +126,5 @@ EDDIE_EXPLORE_PARAMS: dict[str, Any] = {
     "min_frontier_size": 0.4,
     "visualize": True,
     "return_to_init": True,
+    "costmap_topic": "/global_costmap/costmap",
 }

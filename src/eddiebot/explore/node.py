@@ -1,7 +1,9 @@
 """explore_lite's node: frontiers from ``/map`` become ``navigate_to_pose`` goals.
 
 Subscribes ``/map`` (transient-local) and ``explore/resume`` (std_msgs/Bool: false pauses
-and cancels the goal, true resumes); reads the robot's pose from TF ``map`` →
+and cancels the goal, true resumes; the same as a std_srvs/SetBool service, and
+``start_paused`` waits for it); publishes its progress on ``explore/status``
+(`eddiebot.explore.status`); reads the robot's pose from TF ``map`` →
 ``robot_base_frame``; publishes ``explore/frontiers`` (visualization_msgs/MarkerArray) when
 ``visualize``. Goals go through Nav2's ``navigate_to_pose``, so the planner, controller,
 recoveries, velocity smoother and collision monitor stay in charge of the motion; the
@@ -37,6 +39,7 @@ from eddiebot.core.qos import qos_profile_latched
 from eddiebot.core.tf import Buffer, TransformException, TransformListener
 from eddiebot.explore.config import ExploreConfig
 from eddiebot.explore.frontiers import Frontier, FrontierSearch, mark_swept, search_frontiers
+from eddiebot.explore.obstacles import add_costmap_obstacles
 from eddiebot.explore.tracking import Blacklist, FrontierTracker, ProgressMonitor, choose_frontier
 from eddiebot.geometry import yaw_to_quaternion
 from eddiebot.maps import OccupancyMap, map_from_msg
@@ -116,6 +119,11 @@ class ExploreNode(Node):
         self.tf_listener = TransformListener(self.tf_buffer, self)
         self.create_subscription(OccupancyGrid, "/map", self._on_map, qos_profile_latched)
         self.create_subscription(Bool, "explore/resume", self._on_resume, 10)
+        self.costmap: OccupancyMap | None = None
+        """The latest ``costmap_topic`` grid; its lethal cells join the map's obstacles."""
+        if self.config.costmap_topic:
+            self.create_subscription(OccupancyGrid, self.config.costmap_topic,
+                                     self._on_costmap, 1)
         self._marker_pub = (self.create_publisher(MarkerArray, "explore/frontiers", 10)
                             if self.config.visualize else None)
         self._nav = ActionClient(self, NavigateToPose, "navigate_to_pose")
@@ -165,6 +173,12 @@ class ExploreNode(Node):
         self.retries = 0
         self.transient_failures = 0
         """Goals failed for want of the robot's pose (TF), not blamed on their frontier."""
+        self.paused = bool(self.declare_parameter("start_paused", False).value)
+        """Paused until resumed (``explore/resume``); ``start_paused`` starts it so."""
+        from eddiebot.explore.status import ExploreStatus
+
+        self.status = ExploreStatus(self)
+        """``explore/status`` and the ``explore/resume`` service."""
         self.create_timer(0.1, self._tick)
 
     # -- inputs -------------------------------------------------------------------------------
@@ -172,6 +186,9 @@ class ExploreNode(Node):
         self.grid = map_from_msg(msg)
         stamp = msg.header.stamp
         self._map_stamp_s = int(stamp.sec) + int(stamp.nanosec) * 1e-9
+
+    def _on_costmap(self, msg: Any) -> None:
+        self.costmap = map_from_msg(msg)
 
     def _on_resume(self, msg: Any) -> None:
         if bool(msg.data):
@@ -203,6 +220,7 @@ class ExploreNode(Node):
 
     # -- the loop -----------------------------------------------------------------------------
     def _tick(self) -> None:
+        self.status.tick()
         if self.state is ExploreState.DONE or self.paused:
             return
         now = self._now_s()
@@ -302,6 +320,12 @@ class ExploreNode(Node):
                 self.goals[-1].outcome = "no progress"
                 self._cancel_goal()
         swept = mark_swept(self.grid, [(x, y) for x, y, _ in self.path], self.config.robot_radius)
+        if self.costmap is not None:
+            try:
+                swept = add_costmap_obstacles(swept, self.costmap)
+            except ValueError as exc:
+                self.get_logger().warn(f"{self.config.costmap_topic}: {exc}; not used")
+                self.costmap = None
         search = search_frontiers(swept, pose, self.config, avoid=self.avoid, looked=self.looks,
                                   blocked=self.blocked)
         self.last_search = search
