@@ -213,3 +213,26 @@ def test_every_map_grid_critic_weighs_resolution_half_scale(critic: str) -> None
     assert ok[0] and scale == pytest.approx(0.05 * 0.5 * 24.0)
     if critic == "PathDist":
         assert sc[0] == 5.0  # (1.0, 1.75) is 5 cells above the plan's row
+
+
+def test_rotate_to_goal_window_latches_until_a_new_plan() -> None:
+    """RotateToGoalCritic::prepare: once the robot was within xy_goal_tolerance (0.25 m), a
+    pose that localization puts just outside it still only turns in place, until the plan is
+    set again (upstream's in_window_ / rotating_)."""
+    cm = make_costmap(np.zeros((60, 60), dtype=np.int8))
+    plan = np.stack([np.linspace(0.5, 1.5, 21), np.full(21, 1.5), np.full(21, 1.2)], axis=1)
+    cfg = dwb_config_from_params({
+        "max_vel_x": 0.3, "max_speed_xy": 0.3, "max_vel_theta": 1.0, "acc_lim_x": 2.5,
+        "acc_lim_theta": 3.2, "decel_lim_x": -2.5, "decel_lim_theta": -3.2, "vy_samples": 1,
+        "critics": ["RotateToGoal", "GoalDist"], "RotateToGoal.scale": 32.0,
+        "GoalDist.scale": 24.0})
+    ctrl = DWBController(cfg)
+    inside = (1.3, 1.5, 0.0)  # 0.20 m short of the goal, 1.2 rad off its heading
+    cmd = ctrl.compute_velocity_commands(inside, Twist2D(), plan, cm)
+    assert cmd.vx == 0.0 and cmd.wz > 0.0
+    outside = (1.22, 1.5, 0.1)  # 0.28 m short: outside the window, the same plan
+    cmd = ctrl.compute_velocity_commands(outside, Twist2D(0.0, 0.0, cmd.wz), plan, cm)
+    assert cmd.vx == 0.0 and cmd.wz > 0.0
+    ctrl.set_plan(plan.copy())  # a new plan resets the window: GoalDist drives again
+    cmd = ctrl.compute_velocity_commands(outside, Twist2D(), None, cm)
+    assert cmd.vx > 0.0

@@ -193,6 +193,7 @@ class DWBController:
         self._plan_src: object = None
         self._critics = [c.removesuffix("Critic").split("::")[-1] for c in self.config.critics]
         self._rotating = False
+        self._in_window = False
         self._speed_scale = 1.0
         self._osc_sign_x = 0.0
         self._osc_sign_w = 0.0
@@ -210,6 +211,7 @@ class DWBController:
 
     def reset(self) -> None:
         self._rotating = False
+        self._in_window = False
         self._osc_sign_x = self._osc_sign_w = 0.0
         self._osc_flip_pose = None
         self._osc_flipped_x = self._osc_flipped_w = False
@@ -388,17 +390,20 @@ class DWBController:
                         goal: npt.NDArray[np.float64], in_window: bool
                         ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
         n = vx.shape[0]
-        if not in_window:
-            self._rotating = False
+        # upstream's RotateToGoalCritic::prepare: once inside the goal window (and once
+        # rotating) it stays so until the plan is set again; a localization jitter at the
+        # window's edge does not send the robot driving again
+        self._in_window = self._in_window or in_window
+        if not self._in_window:
             return np.zeros(n), np.ones(n, dtype=bool)
         end_yaw = traj[:, -1, 2]
         rot = np.abs(np.arctan2(np.sin(goal[2] - end_yaw), np.cos(goal[2] - end_yaw)))
         cur_sq = velocity.vx ** 2 + velocity.vy ** 2
-        if not self._rotating and cur_sq <= self.config.trans_stopped_velocity ** 2:
-            self._rotating = True
+        self._rotating = self._rotating or cur_sq <= self.config.trans_stopped_velocity ** 2
         speed_sq = vx ** 2 + vy ** 2
         if not self._rotating:
-            ok = speed_sq <= cur_sq + 1e-12
+            # "Not slowing down near goal": a sample at or above the current speed is illegal
+            ok = speed_sq < cur_sq
             return speed_sq * self.config.RotateToGoal_slowing_factor + rot, ok
         ok = (np.abs(vx) == 0.0) & (np.abs(vy) == 0.0)
         return rot, ok
