@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -154,11 +155,15 @@ def poisson_mesh(xyz: NDArray[np.float64], rgb: NDArray[np.uint8], view: NDArray
     colors = np.full((vertices.shape[0], 3), 255, np.uint8)
     if s.color_radius >= 0 and vertices.shape[0]:
         tree = cKDTree(xyz)
-        if s.color_radius > 0:
+        if s.color_radius > 0:  # mean colour of the cloud points within the radius
             near = tree.query_ball_point(vertices, s.color_radius)
-            colored = np.array([len(n) > 0 for n in near], bool)
-            for i in np.flatnonzero(colored):
-                colors[i] = np.mean(rgb[near[i]], axis=0).astype(np.uint8)
+            counts = np.fromiter((len(n) for n in near), np.intp, len(near))
+            colored = counts > 0
+            flat = np.fromiter(chain.from_iterable(near), np.intp, int(counts.sum()))
+            if flat.size:
+                starts = np.concatenate(([0], np.cumsum(counts)[:-1]))[colored]
+                sums = np.add.reduceat(rgb[flat].astype(np.int64), starts, axis=0)
+                colors[colored] = (sums // counts[colored, None]).astype(np.uint8)
         else:
             _, nearest = tree.query(vertices)
             colors = rgb[nearest].astype(np.uint8)
