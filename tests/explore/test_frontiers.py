@@ -23,7 +23,8 @@ from eddiebot.explore import (
     search_frontiers,
 )
 from eddiebot.explore.config import EDDIE_EXPLORE_PARAMS
-from eddiebot.explore.frontiers import UNKNOWN_BLOCKING, mark_swept
+from eddiebot.explore.frontiers import mark_swept
+from eddiebot.explore.gain import UNKNOWN_BLOCKING
 from eddiebot.maps import OccupancyMap
 
 RES = 0.05

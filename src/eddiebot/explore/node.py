@@ -39,6 +39,8 @@ from eddiebot.core.qos import qos_profile_latched
 from eddiebot.core.tf import Buffer, TransformException, TransformListener
 from eddiebot.explore.config import ExploreConfig
 from eddiebot.explore.frontiers import Frontier, FrontierSearch, mark_swept, search_frontiers
+from eddiebot.explore.homing import path_back, retrace, staging_pose
+from eddiebot.explore.markers import frontier_markers
 from eddiebot.explore.obstacles import add_costmap_obstacles
 from eddiebot.explore.tracking import Blacklist, FrontierTracker, ProgressMonitor, choose_frontier
 from eddiebot.geometry import yaw_to_quaternion
@@ -71,16 +73,9 @@ _BACKUP_DISTANCE = 0.30
 _BACKUP_SPEED = 0.15
 #: ... and then waits this long (s, node clock) before the next attempt.
 _RECOVERY_WAIT_S = 5.0
-#: Attempts after the first retrace the path driven while exploring, from its point nearest
-#: the robot (when within _RETRACE_NEAR m) towards the start: this many metres more each
-#: attempt, by way of points _RETRACE_STEP m apart. Away from it, they go first to the point of
-#: the robot's own path _PATH_BACK m back.
+#: Attempts after the first retrace this many metres more of the driven path each
+#: (`eddiebot.explore.homing.retrace`).
 _RETRACE_LENGTH = 2.0
-_RETRACE_STEP = 1.0
-_RETRACE_NEAR = 1.0
-_PATH_BACK = 1.5
-#: A start whose floor the map does not know as free is approached from this far, facing it.
-_STAGING_DISTANCE = 1.2
 
 
 class ExploreState(enum.Enum):
@@ -542,74 +537,18 @@ class ExploreNode(Node):
             done(None)
 
     def _retrace(self, length: float) -> list[tuple[float, float, float]]:
-        """Points ``_RETRACE_STEP`` m apart along the path driven while exploring, from its
-        point nearest the robot towards the start, ``length`` m of it, each facing the way
-        home along it; empty when that path passes no nearer than ``_RETRACE_NEAR`` m."""
-        if not self.path:
-            return []
-        outbound = self.path[:self._outbound] if self._outbound else self.path
-        if len(outbound) < 2:
-            return []
-        x, y, _ = self.path[-1]
-        pts = np.asarray([(px, py) for px, py, _ in outbound])
-        near = np.hypot(pts[:, 0] - x, pts[:, 1] - y)
-        i = int(np.argmin(near))
-        if near[i] > _RETRACE_NEAR:
-            return []
-        out: list[tuple[float, float, float]] = []
-        travelled = since = 0.0
-        for k in range(i, 0, -1):
-            (x0, y0), (x1, y1) = pts[k], pts[k - 1]
-            step = math.hypot(x1 - x0, y1 - y0)
-            travelled += step
-            since += step
-            if since >= _RETRACE_STEP or k == 1:
-                out.append((float(x1), float(y1), math.atan2(y1 - y0, x1 - x0)))
-                since = 0.0
-            if travelled >= length:
-                break
-        return out
+        """`retrace` of the path driven while exploring, from where the robot is."""
+        return retrace(self.path, self._outbound, length)
 
     def _path_back(self) -> tuple[float, float, float] | None:
-        """The point of the robot's own path ``_PATH_BACK`` m (along it) before where it
-        is now, facing the way the robot came; None on a shorter path."""
-        travelled = 0.0
-        for (x0, y0, _), (x1, y1, _) in zip(self.path[::-1], self.path[-2::-1], strict=False):
-            travelled += math.hypot(x1 - x0, y1 - y0)
-            if travelled >= _PATH_BACK:
-                return x1, y1, math.atan2(y1 - y0, x1 - x0)
-        return None
+        """`path_back` of the robot's own path."""
+        return path_back(self.path)
 
     def _staging_pose(self) -> tuple[float, float, float] | None:
-        """A reachable pose ``_STAGING_DISTANCE`` m from the start facing it, when the map
-        does not know the start's floor as free; else None."""
+        """`staging_pose` for the start, on the current map."""
         if self.grid is None or self.initial_pose is None:
             return None
-        from eddiebot.explore.frontiers import reachable_mask
-        from eddiebot.maps import is_inside, map_to_world, world_to_map
-
-        grid = self.grid
-        sx, sy, _ = self.initial_pose
-        cell = world_to_map(grid, np.array([sx, sy]))
-        free = (grid.data >= 0) & (grid.data <= self.config.free_threshold)
-        r = max(1, round(self.config.robot_radius / grid.resolution))
-        if is_inside(grid, cell):
-            c, rr = int(cell[0]), int(cell[1])
-            patch = free[max(0, rr - r):rr + r + 1, max(0, c - r):c + r + 1]
-            if patch.size and patch.all():
-                return None
-        ok = reachable_mask(grid, self.config)
-        rows, cols = np.nonzero(ok)
-        if rows.size == 0:
-            return None
-        pts = map_to_world(grid, np.stack([cols, rows], axis=1))
-        d = np.hypot(pts[:, 0] - sx, pts[:, 1] - sy)
-        band = np.abs(d - _STAGING_DISTANCE)
-        k = int(np.argmin(band))
-        if band[k] > 0.5:
-            return None
-        x, y = float(pts[k, 0]), float(pts[k, 1])
-        return x, y, math.atan2(sy - y, sx - x)
+        return staging_pose(self.grid, self.initial_pose, self.config)
 
     def stop(self, reason: str = "stopped") -> None:
         """Cancel the running goal and explore no more; the robot is not sent home."""
@@ -657,36 +596,9 @@ class ExploreNode(Node):
         self._target = None
 
     def _publish_markers(self, frontiers: tuple[Frontier, ...], ids: list[int]) -> None:
-        if self._marker_pub is None:
+        if self._marker_pub is None or self.grid is None:
             return
-        from eddiebot.msgs.geometry_msgs import Point
-        from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
-
-        frame = self.grid.frame_id if self.grid is not None else "map"
-        stamp = self.get_clock().now().to_msg()
-        markers = []
-        for k, (f, tid) in enumerate(zip(frontiers, ids, strict=True)):
-            abandoned = self.blacklist.contains(f.centroid)
-            cells = Marker(ns="frontiers", id=2 * k, type=Marker.POINTS, action=Marker.ADD)
-            cells.header.frame_id, cells.header.stamp = frame, stamp
-            assert self.grid is not None
-            res = self.grid.resolution
-            cells.scale.x = cells.scale.y = res
-            cells.color.r, cells.color.g, cells.color.b, cells.color.a = \
-                (1.0, 0.0, 0.0, 1.0) if abandoned else (0.0, 0.0, 1.0, 1.0)
-            cells.pose.orientation.w = 1.0
-            cells.points = [Point(x=float(x), y=float(y), z=0.0) for x, y in f.points]
-            dot = Marker(ns="frontiers", id=2 * k + 1, type=Marker.SPHERE, action=Marker.ADD)
-            dot.header.frame_id, dot.header.stamp = frame, stamp
-            dot.pose.position.x, dot.pose.position.y = f.centroid
-            dot.pose.orientation.w = 1.0
-            size = 0.3 if tid == self._target else 0.15
-            dot.scale.x = dot.scale.y = dot.scale.z = size
-            dot.color.g, dot.color.a = 1.0, 1.0
-            markers += [cells, dot]
-        for k in range(2 * len(frontiers), self._last_marker_count):
-            gone = Marker(ns="frontiers", id=k, action=Marker.DELETE)
-            gone.header.frame_id = frame
-            markers.append(gone)
+        msg = frontier_markers(frontiers, ids, self.blacklist, self._target, self.grid,
+                               self.get_clock().now().to_msg(), self._last_marker_count)
         self._last_marker_count = 2 * len(frontiers)
-        self._marker_pub.publish(MarkerArray(markers=markers))
+        self._marker_pub.publish(msg)
