@@ -5,8 +5,9 @@ no external resources; three.js vendored for the 3D view) and one WebSocket from
 threads; a `DashboardNode` in the given context subscribes to the map, costmaps, the vSLAM
 grid and graph, TF, scan, ranges, plans and the controller's lookahead, AMCL's particles,
 images, point clouds (only while a 3D view is open), odometry, battery, collisions, the
-velocity mux's inputs and ``/rosout``, and publishes goals, initial poses, teleop and the
-e-stop lock. Occupancy grids travel as tiles and only changed tiles are re-sent. Loopback by
+velocity mux's inputs, ``/rosout`` and the explore node's ``explore/status``, and publishes
+goals, initial poses, teleop and the e-stop lock, and starts, pauses and resumes exploring
+(``explore/resume``: "Map this floor"). Occupancy grids travel as tiles and only changed tiles are re-sent. Loopback by
 default; other binds need a token (see `eddiebot.viz.dashboard.server`).
 """
 

@@ -19,6 +19,7 @@ import numpy.typing as npt
 from eddiebot.viz.dashboard.errors import CommandError, RateLimitedError
 
 __all__ = [
+    "EXPLORE_COMMANDS",
     "MAX_COMMAND_BYTES",
     "SLAM_COMMANDS",
     "VIEWS",
@@ -132,14 +133,17 @@ class Command:
     y1: float = 0.0
     #: keepout: clear every zone instead of painting one
     clear: bool = False
-    #: slam: the action (`SLAM_COMMANDS`), the node a ``move`` drags, the session ``merge`` adds
+    #: slam: the action (`SLAM_COMMANDS`), the node a ``move`` drags, the session ``merge`` adds;
+    #: explore: the action (`EXPLORE_COMMANDS`)
     action: str = ""
     node: int = -1
     path: str = ""
 
 
 _OPS = {"goal", "initialpose", "teleop", "estop", "cancel", "save_map", "ping", "view", "keepout",
-        "slam"}
+        "slam", "explore"}
+#: the ``explore`` command's actions ("map this floor", pause, resume)
+EXPLORE_COMMANDS = ("start", "pause", "resume")
 #: the ``slam`` command's actions (2D SLAM graph editing, `eddiebot.viz.dashboard.slam_edit`)
 SLAM_COMMANDS = ("interactive", "move", "close_loop", "clear", "merge")
 #: views a connection opens on request (``{"op": "view", "name": ..., "engage": bool}``);
@@ -229,6 +233,12 @@ def _parse_op(op: str, obj: dict[str, Any],
         return Command(op, x=x0, y=y0, x1=x1, y1=y1)
     if op == "slam":
         return _parse_slam(obj)
+    if op == "explore":
+        action = obj.get("action")
+        if action not in EXPLORE_COMMANDS:
+            raise CommandError(f"explore: 'action' must be one of {', '.join(EXPLORE_COMMANDS)}, "
+                               f"got {action!r}")
+        return Command(op, action=str(action))
     if op == "view":
         name, engage = obj.get("name"), obj.get("engage")
         if name not in VIEWS:

@@ -8,7 +8,8 @@ publish directly. The layers are converted by groups, each a module:
 :mod:`~eddiebot.viz.dashboard.robot` (pose, footprint, sensors),
 :mod:`~eddiebot.viz.dashboard.plans` (plans, goal, particles, lookahead),
 :mod:`~eddiebot.viz.dashboard.views` (vSLAM graph, TF view, point clouds),
-:mod:`~eddiebot.viz.dashboard.slam_edit` (2D SLAM graph and its editing) and
+:mod:`~eddiebot.viz.dashboard.slam_edit` (2D SLAM graph and its editing),
+:mod:`~eddiebot.viz.dashboard.explore` (exploration: start, pause, progress) and
 :mod:`~eddiebot.viz.dashboard.status` (status, log, velocity mux source). This module wires
 them: subscriptions, publishers, timers and the page's commands.
 """
@@ -37,6 +38,7 @@ from eddiebot.msgs import get_action, get_message, get_service
 from eddiebot.viz.dashboard.core import TileCache, text_frame
 from eddiebot.viz.dashboard.display import _NS, GRID_LAYERS, _r
 from eddiebot.viz.dashboard.errors import CommandError
+from eddiebot.viz.dashboard.explore import ExploreLayers
 from eddiebot.viz.dashboard.grids import GridLayers
 from eddiebot.viz.dashboard.hub import Hub
 from eddiebot.viz.dashboard.plans import MAX_PARTICLES, PlanLayers
@@ -56,7 +58,8 @@ __all__ = ["FOOTPRINT_RADIUS", "GRID_LAYERS", "MAX_CLOUD_POINTS", "MAX_LIVE_POIN
            "DashboardNode", "DashboardTopics", "footprint_from_urdf"]
 
 
-class DashboardNode(GridLayers, RobotLayers, PlanLayers, ViewLayers, StatusLayers, SlamEditLayers):
+class DashboardNode(GridLayers, RobotLayers, PlanLayers, ViewLayers, StatusLayers, SlamEditLayers,
+                    ExploreLayers):
     """Turns topics into dashboard frames and browser commands into topics, actions and calls."""
 
     def __init__(self, hub: Hub, *, context: Context | None = None, name: str = "eddie_dashboard",
@@ -156,6 +159,7 @@ class DashboardNode(GridLayers, RobotLayers, PlanLayers, ViewLayers, StatusLayer
         self._sub(cloud, t.points, functools.partial(self._on_cloud, "points"), qos_profile_sensor_data)
         self._sub(grid, t.keepout_mask, self._on_keepout_mask, qos_profile_latched)
         self._setup_slam_edit()
+        self._setup_explore()
         self._subscribe_mux()
         try:
             self._mux_params = ParameterClient(self, t.twist_mux)

@@ -284,6 +284,9 @@ async def _serve_connection(ws: WebSocket, node: DashboardNode, hub: Hub,
                 node.slam_command(cmd.action, lambda ok, text: reply_threadsafe(
                     text_frame("ack" if ok else "error", op="slam", action=cmd.action, msg=text)),
                     node=cmd.node, x=cmd.x, y=cmd.y, yaw=cmd.yaw, path=cmd.path)
+            elif cmd.op == "explore":
+                node.explore_command(cmd.action, lambda ok, text: reply_threadsafe(
+                    text_frame("ack" if ok else "error", op="explore", action=cmd.action, msg=text)))
             elif cmd.op == "keepout":
                 node.paint_keepout(None if cmd.clear else (cmd.x, cmd.y, cmd.x1, cmd.y1),
                                    lambda ok, text: reply_threadsafe(

@@ -40,3 +40,6 @@ class DashboardTopics:
     keepout_mask_server: str = "/keepout_filter_mask_server/load_map"
     #: slam_toolbox's node: its graph, editing services and marker feedback live under it
     slam_namespace: str = "/slam_toolbox"
+    #: the explore node's progress and its pause/resume (service and topic of one name)
+    explore_status: str = "/explore/status"
+    explore_resume: str = "/explore/resume"

@@ -121,6 +121,7 @@
       case "path": state.paths[m.name] = m.pts; break;
       case "goal": state.goal = m.pose; state.goalStatus = m.status; showGoal(); break;
       case "status": state.status = m; showStatus(m); break;
+      case "explore": state.explore = m; showExplore(m); break;
       case "log": lastLog = m.lines; showLog(m.lines); break;
       case "estop":
         state.estop = m.locked;
@@ -447,6 +448,43 @@
     requestAnimationFrame(frame);
   }
 
+  // -- exploration -----------------------------------------------------------------------
+  function showExplore(m) {
+    const done = m.state === "done";
+    $("explore-state").textContent = m.message || m.state;
+    $("explore-state").className = m.level > 0 ? "bad" : "";
+    $("explore-frontiers").textContent = m.frontiers === null || m.frontiers === undefined ? "–"
+      : `${m.frontiers} left · ${m.goals_reached} reached · ${m.abandoned} abandoned`;
+    $("explore-known").textContent = `${m.known_m2.toFixed(1)} m² known, ${m.free_m2.toFixed(1)} m² free`;
+    $("explore-time").textContent = m.elapsed_s === null || m.elapsed_s === undefined ? "–" : `${Math.round(m.elapsed_s)} s`;
+    $("explore-start").disabled = done || !m.paused;
+    $("explore-pause").disabled = done;
+    $("explore-pause").textContent = m.paused && !done ? "Resume" : "Pause";
+    drawExploreChart(m.history || []);
+  }
+  // known area (white, left scale) and frontiers left (blue, own scale) against time
+  function drawExploreChart(points) {
+    const c = $("explore-chart"), g = c.getContext("2d");
+    g.clearRect(0, 0, c.width, c.height);
+    if (points.length < 2) return;
+    const t0 = points[0][0], t1 = Math.max(points[points.length - 1][0], t0 + 1);
+    const kmax = Math.max(1, ...points.map((p) => p[1]));
+    const fmax = Math.max(1, ...points.map((p) => p[3] || 0));
+    const x = (t) => 2 + (c.width - 4) * (t - t0) / (t1 - t0);
+    const line = (colour, value, top) => {
+      g.strokeStyle = colour; g.lineWidth = 2; g.beginPath();
+      points.forEach((p, i) => {
+        const y = c.height - 2 - (c.height - 4) * value(p) / top;
+        if (i === 0) g.moveTo(x(p[0]), y); else g.lineTo(x(p[0]), y);
+      });
+      g.stroke();
+    };
+    line("#6af", (p) => p[3] || 0, fmax);
+    line("#fff", (p) => p[1], kmax);
+    g.fillStyle = "#aaa"; g.font = "10px system-ui";
+    g.fillText(`${kmax.toFixed(0)} m²`, 4, 11);
+  }
+
   // -- commands ------------------------------------------------------------------------
   function send(obj) {
     if (state.readOnly || !ws || ws.readyState !== WebSocket.OPEN) return false;
@@ -504,6 +542,9 @@
   $("estop").addEventListener("click", () => { releaseKeys(false); send({ op: "estop" }); });
   $("save-map").addEventListener("click", () => send({ op: "save_map", name: $("map-name").value.trim() }));
   $("follow").addEventListener("change", (e) => { state.follow = e.target.checked; dirty = true; });
+  $("explore-start").addEventListener("click", () => send({ op: "explore", action: "start" }));
+  $("explore-pause").addEventListener("click", () =>
+    send({ op: "explore", action: state.explore && state.explore.paused ? "resume" : "pause" }));
   $("slam-interactive").addEventListener("click", () => send({ op: "slam", action: "interactive" }));
   $("slam-close").addEventListener("click", () => send({ op: "slam", action: "close_loop" }));
   $("slam-clear").addEventListener("click", () => send({ op: "slam", action: "clear" }));
