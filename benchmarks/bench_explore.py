@@ -7,12 +7,16 @@ clock, Kinect 160x120 at 10 Hz, Eddie's explore parameters) until no frontier is
 world's reachable free floor that the map marks free, agreement with the scan-height ground
 truth on the cells both call known, ATE of the SLAM poses (aligned RMSE), distance driven,
 simulated and wall time, share of the time spent turning in place, collisions, whether the
-robot came home, frontier goals reached and abandoned. Targets: coverage ≥ 95 %, agreement
-≥ 95 %, 0 collisions, home at the end. Prints a table and writes
-``benchmarks/results/explore.json``; ``--keep DIR`` keeps each run's map and report.
+robot came home, frontier goals reached and abandoned; beside the simulated time, the
+world's oracle tour (``explore_oracle.py``: a route from the start that sees every reachable
+free cell and comes back, from the ground truth) as ``oracle_s`` and the run's simulated time
+over it as ``vs_oracle``. Targets: coverage ≥ 95 %, agreement ≥ 95 %, 0 collisions, home at
+the end, simulated time within 1.5x of the oracle's. Prints a table and writes
+``benchmarks/results/explore.json``; ``--keep DIR`` keeps each run's map and report;
+``--oracle-only`` prints the oracle tours of the worlds and runs nothing.
 
     .venv/bin/python benchmarks/bench_explore.py [--worlds office house ...] [--seeds 0 1 2]
-        [--time-limit 1200] [--keep DIR]
+        [--time-limit 1200] [--keep DIR] [--oracle-only]
 """
 
 from __future__ import annotations
@@ -28,9 +32,27 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import print_table, write_results
 
 COLUMNS = ["world", "seed", "reason", "coverage", "map_agreement", "ate_m", "distance_m",
-           "explore_time_s", "sim_time_s", "wall_time_s", "turning_share", "waiting_share",
-           "collisions",
+           "explore_time_s", "sim_time_s", "oracle_s", "vs_oracle", "wall_time_s", "turning_share",
+           "waiting_share", "collisions",
            "returned_home", "frontiers_visited", "frontiers_abandoned"]
+ORACLE_COLUMNS = ["world", "reachable_m2", "unseeable", "oracle_95_s", "oracle_95_views",
+                  "oracle_100_s", "oracle_100_views", "oracle_path_m", "oracle_s", "method"]
+
+
+def oracle_row(world: str) -> dict[str, Any]:
+    """The oracle tours of ``world``: seeing 95 % and all of its seeable floor (s, from the
+    start to the last view), and ``oracle_s``, all of it and back to the start."""
+    from explore_oracle import oracle_for_world
+
+    result = oracle_for_world(world)
+    t95, t100 = result.tour(0.95), result.tour(1.0)
+    return {"world": world,
+            "reachable_m2": round(result.reachable_cells * result.resolution**2, 1),
+            "unseeable": round(result.unseeable, 4),
+            "oracle_95_s": round(t95.time_s, 1), "oracle_95_views": len(t95.legs),
+            "oracle_100_s": round(t100.time_s, 1), "oracle_100_views": len(t100.legs),
+            "oracle_path_m": round(t100.path_m + t100.home_path_m, 1),
+            "oracle_s": round(t100.round_trip_s, 1), "method": t100.method}
 
 
 def builtin_worlds() -> list[str]:
@@ -60,12 +82,27 @@ def main(argv: list[str] | None = None) -> int:
                         help="simulated seconds of exploring per run (default 1200)")
     parser.add_argument("--keep", type=Path, default=None, help="keep maps and reports here")
     parser.add_argument("--name", default="explore", help="results file name")
+    parser.add_argument("--oracle-only", action="store_true",
+                        help="print the worlds' oracle tours and run no exploration")
     args = parser.parse_args(argv)
     worlds = args.worlds or builtin_worlds()
+    oracles: dict[str, dict[str, Any]] = {}
+    if args.oracle_only:
+        for world in worlds:
+            oracles[world] = oracle_row(world)
+            print_table([oracles[world]], ORACLE_COLUMNS)
+            sys.stdout.flush()
+        print()
+        print_table(list(oracles.values()), ORACLE_COLUMNS)
+        return 0
     rows = []
     for world in worlds:
         for seed in args.seeds:
             row = run_one(world, seed, args.time_limit, args.keep)
+            if world not in oracles:
+                oracles[world] = oracle_row(world)
+            row["oracle_s"] = oracles[world]["oracle_s"]
+            row["vs_oracle"] = round(float(row["sim_time_s"]) / row["oracle_s"], 2)
             rows.append(row)
             print_table([row], COLUMNS)
             sys.stdout.flush()
