@@ -68,7 +68,7 @@ def test_viewpoints_keep_clear_of_an_obstacle_only_the_costmap_has() -> None:
     # a 0.45 m chair standing on the viewpoint the map alone gives
     chair = [(vx + dx, vy + dy) for dx in np.arange(-0.2, 0.25, RES) for dy in np.arange(-0.2, 0.25, RES)]
     merged = add_costmap_obstacles(grid, costmap_with(chair))
-    after = search_frontiers(merged, robot, config).frontiers[0]
+    after = search_frontiers(grid, robot, config, obstacles=merged.data >= 65).frontiers[0]
     clearance = ndimage.distance_transform_edt(merged.data < 65) * RES
     col, row = int(after.viewpoint[0] / RES), int(after.viewpoint[1] / RES)
     assert clearance[row, col] >= config.goal_clearance - 1e-9
@@ -95,3 +95,19 @@ def test_the_global_costmap_gets_the_depth_cloud_once() -> None:
         "cam": {"data_type": "PointCloud2", "topic": "/camera/points"}}}
     _add_cloud_source(voxel)
     assert voxel["voxel_layer"]["observation_sources"] == "cam"
+
+
+def test_a_trail_of_costmap_marks_across_the_room_leaves_the_frontier_reachable() -> None:
+    grid = room()
+    config = ExploreConfig()
+    robot = (1.0, 2.0, 0.0)
+    # a person's marks left across the whole room, 2.5 m east of the robot
+    trail = [(3.5, y) for y in np.arange(1.05, 3.95, RES)]
+    marks = add_costmap_obstacles(grid, costmap_with(trail)).data >= 65
+    search = search_frontiers(grid, robot, config, obstacles=marks)
+    assert len(search.frontiers) == 1 and search.unreachable == 0
+    f = search.frontiers[0]
+    assert abs(f.viewpoint[0] - 3.5) >= config.goal_clearance - 1e-9
+    # as walls on the map, the marks cut the room in two
+    walled = search_frontiers(add_costmap_obstacles(grid, costmap_with(trail)), robot, config)
+    assert len(walled.frontiers) == 0 and walled.unreachable == 1

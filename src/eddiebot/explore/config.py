@@ -35,10 +35,10 @@ class ExploreConfig:
     # eddiebot additions
     costmap_topic: str = ""
     """An OccupancyGrid costmap in the map's frame (``/global_costmap/costmap``) whose lethal
-    cells are added to the map as obstacles before the frontier search: what the costmap
+    cells goals keep ``goal_clearance`` from, as from the map's obstacles: what the costmap
     marks from the depth cloud below the scan (chairs). explore_lite searches frontiers on
-    its ``costmap_topic``; here frontiers come from ``/map`` and this grid only adds
-    obstacles. "": none."""
+    its ``costmap_topic``; here frontiers come from ``/map`` and this grid only places
+    goals. "": none."""
     robot_radius: float = 0.23
     """Cells closer than this to an occupied cell are not reachable (Nav2's inscribed radius)."""
     goal_clearance: float = 0.35

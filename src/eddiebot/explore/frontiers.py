@@ -236,9 +236,16 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
                      passable: npt.NDArray[np.bool_] | None = None,
                      avoid: Sequence[Sequence[float]] = (),
                      looked: Sequence[Sequence[float]] | npt.NDArray[np.float64] | None = None,
-                     blocked: Sequence[Sequence[float]] = ()) -> FrontierSearch:
+                     blocked: Sequence[Sequence[float]] = (),
+                     obstacles: npt.NDArray[np.bool_] | None = None) -> FrontierSearch:
     """Every reachable frontier of ``grid`` seen from the robot at ``robot`` (x, y, yaw),
     cheapest first.
+
+    ``obstacles``: cells (``grid``'s shape) holding obstacles the map lacks (a costmap's
+    lethal cells: what the depth cloud sees below the scan). Goals keep ``goal_clearance``
+    (and viewpoints ``preferred_clearance``) from them as from the map's; the wavefront
+    still passes them, since a costmap also keeps marks of a person who walked on until a
+    ray clears them, and such a trail must not cut the floor in two.
 
     ``passable``: where the robot's centre may go (default `reachable_mask`); a caller with
     a costmap passes its non-lethal, non-inscribed cells here. ``avoid``: spots (x, y) the
@@ -261,6 +268,8 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
     # unknown beyond it (a corridor seen down its length), so pad it with unknown cells
     pad = 2
     grid, passable = _padded(grid, passable, pad)
+    if obstacles is not None:
+        obstacles = np.pad(obstacles, pad, constant_values=False)
     if passable is None:
         passable = reachable_mask(grid, config)
     rx, ry, ryaw = (float(v) for v in robot)
@@ -274,6 +283,8 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
     # goals keep ``goal_clearance`` from known obstacles: the collision monitor and the IR
     # cones slow Eddie to a crawl beside a wall, and the controller gives up
     _, occupied, _ = _classes(grid, config)
+    if obstacles is not None:
+        occupied = occupied | obstacles
     clearance = (ndimage.distance_transform_edt(~occupied) * res if occupied.any()
                  else np.full(occupied.shape, np.inf))
     # ... and keep the robot's footprint off unknown cells, which may hide a wall or a door leaf

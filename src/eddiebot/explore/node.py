@@ -315,14 +315,16 @@ class ExploreNode(Node):
                 self.goals[-1].outcome = "no progress"
                 self._cancel_goal()
         swept = mark_swept(self.grid, [(x, y) for x, y, _ in self.path], self.config.robot_radius)
+        obstacles = None
         if self.costmap is not None:
             try:
-                swept = add_costmap_obstacles(swept, self.costmap)
+                marked = add_costmap_obstacles(swept, self.costmap)
+                obstacles = marked.data >= self.config.occupied_threshold
             except ValueError as exc:
                 self.get_logger().warn(f"{self.config.costmap_topic}: {exc}; not used")
                 self.costmap = None
         search = search_frontiers(swept, pose, self.config, avoid=self.avoid, looked=self.looks,
-                                  blocked=self.blocked)
+                                  blocked=self.blocked, obstacles=obstacles)
         self.last_search = search
         self.searches += 1
         known = float(np.count_nonzero(self.grid.data >= 0)) * self.grid.resolution**2

@@ -3,9 +3,12 @@
 The SLAM map is made from the scan, a band of depth rows at the Kinect's height: what stands
 lower (the office's 0.45 m chairs) is not in it. The global costmap's obstacle layer marks
 from the depth cloud as well (``observation_sources: scan points``), so its lethal cells
-hold those obstacles; `add_costmap_obstacles` marks them occupied on the map, and the
-frontier search then neither routes its wavefront through them nor puts a viewpoint on or
-beside them.
+hold those obstacles; `add_costmap_obstacles` marks them occupied on a copy of the map, and
+the frontier search keeps its goals clear of them (``search_frontiers(obstacles=...)``).
+Its wavefront does not take them as walls: the global costmap keeps the marks of a person
+walking the corridor until a later ray clears them, and such a trail would cut the floor
+in two (office seed 1: the north rooms' frontiers all "unreachable" once the corridor's
+walker had left one).
 """
 
 from __future__ import annotations
