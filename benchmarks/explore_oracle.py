@@ -582,7 +582,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{result.candidates} candidate views")
         for t in result.tours:
             s = t.summary()
-            print(f"  {100 * t.target:.0f} %: {s['viewpoints']} views, seen {100 * t.seen:.1f} %, "
+            print(f"  {100 * t.target:.0f} % (by {t.method}): {s['viewpoints']} views, seen {100 * t.seen:.1f} %, "
                   f"path {s['path_m']} m, drive {s['drive_s']} s + turn {s['turn_s']} s = "
                   f"{s['time_s']} s; with the way home {s['round_trip_s']} s")
         sys.stdout.flush()
