@@ -141,3 +141,19 @@ def test_grids_must_match() -> None:
         oracle.oracle_tour(a, b, (1.5, 1.5, 0.0), PARAMS, LIMITS)
     with pytest.raises(ValueError, match="no reachable floor"):
         oracle.oracle_tour(a, a, (-0.3, -0.3, 0.0), PARAMS, LIMITS)
+
+
+def test_bench_explore_oracle_row_on_a_world_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    import bench_explore
+
+    monkeypatch.setenv("EDDIE_CACHE_DIR", str(tmp_path / "cache"))
+    world = tmp_path / "room.yaml"
+    world.write_text("name: room\nstart: {x: 1.5, y: 1.5}\nwalls:\n"
+                     "  - {points: [[0, 0], [3, 0], [3, 3], [0, 3], [0, 0]], thickness: 0.1}\n")
+    row = bench_explore.oracle_row(str(world))
+    # the room inside its 0.1 m walls: 2.9 x 2.9 m, less the corners a round body misses
+    assert row["reachable_m2"] == pytest.approx(2.9 * 2.9, rel=0.05)
+    assert row["unseeable"] == 0.0
+    assert 0.0 < row["oracle_95_s"] <= row["oracle_100_s"] < row["oracle_s"] < 40.0
+    assert row["method"] == "places"
+    assert row["oracle_100_views"] >= 3
