@@ -157,3 +157,51 @@ def test_progress_history_topic_fallback_and_a_finished_run(bare: Bus) -> None:
         err = recv_until(ws, "error", lambda f: f["op"] == "explore")
         assert err["msg"].startswith("exploration finished (no reachable frontier left)")
         assert resumes == [False]
+
+
+def test_frontiers_reach_the_page_in_the_display_frame(bare: Bus) -> None:
+    from eddiebot.core.tf import make_transform_2d
+    from eddiebot.msgs.geometry_msgs import Point
+    from eddiebot.msgs.tf2_msgs import TFMessage
+    from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
+
+    tf_pub = bare.node.create_publisher(TFMessage, "/tf", 100)
+
+    def tick() -> None:
+        now = bare.node.get_clock().now().nanoseconds
+        tf_pub.publish(TFMessage(transforms=[
+            make_transform_2d("map", "odom", now, 0.0, 0.0, 0.0),
+            make_transform_2d("odom", "base_footprint", now, 1.0, 2.0, 0.5)]))
+
+    bare.node.create_timer(0.05, tick)
+
+    def cells(k: int, pts: list[tuple[float, float]], rgb: tuple[float, float, float]) -> Any:
+        m = Marker(ns="frontiers", id=k, type=Marker.POINTS, action=Marker.ADD)
+        m.header.frame_id = "map"
+        m.pose.orientation.w = 1.0
+        m.color.r, m.color.g, m.color.b, m.color.a = (*rgb, 1.0)
+        m.points = [Point(x=x, y=y, z=0.0) for x, y in pts]
+        return m
+
+    dot = Marker(ns="frontiers", id=1, type=Marker.SPHERE, action=Marker.ADD)
+    dot.header.frame_id = "map"
+    dot.pose.position.x, dot.pose.position.y = 2.5, 4.25
+    dot.pose.orientation.w = 1.0
+    gone = Marker(ns="frontiers", id=9, action=Marker.DELETE)
+    markers = MarkerArray(markers=[cells(0, [(2.0, 4.0), (2.05, 4.0), (2.1, 4.05)], (0.0, 0.0, 1.0)), dot,
+                                   cells(2, [(-1.5, 0.5)], (1.0, 0.0, 0.0)), gone])
+    pub = bare.node.create_publisher(MarkerArray, "/explore/frontiers", 10)
+    with start_dashboard(bare.context, "127.0.0.1", 0, print_url=False) as dash, \
+            connect(ws_url(dash.url), origin=dash.url.rstrip("/")) as ws:  # type: ignore[arg-type]
+        recv_until(ws, "pose", lambda f: f["frame"] == "map")
+        pub.publish(markers)
+        frame = recv_until(ws, "frontiers")
+        assert frame["frame"] == "map"
+        assert frame["open"] == [2.0, 4.0, 2.05, 4.0, 2.1, 4.05]
+        assert frame["abandoned"] == [-1.5, 0.5]
+        assert frame["centroids"] == [2.5, 4.25]
+        # the next plan: no frontier left
+        pub.publish(MarkerArray(markers=[Marker(ns="frontiers", id=k, action=Marker.DELETE)
+                                         for k in range(3)]))
+        empty = recv_until(ws, "frontiers")
+        assert empty["open"] == [] and empty["abandoned"] == [] and empty["centroids"] == []

@@ -113,3 +113,60 @@ def test_progress_chart_and_a_finished_run(browser: Any) -> None:
             page.context.close()
     finally:
         bus.close()
+
+
+def test_frontiers_drawn_on_the_map(browser: Any) -> None:
+    from eddiebot.core.tf import make_transform_2d
+    from eddiebot.msgs.geometry_msgs import Point
+    from eddiebot.msgs.tf2_msgs import TFMessage
+    from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
+
+    bus = Bus(explore=False)
+    try:
+        tf_pub = bus.node.create_publisher(TFMessage, "/tf", 100)
+
+        def tick() -> None:
+            now = bus.node.get_clock().now().nanoseconds
+            tf_pub.publish(TFMessage(transforms=[
+                make_transform_2d("map", "odom", now, 0.0, 0.0, 0.0),
+                make_transform_2d("odom", "base_footprint", now, 1.0, 2.0, 0.5)]))
+
+        bus.node.create_timer(0.05, tick)
+        row = Marker(ns="frontiers", id=0, type=Marker.POINTS, action=Marker.ADD)
+        row.header.frame_id = "map"
+        row.pose.orientation.w = 1.0
+        row.color.b, row.color.a = 1.0, 1.0
+        row.points = [Point(x=3.3, y=1.0 + 0.05 * k, z=0.0) for k in range(20)]  # x = 3.3, y 1..2
+        dot = Marker(ns="frontiers", id=1, type=Marker.SPHERE, action=Marker.ADD)
+        dot.header.frame_id = "map"
+        dot.pose.position.x, dot.pose.position.y = 2.3, 3.3
+        dot.pose.orientation.w = 1.0
+        pub = bus.node.create_publisher(MarkerArray, "/explore/frontiers", 10)
+        with start_dashboard(bus.context, "127.0.0.1", 0, print_url=False) as dash:
+            ctx = browser.new_context(viewport={"width": 1200, "height": 900})
+            page = ctx.new_page()
+            page.goto(dash.url)
+            page.wait_for_function("() => window.eddie && window.eddie.state.pose && "
+                                   "window.eddie.state.tilesDrawn >= 8", timeout=WAIT_MS)
+            pub.publish(MarkerArray(markers=[row, dot]))
+            page.wait_for_function("() => window.eddie.state.frontiers && "
+                                   "window.eddie.state.frontiers.open.length === 40", timeout=WAIT_MS)
+
+            def pixel(x: float, y: float) -> list[int]:
+                page.evaluate("() => new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
+                return list(page.evaluate(
+                    """([x, y]) => { const [sx, sy] = window.eddie.worldToScreen(x, y);
+                         const c = document.getElementById('view');
+                         return Array.from(c.getContext('2d').getImageData(Math.round(sx), Math.round(sy), 1, 1).data); }""",
+                    [x, y]))
+
+            # off the metric grid's lines (every metre)
+            blue, green, free = pixel(3.3, 1.5), pixel(2.3, 3.3), pixel(2.3, 1.3)
+            assert blue[2] > 200 and blue[0] < 100, blue
+            assert green[1] > 200 and green[0] < 100 and green[2] < 100, green
+            assert min(free[:3]) > 230, free  # the free map where no frontier is
+            page.uncheck("#show-frontiers")
+            assert min(pixel(2.3, 3.3)[:3]) > 230
+            ctx.close()
+    finally:
+        bus.close()

@@ -6,7 +6,9 @@ when an explore node publishes its status but offers no service, the ``explore/r
 topic (std_msgs/Bool, as explore_lite's ROS 2 port). Progress comes from
 ``explore/status`` (diagnostic_msgs/DiagnosticStatus: state, paused, finish reason,
 frontiers left, known and free map area, time since exploring began), kept as a history
-(one point per second of exploring) for the page's chart.
+(one point per second of exploring) for the page's chart; the frontiers themselves from
+``explore/frontiers`` (visualization_msgs/MarkerArray: POINTS markers of frontier cells,
+blue open and red abandoned, SPHERE markers at their centroids), drawn on the map.
 
 The dashboard does not start an explore node (it joins a context and talks to what runs
 there, as for navigation and SLAM): ``eddie explore`` with the explore node's
@@ -15,6 +17,7 @@ there, as for navigation and SLAM): ``eddie explore`` with the explore node's
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -23,7 +26,7 @@ from eddiebot.core.qos import QoSProfile, qos_profile_latched
 from eddiebot.core.task import Future
 from eddiebot.msgs import get_message, get_service
 from eddiebot.viz.dashboard.core import text_frame
-from eddiebot.viz.dashboard.display import _NS, DisplayNode
+from eddiebot.viz.dashboard.display import _NS, DisplayNode, _compose, _yaw
 
 __all__ = ["EXPLORE_ACTIONS", "MAX_HISTORY", "ExploreLayers"]
 
@@ -33,6 +36,9 @@ EXPLORE_ACTIONS = {"start": True, "resume": True, "pause": False}
 MAX_HISTORY = 7200
 #: points of it sent to the page (evenly thinned)
 SENT_HISTORY = 240
+#: frontier cells sent to the page at most (evenly thinned)
+MAX_FRONTIER_POINTS = 20000
+_POINTS, _SPHERE, _ADD = 8, 2, 0
 
 
 def _number(text: str) -> float | None:
@@ -50,9 +56,13 @@ class ExploreLayers(DisplayNode):
     _explore_client: Any
     _explore_pub: Any
     _explore_seen_ns: int | None
+    _frontiers: tuple[int, Any] | None
+    _frontiers_sent: int
 
     def _setup_explore(self) -> None:
         self._explore = None
+        self._frontiers = None
+        self._frontiers_sent = 0
         self._explore_history = deque(maxlen=MAX_HISTORY)
         self._explore_seen_ns = None
         self._explore_client = self.create_client(get_service("std_srvs/srv/SetBool"),
@@ -62,6 +72,48 @@ class ExploreLayers(DisplayNode):
         self._sub(get_message("diagnostic_msgs/msg/DiagnosticStatus"), self.topics.explore_status,
                   self._on_explore_status,
                   QoSProfile(depth=20, durability=qos_profile_latched.durability))
+        self._sub(get_message("visualization_msgs/msg/MarkerArray"), self.topics.explore_frontiers,
+                  self._on_frontiers, 2)
+        self.create_timer(0.5, self._send_frontiers, clock=self._wall)
+
+    def _on_frontiers(self, msg: Any) -> None:
+        seq = self._frontiers[0] + 1 if self._frontiers is not None else 1
+        self._frontiers = (seq, msg)
+
+    def _send_frontiers(self) -> None:
+        """Post the newest frontiers in the display frame (twice a second at most)."""
+        kept = self._frontiers
+        if kept is None or kept[0] == self._frontiers_sent:
+            return
+        frame = self._frontiers_frame(kept[1])
+        if frame is not None:
+            self._frontiers_sent = kept[0]
+            self.hub.post("frontiers", frame)
+
+    def _frontiers_frame(self, msg: Any) -> str | None:
+        """``open`` and ``abandoned`` frontier cells and ``centroids`` as flat x, y lists in
+        the display frame; None while TF cannot place them."""
+        groups: dict[str, list[float]] = {"open": [], "abandoned": [], "centroids": []}
+        markers = [m for m in msg.markers if int(m.action) == _ADD and int(m.type) in (_POINTS, _SPHERE)]
+        total = sum(len(m.points) for m in markers if int(m.type) == _POINTS)
+        step = max(1, -(-total // MAX_FRONTIER_POINTS))
+        for m in markers:
+            where = self._to_display(m.header.frame_id or "map")
+            if where is None:
+                self._problems[self.topics.explore_frontiers] = (
+                    f"no TF from {m.header.frame_id!r} to {self.display_frame!r}")
+                return None
+            base = _compose(where, m.pose.position.x, m.pose.position.y, _yaw(m.pose.orientation))
+            if int(m.type) == _SPHERE:
+                groups["centroids"] += [round(base[0], 3), round(base[1], 3)]
+                continue
+            key = "abandoned" if m.color.r > m.color.b else "open"
+            c, s = math.cos(base[2]), math.sin(base[2])
+            for p in m.points[::step]:
+                groups[key] += [round(base[0] + c * p.x - s * p.y, 3),
+                                round(base[1] + s * p.x + c * p.y, 3)]
+        self._problems.pop(self.topics.explore_frontiers, None)
+        return text_frame("frontiers", frame=self.display_frame, **groups)
 
     def _on_explore_status(self, msg: Any) -> None:
         values = {str(kv.key): str(kv.value) for kv in msg.values}

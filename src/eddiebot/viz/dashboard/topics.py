@@ -43,3 +43,4 @@ class DashboardTopics:
     #: the explore node's progress and its pause/resume (service and topic of one name)
     explore_status: str = "/explore/status"
     explore_resume: str = "/explore/resume"
+    explore_frontiers: str = "/explore/frontiers"

@@ -26,6 +26,7 @@
     ["slam_graph", "SLAM graph", true, [["#3a6bff", "nodes"], ["#2fbf4f", "edges"], ["#ffb000", "staged moves"]]],
     ["graph", "vSLAM graph", true, [["#ff8000", "nodes"], ["#0099ff", "links"], ["#ff0000", "loop closures"]]],
     ["tf", "TF frames", false, [["#f44", "x"], ["#4f4", "y"]]],
+    ["frontiers", "frontiers (explore)", true, [["#2f7bff", "open"], ["#ff3030", "abandoned"], ["#30e030", "centroid"]]],
   ];
   const state = {
     view: { cx: 0, cy: 0, scale: 40 },
@@ -122,6 +123,7 @@
       case "goal": state.goal = m.pose; state.goalStatus = m.status; showGoal(); break;
       case "status": state.status = m; showStatus(m); break;
       case "explore": state.explore = m; showExplore(m); break;
+      case "frontiers": state.frontiers = m; break;
       case "log": lastLog = m.lines; showLog(m.lines); break;
       case "estop":
         state.estop = m.locked;
@@ -266,6 +268,7 @@
     if (shown("show-grid")) drawGrid(px);
     if (shown("show-graph") && state.graph) drawGraph(px);
     if (shown("show-slam_graph") && state.slamGraph) drawSlamGraph(px);
+    if (shown("show-frontiers") && state.frontiers) drawFrontiers(px);
     if (shown("show-particles") && state.particles) drawParticles(px);
     else state.drawn.particles = 0;
     if (shown("show-plans")) {
@@ -388,6 +391,19 @@
       }
     }
     state.drawn.graphNodes = nodes; state.drawn.loops = loops;
+  }
+  function drawFrontiers(px) {
+    const f = state.frontiers, d = Math.max(0.05, 2 * px);
+    for (const [key, colour] of [["open", "#2f7bff"], ["abandoned", "#ff3030"]]) {
+      const p = f[key];
+      ctx.fillStyle = colour;
+      for (let i = 0; i + 1 < p.length; i += 2) ctx.fillRect(p[i] - d / 2, p[i + 1] - d / 2, d, d);
+    }
+    ctx.fillStyle = "#30e030";
+    const r = Math.max(0.08, 4 * px);
+    for (let i = 0; i + 1 < f.centroids.length; i += 2) {
+      ctx.beginPath(); ctx.arc(f.centroids[i], f.centroids[i + 1], r, 0, 2 * Math.PI); ctx.fill();
+    }
   }
   function drawSlamGraph(px) {
     const g = state.slamGraph, e = g.edges, n = g.nodes;
