@@ -187,10 +187,16 @@ class ExploreNode(Node):
 
     def _on_resume(self, msg: Any) -> None:
         if bool(msg.data):
+            was_paused = self.paused
             if self.paused:
                 self.get_logger().info("exploration resumed")
             self.paused = False
             self._replan = True
+            # a pause cancelled the look-around's spin or the goal home: go on from there
+            if was_paused and self.state is ExploreState.LOOK_AROUND:
+                self.state = ExploreState.EXPLORING
+            elif was_paused and self.state is ExploreState.RETURNING and self._resume_at is None:
+                self._go_home()
         else:
             if not self.paused:
                 self.get_logger().info("exploration paused")
