@@ -182,7 +182,12 @@ def errors(poses: dict[int, np.ndarray], ref: np.ndarray, truth: MapTruth) -> di
     return out
 
 
-def run_one(name: str, map_share: float, n_reloc: int) -> list[dict[str, Any]]:
+VARIANTS = ("buffer", f"buffer{PROCESS}", "map only", "odometry", "kidnapped", f"kidnapped{PROCESS}")
+
+
+def run_one(
+    name: str, map_share: float, n_reloc: int, variants: tuple[str, ...] = VARIANTS
+) -> list[dict[str, Any]]:
     log = read_carmen(LOGS[name])
     lasers = log.lasers
     # the corrected logs hold one scan per ~0.6 m of travel (up to 1.3 m on Intel): above
@@ -207,8 +212,6 @@ def run_one(name: str, map_share: float, n_reloc: int) -> list[dict[str, Any]]:
     truth = MapTruth(node_poses, ref[idx], to_ref)
     fitted = np.array([se2_compose(to_ref, p) for p in node_poses[ok]])
     map_ate = float(np.sqrt(np.mean(np.sum((fitted[:, :2] - ref[idx][ok][:, :2]) ** 2, axis=1))))
-    variants = ("buffer", f"buffer{PROCESS}", "map only", "odometry", "kidnapped",
-                f"kidnapped{PROCESS}")
     with tempfile.TemporaryDirectory() as tmp:
         path = save_session(mapped.core, Path(tmp) / "map.eslam")
         sessions = {v: load_session(path, mode="localization") for v in (*variants, "reloc")}
@@ -231,8 +234,9 @@ def run_one(name: str, map_share: float, n_reloc: int) -> list[dict[str, Any]]:
         if variant.startswith("kidnapped"):
             row["recovered_after_scans"] = recovery(poses, rest_ref, truth)
         rows.append(row)
-    rows.append(relocalization(name, sessions["reloc"], scans, rest_ref, truth, n_reloc,
-                               config.max_laser_range))
+    if n_reloc:
+        rows.append(relocalization(name, sessions["reloc"], scans, rest_ref, truth, n_reloc,
+                                   config.max_laser_range))
     return rows
 
 
@@ -291,16 +295,22 @@ def main() -> int:
                         help="share of the log's scans mapped before localising the rest")
     parser.add_argument("--reloc", type=int, default=40, help="relocalisation tries per log")
     parser.add_argument("--name", default="slam_localization", help="results file name")
+    parser.add_argument("--variants", default=",".join(VARIANTS),
+                        help="comma-separated set-ups to run (default: all)")
     args = parser.parse_args()
     unknown = [n for n in args.logs if n not in LOGS]
     if unknown:
         parser.error(f"unknown log {', '.join(unknown)} (choose from {', '.join(LOGS)})")
+    variants = tuple(v.strip() for v in args.variants.split(",") if v.strip())
+    bad = [v for v in variants if v not in VARIANTS]
+    if bad:
+        parser.error(f"--variants: unknown {', '.join(bad)} (choose from {', '.join(VARIANTS)})")
     if not 0.05 <= args.map_share <= 0.95:
         parser.error(f"--map-share {args.map_share}: must lie in [0.05, 0.95]")
     rows: list[dict[str, Any]] = []
     for n in args.logs or list(LOGS):
         if LOGS[n].exists():
-            rows += run_one(n, args.map_share, args.reloc)
+            rows += run_one(n, args.map_share, args.reloc, variants)
     track = [r for r in rows if r["variant"] != "relocalisation"]
     print_table(track, ["log", "variant", "map_ate_rmse_m", "scored", "pos_median_m", "pos_p95_m",
                         "local_pos_median_m", "local_pos_p95_m", "local_within_0.2m",

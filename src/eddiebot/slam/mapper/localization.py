@@ -375,6 +375,7 @@ class Localization(Mapping):
         grid, source = self._global_grid()
         found = self._conclude(pending, source.search(view, grid), warnings)
         if found.accepted:
+            self._restart_buffer(points, found.pose)
             return self._localized(found.pose, odom, found.response, None, warnings)
         if fallback is None:
             return ProcessResult(ProcessStatus.LOST, self.map_to_odom, warnings=tuple(warnings))
@@ -395,18 +396,31 @@ class Localization(Mapping):
             return  # a search whose request was dropped since (new pose, cleared buffer)
         self._pending = None
         found = self._conclude(pending, coarse, warnings)
-        if found.accepted:
-            st = self._state
-            st.last_pose = found.pose.copy()
-            st.last_processed_odom = pending.odom.copy()
-            st.map_to_odom = se2_compose(found.pose, se2_inverse(pending.odom))
+        if not found.accepted:
+            return
+        st = self._state
+        if pending.fallback is not None and st.last_pose is not None:
+            # tracked on since the searched scan: the buffer's poses hold relative to each
+            # other, so the correction the search found moves them all (a robot that drove
+            # on meanwhile is not dead-reckoned from there)
+            fix = se2_compose(found.pose, se2_inverse(pending.fallback))
+            st.last_pose = se2_compose(fix, st.last_pose)
+            st.map_to_odom = se2_compose(fix, st.map_to_odom)
+            for b in self._loc_buffer:
+                b.pose = se2_compose(fix, b.pose)
+            self._weak_run = 0
+            self._reloc_wait = self.config.scan_buffer_size
+            return
+        self._restart_buffer(pending.points, found.pose)
+        st.last_pose = found.pose.copy()
+        st.last_processed_odom = pending.odom.copy()
+        st.map_to_odom = se2_compose(found.pose, se2_inverse(pending.odom))
 
     def _conclude(
         self, pending: _Pending, coarse: MatchResult, warnings: list[SlamWarning]
     ) -> Relocalization:
         """The loop closer's fine match after a whole-map ``coarse`` match of
-        ``pending.view``, the acceptance checks, the record and the warning; an accepted pose
-        restarts the buffer with the searched scan."""
+        ``pending.view``, the acceptance checks, the record and the warning."""
         cfg = self.config
         found = self._finish_relocalization(coarse, pending.view, pending.stamp)
         tracked = 0.0
@@ -427,8 +441,7 @@ class Localization(Mapping):
                 f"{found.pose[2]:.2f}), response {found.response:.2f}",
                 stamp,
             )
-            self.clear_localization_buffer()
-            self._buffer(pending.points, found.pose)
+            self._lost_refusals = 0
             return found
         if pending.fallback is None:
             # no pose: the next attempts after 1, 3, 7 … scans, at most scan_buffer_size
@@ -445,6 +458,11 @@ class Localization(Mapping):
             stamp,
         )
         return found
+
+    def _restart_buffer(self, points: FloatArray, pose: FloatArray) -> None:
+        """The buffer holds only ``points`` at robot pose ``pose`` (after a relocalisation)."""
+        self.clear_localization_buffer()
+        self._buffer(points, pose)
 
     def _recent_view(self, points: FloatArray, pose: FloatArray) -> FloatArray:
         """The buffer's scans and ``points`` (taken at robot pose ``pose``), all in this
