@@ -70,3 +70,25 @@ def test_attaches_explores_and_writes_map_session_and_report(env: dict[str, str]
     finally:
         sim.popen.send_signal(signal.SIGINT)
         sim.finish(timeout=15)
+
+
+def test_paused_with_a_world_of_its_own_is_refused(tmp_path: Path) -> None:
+    # --world runs in a graph nobody else can reach, so nothing could ever resume it.
+    run = subprocess.run([*EDDIE, "explore", "--world", "office", "--paused",
+                          "-o", str(tmp_path / "o")], capture_output=True, text=True, timeout=60)
+    assert run.returncode == 2, run.stderr
+    lines = [line for line in run.stderr.splitlines() if line.startswith("eddie: error:")]
+    assert len(lines) == 1 and "--paused" in lines[0] and "eddie explore --paused" in lines[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_paused_and_no_return_become_the_explore_node_parameters() -> None:
+    import argparse
+
+    from eddiebot.cli.explore import _explore_params, add_arguments
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    assert _explore_params(parser.parse_args([])) is None
+    assert _explore_params(parser.parse_args(["--paused", "--no-return"])) == {
+        "start_paused": True, "return_to_init": False}

@@ -12,7 +12,9 @@ bring-up already running on the same ROS_DOMAIN_ID (a ``/clock`` or ``/odom`` pu
 within ``--attach-timeout`` seconds, default 10), as ``eddie slam`` and ``eddie nav`` do,
 and runs SLAM (launch ``mapping``), the navigation servers (``nav``, SLAM localizing) and
 the explore node against it, following ``/clock`` when it is a simulator. OUTDIR then
-receives the SLAM session as well; the report has no ground-truth figures.
+receives the SLAM session as well; the report has no ground-truth figures. With
+``--paused`` the explore node waits for a resume — the dashboard's "Map this floor" button,
+``explore/resume`` (std_srvs/SetBool service or std_msgs/Bool topic) — before it starts.
 """
 
 from __future__ import annotations
@@ -40,11 +42,29 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="simulated Kinect WxH@HZ (default 160x120@10)")
     parser.add_argument("--no-return", action="store_true",
                         help="stay where exploring ended (return_to_init false)")
+    parser.add_argument("--paused", action="store_true",
+                        help="wait for a resume (the dashboard's \"Map this floor\", or "
+                        "explore/resume) before exploring (start_paused true)")
+
+
+def _explore_params(args: argparse.Namespace) -> dict[str, object] | None:
+    params: dict[str, object] = {}
+    if args.no_return:
+        params["return_to_init"] = False
+    if args.paused:
+        params["start_paused"] = True
+    return params or None
 
 
 def run(args: argparse.Namespace) -> int:
     if args.world is None:
         return _run_attached(args)
+    if args.paused:
+        from eddiebot.cli.errors import CliError
+
+        raise CliError("eddie explore: --paused waits for a resume from another process, and "
+                       "--world runs in a graph of its own: start `eddie sim --world "
+                       f"{args.world}` and run `eddie explore --paused` (no --world) beside it")
     from eddiebot.cli._stack import check_world
     from eddiebot.cli.sim import camera_args
     from eddiebot.explore.mission import run_exploration
@@ -54,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     cam = camera_args(args.camera)
     camera = (int(cam["camera_width"]), int(cam["camera_height"]), float(cam["camera_rate"]))
     out = args.output or Path("out") / "explore" / Path(args.world).stem
-    params = {"return_to_init": False} if args.no_return else None
+    params = _explore_params(args)
     result = run_exploration(out, world=args.world, seed=args.seed, time_limit=args.time_limit,
                              camera=camera, explore_params=params)
     json_path, md_path = write_report(result, out)
@@ -108,7 +128,7 @@ def _run_attached(args: argparse.Namespace) -> int:
         print(f"attached to {robot.what}", flush=True)
         cloud = robot.simulated and cache is not None and not cache.publishers("/points")
         out = args.output or Path("out") / "explore" / time.strftime("%Y%m%d-%H%M%S")
-        params = {"return_to_init": False} if args.no_return else None
+        params = _explore_params(args)
         result = run_attached(out, context, simulated=robot.simulated, with_cloud=cloud,
                               time_limit=args.time_limit, explore_params=params)
     finally:
