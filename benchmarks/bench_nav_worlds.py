@@ -479,6 +479,9 @@ class GoalRecord:
     final_yaw_error: float = math.nan
     amcl_error: float = math.nan
     collisions: int = 0
+    max_odom_gap_s: float = math.nan
+    """Longest time between two odometry samples (``/odom`` stamps) during the goal: the
+    controller refuses a pose older than ``transform_tolerance`` (docs/benchmarks/nav.md#pose-age)."""
     reached: bool = False
     passed: bool = False
     """Special goals: aborted with an error code within ``ABORT_LIMIT_S``, no contact."""
@@ -551,6 +554,7 @@ class NavRun:
         from eddiebot.core.executors import SingleThreadedExecutor
         from eddiebot.core.launch import build_nodes, find_launch_file, parse_launch_file
         from eddiebot.core.node import Node
+        from eddiebot.core.time import stamp_to_ns
         from eddiebot.geometry import quaternion_to_yaw, se2_compose, se2_inverse
         from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
         from eddiebot.msgs.nav2_msgs import NavigateToPose
@@ -576,6 +580,7 @@ class NavRun:
         self.truth: list[tuple[float, float, float]] = []
         self.amcl: tuple[float, float, float] | None = None
         self.contacts: list[tuple[float, float, bool]] = []
+        self.odom_stamps: list[int] = []
 
         def on_truth(msg: Any) -> None:
             p = msg.pose.pose
@@ -601,6 +606,8 @@ class NavRun:
         self.client_node.create_subscription(Odometry, "/ground_truth/odom", on_truth, 50)
         self.client_node.create_subscription(PoseWithCovarianceStamped, "/amcl_pose", on_amcl, 10)
         self.client_node.create_subscription(UInt32, "/sim/collisions", on_contact, 10)
+        self.client_node.create_subscription(
+            Odometry, "/odom", lambda m: self.odom_stamps.append(stamp_to_ns(m.header.stamp)), 50)
         self.executor = SingleThreadedExecutor(context=self.context)
         for n in [*self.nodes, self.client_node]:
             self.executor.add_node(n)
@@ -628,6 +635,7 @@ class NavRun:
         o.x, o.y, o.z, o.w = q
         n0 = len(self.truth)
         c0 = len(self.contacts)
+        o0 = len(self.odom_stamps)
         t0 = self.now_s()
         deadline = t0 + timeout_s
         send = self.client.send_goal_async(msg)
@@ -660,6 +668,9 @@ class NavRun:
         if self.amcl is not None:
             record.amcl_error = math.hypot(self.amcl[0] - end[0], self.amcl[1] - end[1])
         record.collisions = len(self.contacts) - c0
+        stamps = self.odom_stamps[max(o0 - 1, 0):]
+        if len(stamps) > 1:
+            record.max_odom_gap_s = float(np.max(np.diff(stamps))) / 1e9
         record.reached = (record.status == "succeeded" and record.final_xy_error <= REACH_XY
                           and record.final_yaw_error <= REACH_YAW)
 
@@ -743,7 +754,8 @@ def run_goals(name: str, world_name: str, world_file: Path, n_goals: int, seed: 
                       f"({goal[0]:6.2f},{goal[1]:6.2f}) {rec.status:9s} {rec.error_code:3d} "
                       f"{rec.seconds:6.1f}s (oracle {rec.oracle_s:5.1f}s) drove {rec.driven_m:5.2f} m / {rec.shortest_m:5.2f} m "
                       f"err {rec.final_xy_error:.3f} m {rec.final_yaw_error:.2f} rad "
-                      f"amcl {rec.amcl_error:.3f} contacts {rec.collisions} {rec.error_msg}",
+                      f"amcl {rec.amcl_error:.3f} contacts {rec.collisions} "
+                      f"odom gap {rec.max_odom_gap_s:.2f} s {rec.error_msg}",
                       flush=True)
         result.sim_s = run.now_s()
         result.collisions = len(run.contacts)
