@@ -24,6 +24,10 @@ Two further figures say how far the reference itself can be trusted at this scal
   nearest end point of the ten scans before it.
 
     python benchmarks/bench_slam_degraded.py [intel] [aces] [--seeds 1 2 3] [--name slam_degraded]
+        [--chains eddiebot karto] [--graph NAME=VALUE ...]
+
+``--graph NAME=VALUE`` overrides an option of the mapper's `PoseGraph` (e.g.
+``gate_probability=none``: no χ² gate, the loop kernel alone decides).
 """
 
 from __future__ import annotations
@@ -49,6 +53,8 @@ from eddiebot.geometry import se2_transform_points
 from eddiebot.slam import SlamConfig, load_slam_config
 from eddiebot.slam.io import read_carmen
 from eddiebot.slam.mapper import mapping, matcher_params
+from eddiebot.slam.mapper import state as mapper_state
+from eddiebot.slam.pose_graph import PoseGraph
 from eddiebot.slam.replay import replay_lasers
 from eddiebot.slam.scan_matcher import build_correlation_grid, match_scan, refine_icp
 
@@ -87,6 +93,41 @@ def rematch_reference(
 
 
 @contextlib.contextmanager
+def graph_options(options: dict[str, Any]) -> Iterator[None]:
+    """The mapper's `PoseGraph` built with ``options`` over its own arguments."""
+    original = mapper_state.PoseGraph
+    if not options:
+        yield
+        return
+
+    def build(**kwargs: Any) -> PoseGraph:
+        return original(**{**kwargs, **options})
+
+    mapper_state.PoseGraph = build  # type: ignore[assignment,misc]
+    try:
+        yield
+    finally:
+        mapper_state.PoseGraph = original  # type: ignore[misc]
+
+
+def parse_graph_option(text: str) -> tuple[str, Any]:
+    """``NAME=VALUE`` (VALUE a number, true/false or none) for `graph_options`."""
+    name, sep, value = text.partition("=")
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    low = value.strip().lower()
+    if low == "none":
+        return name, None
+    if low in ("true", "false"):
+        return name, low == "true"
+    try:
+        number = float(value)
+    except ValueError:
+        return name, value
+    return name, int(number) if number.is_integer() and "." not in value else number
+
+
+@contextlib.contextmanager
 def karto_chains() -> Iterator[None]:
     """Loop candidate chains by node count only, as Karto counts them."""
     original = mapping.find_loop_candidates
@@ -102,14 +143,19 @@ def karto_chains() -> Iterator[None]:
         mapping.find_loop_candidates = original  # type: ignore[assignment]
 
 
-def run_one(name: str, seed: int = 1, chains: str = "eddiebot") -> dict[str, object]:
+def run_one(
+    name: str, seed: int = 1, chains: str = "eddiebot", graph: dict[str, Any] | None = None
+) -> dict[str, object]:
     log = read_carmen(LOGS[name])
     ref = np.array([r.laser_pose for r in log.lasers])
     odom = degrade_odometry(ref, seed=seed, slips=10)
     # one scan per ~0.6 m of travel, up to 1.3 m on Intel: above max_odometry_jump's 1 m
     config = dataclasses.replace(load_slam_config(CONFIG), max_odometry_jump=2.0)
     t0 = time.process_time()
-    with karto_chains() if chains == "karto" else contextlib.nullcontext():
+    with (
+        karto_chains() if chains == "karto" else contextlib.nullcontext(),
+        graph_options(graph or {}),
+    ):
         result = replay_lasers(log.lasers, config, odometry=list(odom), source=str(LOGS[name]))
     cpu = time.process_time() - t0
     stamps = np.array([r.timestamp for r in log.lasers])
@@ -152,6 +198,7 @@ def run_one(name: str, seed: int = 1, chains: str = "eddiebot") -> dict[str, obj
         "cpu_s": cpu,
         "log_duration_s": result.duration_s,
         "seed": seed,
+        "graph_options": dict(graph or {}),
         "slam": slam,
         "odometry": odo,
         "floor": floor,
@@ -167,17 +214,22 @@ def main() -> int:
     parser.add_argument("--seeds", nargs="+", type=int, default=[1, 2, 3],
                         help="odometry degradation seeds (default 1 2 3)")
     parser.add_argument("--name", default="slam_degraded", help="results file name (benchmarks/results/)")
+    parser.add_argument("--chains", nargs="+", default=["eddiebot", "karto"],
+                        choices=["eddiebot", "karto"], help="loop candidate chains to run")
+    parser.add_argument("--graph", nargs="+", type=parse_graph_option, default=[],
+                        metavar="NAME=VALUE",
+                        help="PoseGraph option over the mapper's (e.g. gate_probability=none)")
     args = parser.parse_args()
     unknown = [n for n in args.logs if n not in LOGS]
     if unknown:
         parser.error(f"unknown log {', '.join(unknown)} (choose from {', '.join(LOGS)})")
     names = args.logs or list(LOGS)
     rows = [
-        run_one(n, seed, chains)
+        run_one(n, seed, chains, dict(args.graph))
         for n in names
         if LOGS[n].exists()
         for seed in args.seeds
-        for chains in ("eddiebot", "karto")
+        for chains in args.chains
     ]
     print_table(
         rows,
