@@ -35,7 +35,10 @@ Several seeds run one after another into one results file, rewritten after each 
 ``--replay DIR`` scores the bags a ``--keep DIR --record`` run left (``DIR/<run>/mapping_bag``)
 offline instead: each bag through `SlamCore` (as ``eddie slam replay`` does: every scan that
 moved enough, no node time gate) with ``--set NAME:=VALUE`` overrides on config/slam.yaml —
-how the parameters below were chosen. Writes ``benchmarks/results/<--name>.json``.
+how the parameters below were chosen. Each replay also scores every loop edge against the
+ground-truth relation of its two scans (``loop_error_*``; ``false_loops``: over 0.5 m off;
+``false_loops_in_estimate``: those the back end still uses at the end). Writes
+``benchmarks/results/<--name>.json``.
 
     .venv/bin/python benchmarks/bench_slam_sim.py --replay DIR [DIR ...] [--worlds ...]
         [--set K:=V ...] [--node-time-gate] [--ensemble K]
@@ -278,6 +281,7 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
         "heading_drift_max_deg": drift(est),
         "odom_heading_drift_max_deg": drift(od),
         "scan_cpu_median_ms": float(np.median(cpu)), "scan_cpu_p99_ms": float(np.percentile(cpu, 99)),
+        **_loop_errors(res.core, tg, pg),
         **({} if not gaps else {
             "isam_gap_checks": len(gaps),
             "isam_gap_half_chi2_median": float(np.median([g[0] for g in gaps])),
@@ -285,6 +289,36 @@ def replay_one(name: str, bag: Path, overrides: dict[str, Any],
             "isam_gap_position_max_m": float(max(g[1] for g in gaps)),
         }),
     }
+
+
+#: a loop edge this far (m) from the ground-truth relation is a false loop (an aliased match)
+FALSE_LOOP_M = 0.5
+
+
+def _loop_errors(core: Any, truth_t: np.ndarray, truth_p: np.ndarray) -> dict[str, Any]:
+    """Each loop edge against the ground-truth relation between its two nodes' scans: the
+    largest and 95th-percentile position error, and the false loops (over `FALSE_LOOP_M`) the
+    back end still holds in its estimate at the end (neither rejected nor held by the gate),
+    with their nodes."""
+    from eddiebot.geometry import se2_between
+    from eddiebot.slam.pose_graph.edges import EdgeKind
+
+    graph = core.graph
+    out_of_estimate = set(graph.rejected) | set(graph.held)
+    stamps = np.array([n.scan.stamp_ns for n in core.nodes], dtype=np.int64)
+    truth = _interp(truth_t, truth_p, stamps)
+    errors, false_in = [], []
+    for k, e in enumerate(graph.edges):
+        if e.kind != EdgeKind.LOOP:
+            continue
+        rel = se2_between(truth[e.i], truth[e.j])
+        err = float(np.hypot(*(np.asarray(e.measurement)[:2] - rel[:2])))
+        errors.append(err)
+        if err > FALSE_LOOP_M and k not in out_of_estimate:
+            false_in.append(f"{e.i}->{e.j} ({err:.2f} m)")
+    arr = np.asarray(errors) if errors else np.zeros(1)
+    return {"loop_error_max_m": float(arr.max()), "loop_error_p95_m": float(np.percentile(arr, 95)),
+            "false_loops": int((arr > FALSE_LOOP_M).sum()), "false_loops_in_estimate": false_in}
 
 
 def _isam_gap(graph: Any, every: int) -> tuple[float, float] | None:
