@@ -68,7 +68,7 @@ LOGS = {
     "csail": DATASETS / "slam2d" / "mit-csail" / "mit-csail.clf",
 }
 CONFIG = Path(__file__).resolve().parents[1] / "config" / "slam_defaults.yaml"
-PROCESS = ", search in a process"
+PROCESS = " (search in a process)"
 
 
 def fit_se2(src: np.ndarray, dst: np.ndarray) -> np.ndarray:
@@ -102,6 +102,8 @@ def localize(
     poses: dict[int, np.ndarray] = {}
     counts = {"weak": 0, "relocalized": 0, "lost": 0}
     cpu: list[float] = []
+    seen: dict[int, int] = {}  # scan stamp → processed scans before it
+    delays: list[int] = []  # processed scans from a searched scan to its answer
     last = -1
     try:
         for k, scan in enumerate(scans):
@@ -115,8 +117,11 @@ def localize(
                 poses[k] = se2_compose(start, se2_between(odom[0], odom[k]))
                 continue
             t0 = time.process_time()
+            attempts = len(core.relocalizations)
             r = core.process(scan, odom[k], expected_beams=scan.ranges.size)
             t1 = time.process_time()
+            seen[scan.stamp_ns] = len(cpu)
+            delays += [len(cpu) - seen[a.stamp_ns] for a in core.relocalizations[attempts:]]
             if r.pose is None and r.status is not ProcessStatus.LOST:
                 continue
             cpu.append(t1 - t0)
@@ -136,6 +141,7 @@ def localize(
         counts["cpu_ms_p95"] = float(np.percentile(ms, 95))
         counts["cpu_ms_max"] = float(ms.max())
         counts["reloc_attempts"] = len(core.relocalizations)
+        counts["answer_delay_scans"] = float(np.median(delays)) if delays else 0.0
         counts["search_cpu_ms_per_scan"] = (
             1e3 * sum(search.search_cpu_s) / max(len(cpu), 1) if search is not None else 0.0
         )
@@ -316,7 +322,8 @@ def main() -> int:
                         "local_pos_median_m", "local_pos_p95_m", "local_within_0.2m",
                         "local_head_median_deg", "local_head_p95_deg", "weak", "relocalized",
                         "recovered_after_scans", "reloc_attempts", "cpu_ms_per_scan",
-                        "cpu_ms_p95", "cpu_ms_max", "search_cpu_ms_per_scan"])
+                        "cpu_ms_p95", "cpu_ms_max", "search_cpu_ms_per_scan",
+                        "answer_delay_scans"])
     print()
     print_table([r for r in rows if r["variant"] == "relocalisation"],
                 ["log", "tries", "accepted", "accepted_correct", "accepted_wrong",

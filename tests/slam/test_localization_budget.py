@@ -9,7 +9,7 @@ from slam_world import CORRIDOR, ROOM, SCAN_ANGLES, drifting_odometry, loop_path
 
 from eddiebot.geometry import se2_between, se2_compose, wrap_angle
 from eddiebot.slam import ProcessStatus, Scan, SlamConfig, SlamCore, load_session, save_session
-from eddiebot.slam.mapper.localization import RELOCALIZATION_BACKOFF_LIMIT, GlobalMap
+from eddiebot.slam.mapper.localization import GlobalMap
 from eddiebot.slam.relocalization_process import RelocalizationProcess
 from eddiebot.slam.scan import scan_points
 from eddiebot.slam.scan_matcher import MatchResult
@@ -70,30 +70,32 @@ class HeldSearch:
         self.ready.append((ticket, source.search(points)))
 
 
-def test_relocalisation_attempts_back_off_where_the_map_does_not_cover_the_place(session) -> None:
+def test_a_tracked_robot_off_the_map_is_searched_for_every_scan_buffer_size_scans(
+    session,
+) -> None:
     loc, truth = _loaded(session)
+    search = HeldSearch()
+    loc.global_search = search
     loc.set_initial_pose(truth[10], np.zeros(3))
     loc.process(_scan(truth[10], 1), np.zeros(3))
     # carried into a corridor the map does not hold; odometry follows the walk from there
-    walk = _corridor_walk(44)
-    attempts_at = []
+    walk = _corridor_walk(30)
+    submitted_at = []
     for n, pose in enumerate(walk):
         # odometry saw a turn while the robot was carried, then the walk
         odom = se2_compose(np.array([0.0, 0.0, 0.7]), se2_between(walk[0], pose))
-        before = len(loc.relocalizations)
+        before = len(search.requests)
+        if n == 14:  # the first search answers (refused) after the robot drove on
+            search.release()
         r = loc.process(_scan(pose, 10 + n, CORRIDOR), odom)
         assert r.status is ProcessStatus.LOCALIZED  # tracked on, never lost
-        if len(loc.relocalizations) > before:
-            attempts_at.append(n + 1)
-    assert not any(a.accepted for a in loc.relocalizations)
-    # unsupported scans before each attempt: 4, then 8, 16 (doubling after each refusal);
-    # without the back-off there would be one every 4 scans (11 here)
+        if len(search.requests) > before:
+            submitted_at.append(n + 1)
     b = CONFIG.scan_buffer_size
-    assert attempts_at == [b, 3 * b, 7 * b]
-    assert RELOCALIZATION_BACKOFF_LIMIT * b >= 8 * b
-    # the map supports a scan again: the next loss is searched for after scan_buffer_size
-    loc.start_at(truth[20])
-    assert loc._reloc_wait == b
+    # one search at a time: none while the first runs (scans 4 to 14); after its answer the
+    # next after scan_buffer_size more unsupported scans (the second one never answers here)
+    assert submitted_at == [b, 15 + b - 1]
+    assert [a.accepted for a in loc.relocalizations] == [False]
 
 
 def test_lost_robot_retries_after_1_3_then_scan_buffer_size_scans(session) -> None:

@@ -34,12 +34,12 @@ tracked pose does (the loop closer's fine match there). Otherwise it is refused:
 ``LOST`` without a pose to keep, else the tracked pose is kept. ``relocalizations`` records
 each attempt.
 
-Bounded cost: a whole-map search costs as much as tens to hundreds of tracked scans, and most
-where the map does not cover the place (the branch and bound prunes little). Attempts back
-off while they are refused: tracked, the unsupported scans before the next one double after
-each refusal (``scan_buffer_size``, 2×, 4× … up to `RELOCALIZATION_BACKOFF_LIMIT` ×), back to
-``scan_buffer_size`` once the map supports a scan; without a pose, the next attempt comes after
-1, 3, 7 … scans, at most ``scan_buffer_size``. With a `global_search` (the node's spawned
+Bounded cost: a whole-map search costs as much as tens to hundreds of tracked scans (seconds
+for the buffered view where the map does not cover the place: the branch and bound prunes
+little). Without a pose, refused attempts back off: the next after 1, 3, 7 … scans, at most
+``scan_buffer_size``. (Backing off tracked attempts too — doubling the unsupported scans before
+each — cost ACES its relocalisations that correct the track: median error 0.13 → 0.56 m.)
+With a `global_search` (the node's spawned
 process) the whole-map search runs off the scan's call: the scan returns at once (``LOST``,
 or tracked on at its pose), no second search starts while one runs, and the first scan after
 the answer takes it — accepted, the searched scan's pose carried by odometry to this one is
@@ -86,11 +86,6 @@ class Relocalization:
     accepted: bool
     coarse_variance: float = math.inf
     stamp_ns: int = 0
-
-
-#: while the map does not support the tracked scans, each refused relocalisation doubles the
-#: unsupported scans before the next attempt, from ``scan_buffer_size`` up to this many times it
-RELOCALIZATION_BACKOFF_LIMIT = 8
 
 
 @dataclass(frozen=True)
@@ -167,7 +162,6 @@ class Localization(Mapping):
         super().clear()
         self._loc_buffer: deque[_Buffered] = deque()
         self._weak_run = 0
-        self._reloc_wait = self.config.scan_buffer_size
         self._lost_wait = 0
         self._lost_refusals = 0
         self._pending: _Pending | None = None
@@ -182,7 +176,6 @@ class Localization(Mapping):
         and any relocalisation in flight; the next lost scans attempt one again at once."""
         self._loc_buffer.clear()
         self._weak_run = 0
-        self._reloc_wait = self.config.scan_buffer_size
         self._lost_wait = 0
         self._lost_refusals = 0
         self._pending = None
@@ -251,17 +244,10 @@ class Localization(Mapping):
             self._buffer(points, pose)
         if support >= self._weak_response:
             self._weak_run = 0
-            self._reloc_wait = cfg.scan_buffer_size
         else:
             self._weak_run += 1
-            if self._weak_run >= self._reloc_wait and self._pending is None:
+            if self._weak_run >= cfg.scan_buffer_size and self._pending is None:
                 run, self._weak_run = self._weak_run, 0
-                # backs off while the map does not cover the place: the next attempt after
-                # twice as many unsupported scans, up to RELOCALIZATION_BACKOFF_LIMIT times
-                # scan_buffer_size (a whole-map search costs tens to hundreds of tracked scans)
-                self._reloc_wait = min(
-                    2 * self._reloc_wait, RELOCALIZATION_BACKOFF_LIMIT * cfg.scan_buffer_size
-                )
                 return self._relocalize_scan(
                     points, odom, stamp, warnings,
                     f"{run} consecutive scans the map does not support",
@@ -397,6 +383,7 @@ class Localization(Mapping):
         self._pending = None
         found = self._conclude(pending, coarse, warnings)
         if not found.accepted:
+            self._weak_run = 0  # as in the call: the next after scan_buffer_size more
             return
         st = self._state
         if pending.fallback is not None and st.last_pose is not None:
@@ -409,7 +396,6 @@ class Localization(Mapping):
             for b in self._loc_buffer:
                 b.pose = se2_compose(fix, b.pose)
             self._weak_run = 0
-            self._reloc_wait = self.config.scan_buffer_size
             return
         self._restart_buffer(pending.points, found.pose)
         st.last_pose = found.pose.copy()
