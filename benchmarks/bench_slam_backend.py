@@ -9,8 +9,9 @@ For intel.g2o and manhattan.g2o:
    final ½χ², deviation from the clean optimum;
 3. the same replay with 5 % and 10 % false loop closures added (random node pairs, random
    relative poses within ±1 m / ±0.5 rad, the information of a typical loop edge; seed 7), each
-   arriving with its later node: with the χ² gate (the default `PoseGraph`, DCS kernel) and
-   without it (kernel alone, and no protection at all). Gated replays report the live estimate
+   arriving with its later node: with the χ² gate (the default `PoseGraph`, DCS kernel; the
+   SLAM mapper's), with the gate and no kernel ("gate only"), and without the gate (kernel
+   alone, and no protection at all). Gated replays report the live estimate
    after the last node (``live_*``) and the estimate after `PoseGraph.reconsider`, the final
    consistency pass (the unprefixed figures);
 4. the same false loops solved in one batch from the file's initial guess (chained odometry):
@@ -19,6 +20,7 @@ For intel.g2o and manhattan.g2o:
 Deviation = max / mean position distance from the clean optimum.
 
     python benchmarks/bench_slam_backend.py [--graphs intel manhattan] [--shares 0.05 0.1]
+        [--runs clean incremental batch] [--handlings "gate+dcs" "gate only" "dcs only" none]
 
 Results go to benchmarks/results/slam_backend.json (slam_backend_<graph>.json for one graph).
 """
@@ -189,6 +191,15 @@ def main(argv: list[str] | None = None) -> int:
         choices=["clean", "incremental", "batch"],
         help="which parts to run (clean = the node-by-node replay without false loops)",
     )
+    parser.add_argument(
+        "--handlings",
+        nargs="+",
+        default=["gate+dcs", "dcs only", "none"],
+        choices=["gate+dcs", "gate only", "dcs only", "none"],
+        help="false-loop handlings to run: the χ² gate with the DCS kernel (the SLAM mapper's), "
+        "the gate with no kernel, the kernel alone, no protection (incremental only); "
+        "default all but 'gate only'",
+    )
     parser.add_argument("--out", default=None, help="results name (benchmarks/results/NAME.json)")
     parser.add_argument(
         "--gate",
@@ -253,7 +264,10 @@ def main(argv: list[str] | None = None) -> int:
         rows_out.append(row)
         for share in args.shares:
             rows = edge_rows(data, share)
-            variants: list[tuple[str, str, dict[str, Any]]] = [("incremental", "gate+dcs", gated)]
+            bare = {**gated, "robust_kernel": "none"}
+            variants: list[tuple[str, str, dict[str, Any]]] = [
+                ("incremental", "gate+dcs", gated), ("incremental", "gate only", bare)
+            ]
             if "incremental" not in args.runs:
                 variants = []
             elif not args.no_baselines:
@@ -264,10 +278,12 @@ def main(argv: list[str] | None = None) -> int:
                 ]
             if "batch" in args.runs:
                 variants.append(("batch", "gate+dcs", gated))
+                variants.append(("batch", "gate only", bare))
             if "batch" in args.runs and not args.no_baselines:
                 variants.append(
                     ("batch", "dcs only", {"robust_kernel": "dcs", "gate_probability": None})
                 )
+            variants = [v for v in variants if v[1] in args.handlings]
             for mode, label, kwargs in variants:
                 res: dict[str, Any] = (replay if mode == "incremental" else batch)(
                     data, rows, **kwargs
