@@ -5,6 +5,13 @@ remote control watching the robot would, and publishes ``/cmd_vel_teleop`` — t
 ``eddie teleop`` uses — so the whole base stack (mux, controller, board driver, emulator)
 carries every command. A waypoint may ask for a spin in place, which is how a 57° Kinect
 sees a room.
+
+When a forward command moves the robot less than ``stuck_distance`` within ``stuck_after_s``
+(the base's range veto or its slowdown band holds it), the operator does what one with a
+remote control does: turns in place until the robot faces its carrot within
+``align_tolerance`` and drives on from there. The veto judges the straight corridor ahead of
+the robot, so an arc whose heading still points at a door leaf is refused while the same
+path started square to the doorway is not.
 """
 
 from __future__ import annotations
@@ -134,10 +141,24 @@ class RouteDriver(Node):
     """Follows ``route``; ``done`` is set at the end (or ``failed`` after ``timeout_s``)."""
 
     def __init__(self, route: tuple[Waypoint, ...], *, speed: float = 0.35, turn_speed: float = 0.7,
-                 lookahead: float = 0.4, timeout_s: float = 1200.0, **kwargs: Any) -> None:
+                 lookahead: float = 0.4, timeout_s: float = 1200.0, stuck_after_s: float = 1.0,
+                 stuck_distance: float = 0.02, align_tolerance: float = math.radians(2.0),
+                 **kwargs: Any) -> None:
         super().__init__("route_driver", **kwargs)
+        if not stuck_after_s > 0.0:
+            raise ValueError(f"RouteDriver: stuck_after_s must be > 0 s, got {stuck_after_s}")
+        if not 0.0 < align_tolerance < math.radians(35):
+            raise ValueError(f"RouteDriver: align_tolerance must be in (0, 35°) rad, got {align_tolerance}")
         self.route = route
         self.speed, self.turn_speed, self.lookahead = speed, turn_speed, lookahead
+        self.stuck_ns = round(stuck_after_s * 1e9)
+        self.stuck_distance, self.align_tolerance = stuck_distance, align_tolerance
+        #: Times a forward command did not move the robot and it turned to face its carrot.
+        self.realignments = 0
+        #: Where each realignment started (world x, y), for reports.
+        self.stuck_at: list[tuple[float, float]] = []
+        self._aligning = False
+        self._progress: tuple[int, float, float] | None = None
         self.timeout_ns = round(timeout_s * 1e9)
         self.index = 0
         self.spin_left = 0.0
@@ -178,6 +199,7 @@ class RouteDriver(Node):
             return
         x, y, th = self.pose
         if self.spin_left > 0:
+            self._progress = None
             if self._last_yaw is not None:
                 self.spin_left -= abs(float(wrap_angle(th - self._last_yaw)))
             self._last_yaw = th
@@ -213,8 +235,24 @@ class RouteDriver(Node):
                 carrot = min(length, max(0.0, along) + max(self.lookahead, 0.5))
                 tx, ty = sx + carrot * ux, sy + carrot * uy
         err = float(wrap_angle(math.atan2(ty - y, tx - x) - th))
+        if self._aligning:
+            if abs(err) > self.align_tolerance:
+                # slowing near the heading so the turn ends inside the tolerance
+                self._send(0.0, math.copysign(min(self.turn_speed, max(0.15, 1.5 * abs(err))), err))
+                return
+            self._aligning = False
         if abs(err) > math.radians(35):
+            self._progress = None
             self._send(0.0, math.copysign(self.turn_speed, err))
+            return
+        if self._progress is None or math.hypot(x - self._progress[1], y - self._progress[2]) > self.stuck_distance:
+            self._progress = (now, x, y)
+        elif now - self._progress[0] > self.stuck_ns:
+            self._progress = None
+            self._aligning = True
+            self.realignments += 1
+            self.stuck_at.append((x, y))
+            self._send(0.0, 0.0)
             return
         curvature = 2.0 * math.sin(err) / max(self.lookahead, min(math.hypot(tx - x, ty - y), 1.0))
         v = min(self.speed, 0.6 * dist + 0.05)
