@@ -26,9 +26,7 @@ already looked along from the same spot (`eddiebot.explore.frontiers.looked_mask
 from __future__ import annotations
 
 import dataclasses
-import enum
 import math
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,6 +40,7 @@ from eddiebot.explore.frontiers import Frontier, FrontierSearch, mark_swept, sea
 from eddiebot.explore.homing import path_back, retrace, staging_pose
 from eddiebot.explore.markers import frontier_markers
 from eddiebot.explore.obstacles import add_costmap_obstacles
+from eddiebot.explore.records import ExploreState, GoalRecord
 from eddiebot.explore.tracking import Blacklist, FrontierTracker, ProgressMonitor, choose_frontier
 from eddiebot.geometry import yaw_to_quaternion
 from eddiebot.maps import OccupancyMap, map_from_msg
@@ -76,25 +75,6 @@ _RECOVERY_WAIT_S = 5.0
 #: Attempts after the first retrace this many metres more of the driven path each
 #: (`eddiebot.explore.homing.retrace`).
 _RETRACE_LENGTH = 2.0
-
-
-class ExploreState(enum.Enum):
-    WAITING = "waiting"
-    LOOK_AROUND = "look_around"
-    EXPLORING = "exploring"
-    RETURNING = "returning"
-    DONE = "done"
-
-
-@dataclass
-class GoalRecord:
-    """One frontier goal: where (map frame, m/rad), when (s, node clock), how it ended."""
-
-    frontier_id: int
-    viewpoint: tuple[float, float, float]
-    centroid: tuple[float, float]
-    sent_s: float
-    outcome: str = "active"
 
 
 class ExploreNode(Node):
