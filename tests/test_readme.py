@@ -132,7 +132,7 @@ class _Run:
             if proc.popen.poll() is not None or time.monotonic() > deadline:
                 proc.popen.kill()
                 pytest.fail(f"{command}: no {ready!r} (exit {proc.popen.poll()})\n"
-                            f"{proc.stderr[-3000:]}")
+                            + "\n".join(proc.lines[-30:]) + f"\n{proc.stderr[-3000:]}")
             time.sleep(0.05)
         print(f"{time.monotonic() - deadline + timeout:5.1f} s  {command} (started)")
         return proc
@@ -201,7 +201,9 @@ def _tour(run: _Run) -> None:
         lambda: run.check("eddie topic pub --once /chatter std_msgs/msg/String \"{data: hi}\""),
     )]
     # topics are taken in name order: /tf_static comes last of the simulator's
-    record = run.start("eddie record -o run1 -a", ready="recording /tf_static")
+    # in one loaded -n 2 run of many the recorder (subscribing to the Kinect's 46 MB/s too)
+    # had not reported /tf_static after 60 s; the failure now shows its output
+    record = run.start("eddie record -o run1 -a", ready="recording /tf_static", timeout=120.0)
     time.sleep(2.0)  # everything for a while (the Kinect's images: 46 MB/s), SLAM's first scans
     assert "recorded" in run.stop(record)
     run.check("eddie map save office", expect="map saved to")
