@@ -1,4 +1,6 @@
-"""Localization mode: the rolling buffer of recent scans, global relocalisation, kidnapping."""
+"""Localization mode: the rolling buffer of recent scans, global relocalisation, kidnapping;
+and its bounded cost: attempts back off while the map does not cover the place, and a
+whole-map search run off the scan's call never holds up tracking."""
 
 from __future__ import annotations
 
@@ -8,7 +10,10 @@ from slam_world import CORRIDOR, ROOM, SCAN_ANGLES, drifting_odometry, loop_path
 
 from eddiebot.geometry import se2_between, se2_compose, wrap_angle
 from eddiebot.slam import ProcessStatus, Scan, SlamConfig, SlamCore, load_session, save_session
+from eddiebot.slam.mapper.localization import GlobalMap
+from eddiebot.slam.relocalization_process import RelocalizationProcess
 from eddiebot.slam.scan import scan_points
+from eddiebot.slam.scan_matcher import MatchResult
 
 CONFIG = SlamConfig(minimum_travel_distance=0.5, loop_match_minimum_chain_size=6, scan_buffer_size=4)
 
@@ -135,3 +140,174 @@ def test_relocalize_reports_the_best_pose_and_its_responses(session) -> None:
     assert _err(found.pose, truth[40])[0] < 0.05
     # the tracked pose is left alone
     assert loc._state.last_pose is None
+
+
+# --- bounded relocalisation -----------------------------------------------------------
+
+def _corridor_walk(n: int) -> list[np.ndarray]:
+    """Poses driving up and down the corridor (which the room's map does not hold), 0.6 m
+    apart."""
+    xs = np.concatenate([np.arange(3.0, 27.0, 0.6), np.arange(27.0, 3.0, -0.6)])
+    return [np.array([xs[k % xs.size], 1.0, 0.0 if k % xs.size < xs.size // 2 else np.pi])
+            for k in range(n)]
+
+
+class HeldSearch:
+    """A `GlobalSearch` whose answers come only when the test releases them (the search
+    itself runs in the test's process, on release)."""
+
+    def __init__(self) -> None:
+        self.requests: list[tuple[int, GlobalMap, np.ndarray]] = []
+        self.ready: list[tuple[int, MatchResult]] = []
+
+    def submit(self, source: GlobalMap, points: np.ndarray) -> int:
+        self.requests.append((len(self.requests) + 1, source, points.copy()))
+        return len(self.requests)
+
+    def poll(self) -> tuple[int, MatchResult] | None:
+        return self.ready.pop(0) if self.ready else None
+
+    def release(self) -> None:
+        ticket, source, points = self.requests[-1]
+        self.ready.append((ticket, source.search(points)))
+
+
+def test_a_tracked_robot_off_the_map_is_searched_for_every_scan_buffer_size_scans(
+    session,
+) -> None:
+    loc, truth = _loaded(session)
+    search = HeldSearch()
+    loc.global_search = search
+    loc.set_initial_pose(truth[10], np.zeros(3))
+    loc.process(_scan(truth[10], 1), np.zeros(3))
+    # carried into a corridor the map does not hold; odometry follows the walk from there
+    walk = _corridor_walk(30)
+    submitted_at = []
+    for n, pose in enumerate(walk):
+        # odometry saw a turn while the robot was carried, then the walk
+        odom = se2_compose(np.array([0.0, 0.0, 0.7]), se2_between(walk[0], pose))
+        before = len(search.requests)
+        if n == 14:  # the first search answers (refused) after the robot drove on
+            search.release()
+        r = loc.process(_scan(pose, 10 + n, CORRIDOR), odom)
+        assert r.status is ProcessStatus.LOCALIZED  # tracked on, never lost
+        if len(search.requests) > before:
+            submitted_at.append(n + 1)
+    b = CONFIG.scan_buffer_size
+    # one search at a time: none while the first runs (scans 4 to 14); after its answer the
+    # next after scan_buffer_size more unsupported scans (the second one never answers here)
+    assert submitted_at == [b, 15 + b - 1]
+    assert [a.accepted for a in loc.relocalizations] == [False]
+
+
+def test_lost_robot_retries_after_1_3_then_scan_buffer_size_scans(session) -> None:
+    loc, _ = _loaded(session)
+    attempts_at = []
+    # mid-corridor, both ends beyond the laser's range: the map fits it nowhere for sure
+    elsewhere = np.array([15.0, 1.0, 0.3])
+    for n in range(20):
+        before = len(loc.relocalizations)
+        r = loc.process(_scan(elsewhere, 1 + n, CORRIDOR), np.array([0.6 * n, 0.0, 0.0]))
+        assert r.status is ProcessStatus.LOST and r.pose is None
+        if len(loc.relocalizations) > before:
+            attempts_at.append(n)
+    # refused searches wait 1, 3, then min(7, scan_buffer_size = 4) scans
+    assert attempts_at == [0, 2, 6, 11, 16]
+
+
+def test_a_lost_scan_returns_while_its_search_runs_and_a_later_scan_takes_the_answer(
+    session,
+) -> None:
+    loc, truth = _loaded(session)
+    search = HeldSearch()
+    loc.global_search = search
+    odom0 = np.array([-4.0, 2.0, 1.0])
+    r = loc.process(_scan(truth[30], 1), odom0)
+    # handed over, not searched in the call
+    assert r.status is ProcessStatus.LOST and r.pose is None
+    assert len(search.requests) == 1 and loc.relocalizations == []
+    # the robot drives on; no second search while the first runs
+    for n, k in enumerate((32, 34), start=2):
+        odom = se2_compose(odom0, se2_between(truth[30], truth[k]))
+        r = loc.process(_scan(truth[k], n), odom)
+        assert r.status is ProcessStatus.LOST
+    assert len(search.requests) == 1
+    search.release()
+    odom = se2_compose(odom0, se2_between(truth[30], truth[36]))
+    r = loc.process(_scan(truth[36], 4), odom)
+    # the answer places scan 30; odometry carries it to scan 36, whose match then tracks
+    assert r.status is ProcessStatus.LOCALIZED
+    assert "relocalized" in {w.kind for w in r.warnings}
+    (attempt,) = loc.relocalizations
+    assert attempt.accepted and _err(attempt.pose, truth[30])[0] < 0.05
+    d, th = _err(r.pose, truth[36])
+    assert d < 0.05 and th < 0.02
+
+
+def test_tracking_goes_on_while_the_search_for_a_kidnapped_robot_runs(session) -> None:
+    loc, truth = _loaded(session)
+    search = HeldSearch()
+    loc.global_search = search
+    loc.set_initial_pose(truth[10], np.zeros(3))
+    odom = np.zeros(3)
+    last = truth[10]
+    loc.process(_scan(truth[10], 1), odom)
+    kidnap = [60, 58, 56, 54, 52, 50, 48, 46, 44]
+    statuses = []
+    for n, k in enumerate(kidnap):
+        step = se2_between(last, truth[k]) if n else np.array([0.0, 0.0, 0.6])
+        odom = se2_compose(odom, step)
+        last = truth[k]
+        if n == 6:
+            assert len(search.requests) == 1
+            search.release()
+        r = loc.process(_scan(truth[k], 10 + n), odom)
+        statuses.append(r.status)
+        if n < 6:  # every scan is tracked (on the wrong pose) while the search runs
+            assert not any(w.kind == "relocalized" for w in r.warnings)
+    assert all(s is ProcessStatus.LOCALIZED for s in statuses)
+    assert len(search.requests) == 1
+    (attempt,) = loc.relocalizations
+    assert attempt.accepted
+    d, th = _err(r.pose, truth[kidnap[-1]])
+    assert d < 0.05 and th < 0.02
+
+
+def test_a_stale_answer_is_dropped_after_a_new_initial_pose(session) -> None:
+    loc, truth = _loaded(session)
+    search = HeldSearch()
+    loc.global_search = search
+    loc.process(_scan(truth[30], 1), np.zeros(3))
+    search.release()
+    loc.start_at(truth[50])
+    r = loc.process(_scan(truth[50], 2), np.array([1.0, 0.0, 0.0]))
+    assert r.status is ProcessStatus.LOCALIZED
+    assert loc.relocalizations == []  # the old search's answer is not applied
+    assert _err(r.pose, truth[50])[0] < 0.03
+
+
+def test_the_search_process_answers_without_the_scan_call_waiting(session) -> None:
+    loc, truth = _loaded(session)
+    search = RelocalizationProcess()
+    loc.global_search = search
+    try:
+        odom0 = np.array([2.0, -1.0, 0.3])
+        r = loc.process(_scan(truth[45], 1), odom0)
+        assert r.status is ProcessStatus.LOST and loc.relocalizations == []
+        assert search.busy()
+        assert search.wait(120.0)
+        odom = se2_compose(odom0, se2_between(truth[45], truth[47]))
+        r = loc.process(_scan(truth[47], 2), odom)
+        assert r.status is ProcessStatus.LOCALIZED
+        assert _err(r.pose, truth[47])[0] < 0.05
+        assert len(search.search_cpu_s) == 1 and search.search_cpu_s[0] > 0.0
+        # the map is sent once: a second search reuses the child's grid
+        key = loc._global_source().key
+        search.submit(loc._global_source(), scan_points(_scan(truth[47], 3), 12.0))
+        assert loc._global_source().key == key
+        assert search.wait(120.0)
+        ticket, match = search.poll()  # type: ignore[misc]
+        assert ticket == 2 and isinstance(match, MatchResult)
+    finally:
+        search.close()
+    assert not search.busy()
