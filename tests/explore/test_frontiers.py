@@ -95,6 +95,29 @@ def test_small_and_unreachable_frontiers_are_dropped() -> None:
     assert search.unreachable == 1 and not search.frontiers
 
 
+def test_holes_too_small_to_visit_do_not_take_a_frontiers_viewpoints() -> None:
+    # one- and two-cell gaps in the scan's coverage between the robot and the frontier (a
+    # corridor seen by a Kinect): dropped as too small, they must not claim the spots that
+    # look at the real frontier (each cell looks at the frontier nearest to it)
+    config = ExploreConfig()
+    clean = search_frontiers(room(), (1.0, 2.5, 0.0), config).frontiers[0]
+    d = room().data.copy()
+    for row in range(24, 78, 6):
+        d[row:row + 2, 75] = -1
+    search = search_frontiers(OccupancyMap(d, RES), (1.0, 2.5, 0.0), config)
+    assert search.too_small == 9 and len(search.frontiers) == 1
+    f = search.frontiers[0]
+    back = 5.025 - f.viewpoint[0]
+    assert config.standoff - RES <= back <= 0.5 * config.sensor_max_range + RES, f.viewpoint
+    assert f.gain == pytest.approx(clean.gain, rel=0.15)
+    # after a full turn at that viewpoint, another spot still looks at the frontier
+    turn = [(f.viewpoint[0], f.viewpoint[1], a) for a in np.linspace(-math.pi, math.pi, 36)]
+    again = search_frontiers(OccupancyMap(d, RES), f.viewpoint, config, looked=turn)
+    g = again.frontiers[0]
+    assert math.dist(g.viewpoint[:2], f.viewpoint[:2]) >= 0.3
+    assert g.gain >= 0.5 * clean.gain, (g.viewpoint, g.gain, clean.gain)
+
+
 def test_wavefront_measures_path_length_around_walls_not_straight_lines() -> None:
     passable = np.ones((60, 60), bool)
     passable[0:50, 30] = False  # a wall with a gap at rows 50..59

@@ -325,8 +325,11 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
     view_max = max(standoff + 2 * res, 0.5 * config.sensor_max_range)
     # distance to the nearest frontier through known free space (not through walls: a
     # frontier behind a wall cannot be seen from the other side), and which one it is
+    # among the frontiers kept: a few unknown cells amid known floor (a scan's gap) are too
+    # small to visit, and must not claim the spots that look at a real frontier
     free, _, _ = _classes(grid, config)
-    fr, fc = np.nonzero(labels)
+    kept = np.concatenate(([False], sizes >= config.min_frontier_size))
+    fr, fc = np.nonzero(kept[labels])
     edt, owner = _dijkstra(np.ascontiguousarray(free | (labels > 0)), fr.astype(np.int64),
                            fc.astype(np.int64), np.zeros(fr.size), labels[fr, fc].astype(np.int64))
     edt = edt * res

@@ -76,6 +76,8 @@ def write_report(result: ExploreResult, out: Path) -> tuple[Path, Path]:
     rows = [
         ("finished because", result.reason),
         ("coverage of the reachable free floor", _fmt(result.coverage, pct=True)),
+        ("... with the map placed by ATE's fit, not the start pose",
+         _fmt(result.coverage_aligned, pct=True)),
         ("map agreement (cells both call known)", _fmt(result.map_agreement, pct=True)),
         ("map agreement, walls within one cell", _fmt(result.map_agreement_tolerant, pct=True)),
         ("ATE of the SLAM poses (aligned RMSE)", _fmt(result.ate_m, " m")),
