@@ -43,7 +43,9 @@ Controllers (``--controllers``, static runs): the controller the navigator's tre
 ``mppi`` (Nav2 Jazzy's sample section with Eddie's limits, `MPPI_EDDIE`) or ``mppi_shim``
 (that MPPI behind Nav2's rotation shim controller, `SHIM_EDDIE`) — on the same goals.
 Each goal's time is reported beside an oracle time: the reference length at the
-controller's desired speed (0.4 m/s for all three).
+controller's desired speed (0.4 m/s for all three). ``--params FILE`` runs a user's whole
+Nav2 parameters file instead (as ``eddie nav --params FILE``; its ``FollowPath`` as written),
+labelled with the file's stem; the oracle speed is its ``FollowPath``'s top speed.
 
 Collisions are the simulator's contacts (the robot's own motion blocked by an obstacle or a
 person); contacts with a person near are counted apart.
@@ -392,14 +394,21 @@ SHIM_EDDIE = {"plugin": "nav2_rotation_shim_controller::RotationShimController",
               "rotate_to_heading_angular_vel": 1.2, "max_angular_accel": 3.2}
 
 
-def controller_params(controller: str, out_dir: Path) -> tuple[Path, float]:
+def controller_params(controller: str, out_dir: Path,
+                      params_file: Path | None = None) -> tuple[Path, float]:
     """config/nav2.yaml with ``FollowPath`` (the controller the navigator's trees name) set to
-    ``controller``, and that controller's desired speed (m/s) for the oracle time."""
+    ``controller``, and that controller's desired speed (m/s) for the oracle time. With
+    ``params_file``: that file as it is (``controller`` is only its label)."""
     from eddiebot.cli.nav import default_params
 
-    source = default_params()
+    source = params_file or default_params()
     doc = yaml.safe_load(source.read_text())
     srv = doc["controller_server"]["ros__parameters"]
+    if params_file is not None:
+        section = srv.get("FollowPath", {})
+        speed = float(section.get("desired_linear_vel", section.get("vx_max",
+                                                                    section.get("max_vel_x", 0.5))))
+        return params_file, speed
     if controller == "dwb":
         srv["FollowPath"] = dict(srv["DWB"])
     elif controller in ("mppi", "mppi_shim"):
@@ -690,14 +699,15 @@ def run_goals(name: str, world_name: str, world_file: Path, n_goals: int, seed: 
               checkpoint: Callable[[RunResult], None] | None = None,
               first: int = 0, *, setup: MapSetup | None = None, controller: str = "rpp",
               special: list[tuple[str, tuple[float, float, float]]] | None = None,
-              allowed: np.ndarray | None = None) -> RunResult:
+              allowed: np.ndarray | None = None, params_file: Path | None = None) -> RunResult:
     """Goals one after another in one launch; ``checkpoint`` sees the result after each goal.
 
     ``first`` > 0 resumes the seeded sequence at that goal: the robot starts on goal
     ``first - 1`` (its position and yaw), as if the earlier goals had just been driven.
     ``setup``: the map served (default: the world's footprint map); ``controller``: the
     controller run as ``FollowPath``; ``special``: goals to be aborted, sent after the random
-    ones; ``allowed``: a mask narrowing the cells random goals are drawn from."""
+    ones; ``allowed``: a mask narrowing the cells random goals are drawn from;
+    ``params_file``: a whole Nav2 parameters file run as it is (``controller`` labels it)."""
     from eddiebot.sim.worlds import load_world
 
     world = load_world(world_file)
@@ -712,7 +722,7 @@ def run_goals(name: str, world_name: str, world_file: Path, n_goals: int, seed: 
     graph = PathGraph(truth_space)
     result = RunResult(name, world_name, setup.name, controller)
     run_dir = tmp / f"{name}-{world_name}-{setup.name}-{controller}"
-    params, speed = controller_params(controller, run_dir)
+    params, speed = controller_params(controller, run_dir, params_file)
     sequence = [("random", g) for g in goals[first:]] + list(special or [])
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     run = NavRun(world_file, setup.yaml, start_pose, run_dir, seed=seed, params=params,
@@ -908,6 +918,9 @@ def main(argv: list[str] | None = None) -> int:
                          "where the SLAM map is known and free (the same goals on both maps)")
     ap.add_argument("--controllers", nargs="+", default=["rpp"], choices=list(CONTROLLERS),
                     help="static runs: the controller run as FollowPath, the same goals for each")
+    ap.add_argument("--params", type=Path, default=None, metavar="FILE",
+                    help="static runs: this Nav2 parameters file as it is instead of "
+                         "config/nav2.yaml and --controllers (as eddie nav --params FILE)")
     ap.add_argument("--slam-goals", action="store_true",
                     help="draw random goals where the SLAM map is known and free also when "
                          "only --maps truth runs (the goal set of a --maps slam run)")
@@ -926,6 +939,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="with --plans-only: global costmap footprint_padding, inflation_radius, "
                          "cost_scaling_factor overrides")
     args = ap.parse_args(argv)
+    if args.params is not None:
+        if not args.params.is_file():
+            ap.error(f"--params: {args.params}: no such file")
+        args.controllers = [args.params.stem]
     if args.merge:
         return merge(args.merge, args.out)
     if args.plans_only:
@@ -978,7 +995,7 @@ def main(argv: list[str] | None = None) -> int:
                         r = run_goals(kind, w, wf, n, args.seed, tmp, verbose=not args.quiet,
                                       checkpoint=save, first=args.first if kind == "static" else 0,
                                       setup=setup, controller=controller, special=special,
-                                      allowed=allowed)
+                                      allowed=allowed, params_file=args.params)
                         s = r.summary()
                         rows.append(s)
                         save(r, final=True)

@@ -13,6 +13,7 @@ from eddiebot.nav.collision_monitor import (
     VelocitySubPolygon,
     build_collision_monitor,
     cloud_source_points,
+    costmap_source_points,
     points_in_polygon,
     polygon_source_points,
     range_source_points,
@@ -270,3 +271,17 @@ def test_eddie_near_wall_zone_limits_speed_but_keeps_turning() -> None:
     assert slow.publish.vx == pytest.approx(0.2) and slow.publish.wz == pytest.approx(0.2 * 0.2 / 0.3)
     gentle = m.process(Twist2D(0.0, 0.0, 0.5), wall, 2)
     assert gentle.publish == Twist2D(0.0, 0.0, 0.5)  # under both limits: untouched
+
+
+def test_costmap_source_cells_over_threshold() -> None:
+    # 4 x 3 cells of 0.1 m, origin (1.0, 2.0): lethal (1, 0), inscribed (2, 1), unknown (3, 2)
+    data = np.zeros((3, 4), dtype=np.uint8)
+    data[0, 1], data[1, 2], data[2, 3], data[2, 0] = 254, 253, 255, 252
+    pts = costmap_source_points(data.ravel(), 4, 3, 0.1, (1.0, 2.0))
+    assert np.allclose(pts, [[1.15, 2.05], [1.25, 2.15], [1.35, 2.25]])
+    lethal = costmap_source_points(data.ravel(), 4, 3, 0.1, (1.0, 2.0), 254, False)
+    assert np.allclose(lethal, [[1.15, 2.05]])
+    # the costmap frame 1 m behind the base and turned by 90 degrees
+    moved = costmap_source_points(data.ravel(), 4, 3, 0.1, (1.0, 2.0), 254, False,
+                                  (-1.0, 0.0, math.pi / 2))
+    assert np.allclose(moved, [[-1.0 - 2.05, 1.15]])

@@ -1,5 +1,6 @@
 """Nav2 collision monitor core (``nav2_collision_monitor``, Jazzy): stop / slowdown / limit /
-approach zones over obstacle points from scan, point-cloud, range and polygon sources.
+approach zones over obstacle points from scan, point-cloud, range and polygon sources, and
+(Nav2 Kilted's ``CostmapSource``) the obstacle cells of a costmap.
 
 Zones are ``polygon`` (static ``points``, or a shape received on ``polygon_sub_topic`` / the
 footprint topic for approach), ``circle`` (``radius``) and ``velocity_polygon`` (sub-polygons
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from eddiebot.nav.cost_values import NO_INFORMATION
 from eddiebot.nav.errors import ParameterError
 from eddiebot.nav.params import from_params, require
 from eddiebot.nav.types import Twist2D
@@ -46,7 +48,7 @@ _ACTIONS = {"stop": ActionType.STOP, "slowdown": ActionType.SLOWDOWN,
 #: ``type`` values of a zone
 ZONE_TYPES = ("polygon", "circle", "velocity_polygon")
 #: ``type`` values of an observation source
-SOURCE_TYPES = ("scan", "pointcloud", "range", "polygon")
+SOURCE_TYPES = ("scan", "pointcloud", "range", "polygon", "costmap")
 #: polygon name reported when an enabled source has no valid recent data
 INVALID_SOURCE = "invalid source"
 
@@ -488,6 +490,26 @@ def polygon_source_points(polygons: list[npt.ArrayLike], sampling_distance: floa
     return np.concatenate(out) if out else np.zeros((0, 2))
 
 
+def costmap_source_points(data: npt.ArrayLike, size_x: int, size_y: int, resolution: float,
+                          origin: tuple[float, float], cost_threshold: int = 253,
+                          treat_unknown_as_obstacle: bool = True,
+                          frame_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> Points:
+    """nav2_msgs/Costmap -> base-frame points at the centres of its obstacle cells
+    (``CostmapSource::getSourceData``, Nav2 Kilted+): cost in [``cost_threshold``, 255), or
+    255 (no information) with ``treat_unknown_as_obstacle``. ``frame_pose`` is the costmap
+    frame in the base frame."""
+    d = np.asarray(data, dtype=np.uint8).reshape(size_y, size_x)
+    hit = (d >= cost_threshold) & (d < NO_INFORMATION)
+    if treat_unknown_as_obstacle:
+        hit |= d == NO_INFORMATION
+    rows, cols = np.nonzero(hit)
+    wx = origin[0] + (cols + 0.5) * resolution
+    wy = origin[1] + (rows + 0.5) * resolution
+    fx, fy, fyaw = frame_pose
+    c, s = math.cos(fyaw), math.sin(fyaw)
+    return np.stack([fx + c * wx - s * wy, fy + s * wx + c * wy], axis=-1)
+
+
 __all__ = [
     "INVALID_SOURCE",
     "SOURCE_TYPES",
@@ -501,6 +523,7 @@ __all__ = [
     "Zone",
     "build_collision_monitor",
     "cloud_source_points",
+    "costmap_source_points",
     "points_in_polygon",
     "polygon_source_points",
     "range_source_points",

@@ -238,3 +238,55 @@ def test_lost_localization_stops_autonomous_commands(ctx) -> None:
     ctx.sim_clock.set_ns(7000 * MS)
     _cmd(node)
     assert out.msgs[-1].linear.x == 0.0 and "stale" in state.msgs[-1].polygon_name
+
+
+def _costmap(stamp_ns: int, lethal: list[tuple[float, float]]) -> Any:
+    """A 2 x 2 m odom-frame costmap at 0.05 m, origin (-1, -1), lethal at the given points."""
+    from eddiebot.msgs.nav2_msgs import Costmap
+
+    data = np.zeros((40, 40), dtype=np.uint8)
+    for x, y in lethal:
+        data[int((y + 1.0) / 0.05), int((x + 1.0) / 0.05)] = 254
+    msg = Costmap()
+    _stamp(msg, stamp_ns)
+    msg.header.frame_id = "odom"
+    msg.metadata.resolution, msg.metadata.size_x, msg.metadata.size_y = 0.05, 40, 40
+    msg.metadata.origin.position.x = msg.metadata.origin.position.y = -1.0
+    msg.data = data.ravel()
+    return msg
+
+
+def test_costmap_source_approach_behind_the_robot(ctx) -> None:
+    # a jamb the robot's forward sensors no longer see, 0.30 m behind the base (cell centre
+    # (-0.325, 0.025)): the approach zone on the costmap slows backing into it, lets driving
+    # away through; the scan (nothing ahead) is not used by that zone
+    approach = {"type": "circle", "radius": 0.23, "action_type": "approach", "min_points": 1,
+                "time_before_collision": 1.0, "simulation_time_step": 0.05,
+                "sources_names": ["local_costmap"]}
+    node, out, state = _node(
+        ctx, {"scan": {"type": "scan", "topic": "scan", "source_timeout": 0.0},
+              "local_costmap": {"type": "costmap", "topic": "/local_costmap/costmap_raw",
+                                "cost_threshold": 254, "treat_unknown_as_obstacle": False}},
+        {"CostmapApproach": approach})
+    node.tf_buffer.set_transform(make_transform_2d("odom", "base_footprint", 1000 * MS, 0, 0, 0))
+    ctx.sim_clock.set_ns(1000 * MS)
+    node._source_callback("local_costmap")(_costmap(900 * MS, [(-0.32, 0.03)]))
+    _cmd(node, -0.15)  # 0.097 m to go at 0.15 m/s: 0.6 s (upstream's step) of the 1.0 s
+    assert out.msgs[-1].linear.x == pytest.approx(-0.15 * 0.6)
+    assert (state.msgs[-1].action_type, state.msgs[-1].polygon_name) == (ActionType.APPROACH,
+                                                                        "CostmapApproach")
+    _cmd(node, 0.15)
+    assert out.msgs[-1].linear.x == pytest.approx(0.15)
+    # the cell within the body's 0.23 m: no translation either way
+    node._source_callback("local_costmap")(_costmap(950 * MS, [(-0.20, 0.03)]))
+    _cmd(node, -0.15)
+    assert out.msgs[-1].linear.x == 0.0
+
+
+def test_costmap_source_bad_threshold_is_named(ctx) -> None:
+    node = CollisionMonitorNode(context=ctx, parameter_overrides={
+        "polygons": ["Stop"], "observation_sources": ["cm"], "cm.type": "costmap",
+        "cm.topic": "/local_costmap/costmap_raw", "cm.cost_threshold": 300,
+        **{f"Stop.{k}": v for k, v in STOP.items()}})
+    assert node.trigger_configure() == 98
+    assert "cm.cost_threshold" in node.last_error and "0-255" in node.last_error

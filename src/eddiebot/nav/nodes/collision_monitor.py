@@ -1,12 +1,15 @@
 """nav2_collision_monitor as a lifecycle node: ``/cmd_vel_smoothed`` → ``/cmd_vel_safe``.
 
-Sources (``observation_sources``; each ``type: scan | pointcloud | range | polygon``,
+Sources (``observation_sources``; each ``type: scan | pointcloud | range | polygon | costmap``,
 ``topic``, ``enabled``, ``source_timeout`` (default: the node's)): ``pointcloud`` keeps points
 with ``min_height`` ≤ z ≤ ``max_height`` (0.05 / 0.5 m; in the base frame, or in the odom frame
 with ``use_global_height``); ``range`` puts points on the arc at the measured distance every
 ``obstacles_angle`` (π/180); ``polygon`` (geometry_msgs/PolygonInstanceStamped, one shape per
 ``id``, dropped after ``source_timeout``) samples each outline every ``sampling_distance``
-(0.1 m). The newest message of each source is turned into base-frame points when a command
+(0.1 m); ``costmap`` (nav2_msgs/Costmap, e.g. ``/local_costmap/costmap_raw``; Nav2 Kilted's
+``CostmapSource``) gives the centres of cells with cost in [``cost_threshold`` (253), 255),
+and of unknown cells with ``treat_unknown_as_obstacle`` (true): the costmap remembers what
+the sensors no longer see, beside or behind a robot whose sensors all look ahead. The newest message of each source is turned into base-frame points when a command
 arrives: with ``base_shift_correction`` through ``odom`` from the data's stamp to the latest
 odometry (the robot moved since), else with the latest sensor-to-base transform. An enabled
 source with no data, stale data or no transform stops the robot ("invalid source") unless
@@ -45,6 +48,7 @@ from eddiebot.nav.collision_monitor import (
     Points,
     build_collision_monitor,
     cloud_source_points,
+    costmap_source_points,
     polygon_source_points,
     range_source_points,
     scan_source_points,
@@ -60,6 +64,7 @@ _SOURCE_DEFAULTS: dict[str, dict[str, Any]] = {
     "pointcloud": {"min_height": 0.05, "max_height": 0.5, "use_global_height": False},
     "range": {"obstacles_angle": math.pi / 180.0},
     "polygon": {"sampling_distance": 0.1},
+    "costmap": {"cost_threshold": 253, "treat_unknown_as_obstacle": True},
 }
 #: the keys each source type reads
 SOURCE_KEYS: dict[str, frozenset[str]] = {
@@ -75,6 +80,16 @@ def _matrix(t: Any) -> np.ndarray:
     tr = t.transform.translation
     m[:3, 3] = (tr.x, tr.y, tr.z)
     return m
+
+
+def _cost_threshold(server: str, source: str, value: Any) -> int:
+    """``<source>.cost_threshold``: an integer, clamped to 0-255 with a warning upstream; here
+    a value outside is an error naming it."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or value != int(value):
+        raise ParameterError(server, f"{source}.cost_threshold", value, "must be an integer")
+    if not 0 <= int(value) <= 255:
+        raise ParameterError(server, f"{source}.cost_threshold", value, "must be in 0-255")
+    return int(value)
 
 
 def _pose2d(m: np.ndarray) -> tuple[float, float, float]:
@@ -143,6 +158,13 @@ class CollisionMonitorNode(NavServer):
                         except (TypeError, ValueError) as exc:
                             raise ParameterError(self.get_name(), f"{name}.{key}", merged[key],
                                                  "must be a number") from exc
+                if kind == "costmap":
+                    merged["cost_threshold"] = _cost_threshold(self.get_name(), name,
+                                                               merged["cost_threshold"])
+                    unknown = merged["treat_unknown_as_obstacle"]
+                    if not isinstance(unknown, bool):
+                        raise ParameterError(self.get_name(), f"{name}.treat_unknown_as_obstacle",
+                                             unknown, "must be true or false")
                 if kind == "polygon" and merged["sampling_distance"] <= 0.0:
                     raise ParameterError(self.get_name(), f"{name}.sampling_distance",
                                          merged["sampling_distance"], "must be > 0")
@@ -160,6 +182,7 @@ class CollisionMonitorNode(NavServer):
 
     def on_activate(self, state: State) -> TransitionCallbackReturn:
         from eddiebot.msgs.geometry_msgs import PolygonInstanceStamped, PolygonStamped
+        from eddiebot.msgs.nav2_msgs import Costmap
         from eddiebot.msgs.sensor_msgs import LaserScan, PointCloud2, Range
 
         assert self.monitor is not None
@@ -167,13 +190,14 @@ class CollisionMonitorNode(NavServer):
         self._latest = {}
         self._polygons = {}
         types = {"scan": LaserScan, "range": Range, "pointcloud": PointCloud2,
-                 "polygon": PolygonInstanceStamped}
+                 "polygon": PolygonInstanceStamped, "costmap": Costmap}
         for name, sub in self._sources.items():
             if not sub.get("enabled", True):
                 continue
+            # upstream subscribes to the costmap with the standard (reliable) QoS
+            qos = 1 if sub["type"] == "costmap" else qos_profile_sensor_data
             self._subs.append(self.create_subscription(
-                types[sub["type"]], str(sub["topic"]), self._source_callback(name),
-                qos_profile_sensor_data))
+                types[sub["type"]], str(sub["topic"]), self._source_callback(name), qos))
         for zone in self.monitor.zones:
             if zone.dynamic_topic:
                 self._subs.append(self.create_subscription(
@@ -278,6 +302,12 @@ class CollisionMonitorNode(NavServer):
             return range_source_points(float(msg.range), float(msg.min_range),
                                        float(msg.max_range), float(msg.field_of_view), pose,
                                        float(sub["obstacles_angle"]))
+        if kind == "costmap":
+            meta = msg.metadata
+            return costmap_source_points(
+                msg.data, int(meta.size_x), int(meta.size_y), float(meta.resolution),
+                (float(meta.origin.position.x), float(meta.origin.position.y)),
+                int(sub["cost_threshold"]), bool(sub["treat_unknown_as_obstacle"]), pose)
         if kind == "pointcloud":
             from eddiebot.nav.nodes._costmap import cloud_xyz
 
