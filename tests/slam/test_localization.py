@@ -4,14 +4,28 @@ whole-map search run off the scan's call never holds up tracking."""
 
 from __future__ import annotations
 
+import dataclasses
+from pathlib import Path
+
 import numpy as np
 import pytest
-from slam_world import CORRIDOR, ROOM, SCAN_ANGLES, drifting_odometry, loop_path, raycast
+from slam_world import CORRIDOR, ROOM, SCAN_ANGLES, dataset, drifting_odometry, loop_path, raycast
 
 from eddiebot.geometry import se2_between, se2_compose, wrap_angle
-from eddiebot.slam import ProcessStatus, Scan, SlamConfig, SlamCore, load_session, save_session
+from eddiebot.slam import (
+    ProcessStatus,
+    Scan,
+    SlamConfig,
+    SlamCore,
+    load_session,
+    load_slam_config,
+    save_session,
+)
+from eddiebot.slam.io import read_carmen
+from eddiebot.slam.mapper.global_search import CANDIDATES, scan_candidates
 from eddiebot.slam.mapper.localization import GlobalMap
 from eddiebot.slam.relocalization_process import RelocalizationProcess
+from eddiebot.slam.replay import replay_lasers
 from eddiebot.slam.scan import scan_points
 from eddiebot.slam.scan_matcher import MatchResult
 
@@ -157,19 +171,19 @@ class HeldSearch:
     itself runs in the test's process, on release)."""
 
     def __init__(self) -> None:
-        self.requests: list[tuple[int, GlobalMap, np.ndarray]] = []
+        self.requests: list[tuple[int, GlobalMap, np.ndarray, np.ndarray | None]] = []
         self.ready: list[tuple[int, MatchResult]] = []
 
-    def submit(self, source: GlobalMap, points: np.ndarray) -> int:
-        self.requests.append((len(self.requests) + 1, source, points.copy()))
+    def submit(self, source: GlobalMap, points: np.ndarray, view: np.ndarray | None = None) -> int:
+        self.requests.append((len(self.requests) + 1, source, points.copy(), view))
         return len(self.requests)
 
     def poll(self) -> tuple[int, MatchResult] | None:
         return self.ready.pop(0) if self.ready else None
 
     def release(self) -> None:
-        ticket, source, points = self.requests[-1]
-        self.ready.append((ticket, source.search(points)))
+        ticket, source, points, view = self.requests[-1]
+        self.ready.append((ticket, source.search(points, view=view)))
 
 
 def test_a_tracked_robot_off_the_map_is_searched_for_every_scan_buffer_size_scans(
@@ -311,3 +325,88 @@ def test_the_search_process_answers_without_the_scan_call_waiting(session) -> No
     finally:
         search.close()
     assert not search.busy()
+
+
+# --- a kidnapped robot on a recorded log ----------------------------------------------
+
+INTEL_MAPPED = 200
+"""The Intel log's first scans, mapped (slam_toolbox's sample parameters, corrected poses as
+odometry); the robot is then carried from scan 20's place to scan 100's (9.4 m away) and
+drives on to scan 130 with odometry that never saw the carry."""
+
+
+@pytest.fixture(scope="module")
+def intel(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, list[Scan], np.ndarray]:
+    log = read_carmen(dataset("slam2d", "intel", "intel-corrected.log.gz"))
+    lasers = log.lasers[:INTEL_MAPPED]
+    truth = np.array([r.laser_pose for r in lasers])
+    config = dataclasses.replace(
+        load_slam_config(Path(__file__).resolve().parents[2] / "config" / "slam_defaults.yaml"),
+        max_odometry_jump=2.0,  # one scan per ~0.6 m of travel, up to 1.3 m
+    )
+    mapped = replay_lasers(lasers, config, odometry=list(truth))
+    path = save_session(mapped.core, tmp_path_factory.mktemp("intel") / "intel.eslam")
+    scans = [Scan(r.ranges, r.angles, 0.0, r.range_max, round(r.timestamp * 1e9)) for r in lasers]
+    return path, scans, truth
+
+
+def _kidnapped_errors(
+    intel: tuple[object, list[Scan], np.ndarray], search: RelocalizationProcess | None
+) -> tuple[list[float], SlamCore]:
+    path, scans, truth = intel
+    loc = load_session(path, mode="localization")  # type: ignore[arg-type]
+    loc.global_search = search
+    loc.set_initial_pose(truth[20], truth[100])
+    errors = []
+    for k in range(100, 130):
+        if search is not None and search.busy():
+            assert search.wait(120.0)  # an idle core: the answer comes before the next scan
+        r = loc.process(scans[k], truth[k], expected_beams=scans[k].ranges.size)
+        assert r.pose is not None
+        errors.append(float(np.hypot(*(r.pose[:2] - truth[k][:2]))))
+    return errors, loc
+
+
+@pytest.mark.parametrize("in_process", [False, True])
+def test_kidnapped_robot_on_a_recorded_log_is_back_a_scan_after_the_search(
+    intel, in_process: bool
+) -> None:
+    search = RelocalizationProcess() if in_process else None
+    try:
+        errors, loc = _kidnapped_errors(intel, search)
+    finally:
+        if search is not None:
+            search.close()
+    # tracked on the wrong pose (the map supports the first scans there) until
+    # scan_buffer_size scans in a row are not supported; the view of the buffered scans is
+    # then checked at the newest scan's best places, and the answer is right
+    back = next(n for n, e in enumerate(errors) if e < 0.3)
+    assert min(errors[:back]) > 1.0
+    size = loc.config.scan_buffer_size
+    assert back <= 2 * size + 1 + int(in_process)
+    assert max(errors[back:]) < 0.3
+    accepted = [a for a in loc.relocalizations if a.accepted]
+    assert len(accepted) == 1 and accepted[0].response >= loc.config.loop_match_minimum_response_fine
+
+
+def test_the_newest_scan_proposes_distinct_places_best_first(intel) -> None:
+    path, scans, truth = intel
+    loc = load_session(path, mode="localization")  # type: ignore[arg-type]
+    grid, source = loc._global_grid()
+    points = scan_points(scans[100], loc.config.max_laser_range)
+    poses, responses = scan_candidates(points, grid, source.prior, source.params)
+    assert 1 < len(poses) <= CANDIDATES
+    assert np.all(np.diff(responses) <= 0.0)
+    # the true place is the best (on the coarse search's 5 cm and 2° steps); the others are
+    # at least 0.5 m or two heading steps away from each other (one per place)
+    assert np.hypot(*(poses[0][:2] - truth[100][:2])) < 0.3
+    assert abs(float(wrap_angle(poses[0][2] - truth[100][2]))) < 0.05
+    step = source.params.coarse_angle_resolution
+    for i in range(len(poses)):
+        for j in range(i):
+            apart = np.abs(poses[i][:2] - poses[j][:2]).max()
+            turn = abs(float(wrap_angle(poses[i][2] - poses[j][2])))
+            assert apart > 0.5 - grid.resolution or turn > 2.5 * step
+    # the single best of the plain whole-map search is the same place
+    best = source.search(points, grid)
+    assert np.hypot(*(best.pose[:2] - poses[0][:2])) < 0.3

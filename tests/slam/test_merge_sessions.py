@@ -111,7 +111,7 @@ def test_another_place_is_not_merged(halves: Any) -> None:
     for k in range(12):
         pose = np.array([2.0 + 0.6 * k, 1.0, 0.0])
         corridor.process(_scan(CORRIDOR, pose, k * 100_000_000), pose)
-    with pytest.raises(MergeError, match="none of the 12 sampled nodes of the session relocalised"):
+    with pytest.raises(MergeError, match="12 sampled nodes of the session relocalised"):
         place_session(core, corridor)
 
 

@@ -1,9 +1,9 @@
 """Runs localization's whole-map relocalisation searches in a process of its own, so that the
 SLAM node's scan callback never waits for one.
 
-A search is a branch and bound over the whole map at every heading: 0.2–0.7 s for one scan on
-the Intel, ACES and CSAIL half-maps, seconds for the view of the buffered scans where the
-map does not cover the place (benchmarks/bench_slam_localization.py). The kernels are
+A search is a branch and bound over the whole map at every heading, of one scan (its view of
+the buffered scans is then checked at the scan's best places): 0.1–1 s of CPU on the Intel,
+ACES and CSAIL half-maps (benchmarks/bench_slam_localization.py). The kernels are
 compiled numba functions that hold the GIL for the whole of each call, so a thread would stall
 the node's executor as long. The child is spawned once, keeps the map's correlation grid
 between searches (rebuilt when `GlobalMap.key` changes) and answers one search at a time;
@@ -26,7 +26,8 @@ __all__ = ["RelocalizationProcess"]
 
 
 def _child(conn: Connection) -> None:
-    """Serve (ticket, map or None, points) requests with (ticket, match, CPU seconds)."""
+    """Serve (ticket, map or None, points, view or None) requests with (ticket, match, CPU
+    seconds)."""
     source: GlobalMap | None = None
     grid: CorrelationGrid | None = None
     while True:
@@ -36,12 +37,12 @@ def _child(conn: Connection) -> None:
             return
         if request is None:
             return
-        ticket, new_source, points = request
+        ticket, new_source, points, view = request
         t0 = time.process_time()
         if new_source is not None:
             source, grid = new_source, new_source.grid()
         assert source is not None and grid is not None
-        match = source.search(points, grid)
+        match = source.search(points, grid, view)
         conn.send((ticket, match, time.process_time() - t0))
 
 
@@ -61,7 +62,7 @@ class RelocalizationProcess:
         self._in_flight = 0
         self.search_cpu_s: list[float] = []
 
-    def submit(self, source: GlobalMap, points: FloatArray) -> int:
+    def submit(self, source: GlobalMap, points: FloatArray, view: FloatArray | None = None) -> int:
         with self._lock:
             if self._conn is None:
                 parent, child = self._ctx.Pipe(duplex=True)
@@ -74,7 +75,7 @@ class RelocalizationProcess:
                 self._sent_key = None
             self._tickets += 1
             send = source if source.key != self._sent_key else None
-            self._conn.send((self._tickets, send, points))
+            self._conn.send((self._tickets, send, points, view))
             self._sent_key = source.key
             self._in_flight += 1
             return self._tickets

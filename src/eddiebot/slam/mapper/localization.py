@@ -22,21 +22,21 @@ Relocalisation: with no pose (localization started without ``map_start_pose`` or
 ``/initialpose``), or after ``scan_buffer_size`` consecutive unsupported scans (a place the map
 does not cover is tracked through the buffer meanwhile), the scan is searched over the whole
 map: one correlation grid of every active node's scan at the loop search's resolution and
-smear, every heading, every translation (branch and bound), then the loop closer's fine match
-against the nodes near the best pose. It is accepted as a loop closure is (Karto's two-stage
+smear, every heading, every translation where the map's scans were taken or what they saw
+(branch and bound), then the loop closer's fine match against the nodes near the best pose. It is accepted as a loop closure is (Karto's two-stage
 check): the coarse response reaches ``loop_match_minimum_response_coarse`` with x and y
 variances below ``loop_match_maximum_variance_coarse`` (a scan that fits several places of the
 map spreads its candidates: refused as ambiguous), and the fine response reaches
 ``loop_match_minimum_response_fine``. When tracking was lost (rather than never had), the
-search uses the view of the buffered scans together (their poses relative to the newest hold
-even when the map frame went wrong), and the result must also fit that view better than the
+view of the buffered scans together (their poses relative to the newest hold even when the
+map frame went wrong) decides: the newest scan's best distinct places over the whole map are
+the candidates, the view is matched around each and fits best at the answer
+(`eddiebot.slam.mapper.global_search`), which must also fit that view better than the
 tracked pose does (the loop closer's fine match there). Otherwise it is refused: status
 ``LOST`` without a pose to keep, else the tracked pose is kept. ``relocalizations`` records
 each attempt.
 
-Bounded cost: a whole-map search costs as much as tens to hundreds of tracked scans (seconds
-for the buffered view where the map does not cover the place: the branch and bound prunes
-little). Without a pose, refused attempts back off: the next after 1, 3, 7 … scans, at most
+Bounded cost: a whole-map search costs as much as tens of tracked scans (0.1–1 s of CPU). Without a pose, refused attempts back off: the next after 1, 3, 7 … scans, at most
 ``scan_buffer_size``. (Backing off tracked attempts too — doubling the unsupported scans before
 each — cost ACES its relocalisations that correct the track: median error 0.13 → 0.56 m.)
 With a `global_search` (the node's spawned
@@ -58,6 +58,7 @@ import numpy as np
 import numpy.typing as npt
 
 from eddiebot.geometry import se2_compose, se2_inverse
+from eddiebot.slam.mapper.global_search import search_view
 from eddiebot.slam.mapper.mapping import Mapping
 from eddiebot.slam.mapper.results import FloatArray, ProcessResult, ProcessStatus, SlamWarning
 from eddiebot.slam.mapper.se2_rows import _compose1
@@ -91,32 +92,56 @@ class Relocalization:
 @dataclass(frozen=True)
 class GlobalMap:
     """What a whole-map search matches against: every active node's end points (map frame)
-    inside ``bounds``, searched from ``prior`` (the map's centre) with ``params``. ``key``
-    changes whenever the graph does."""
+    inside ``bounds``, searched from ``prior`` (the map's centre) with ``params``; a view's
+    candidate places need a scan response above ``minimum_response``. ``key`` changes
+    whenever the graph does."""
 
     key: int
     reference: FloatArray
     bounds: tuple[float, float, float, float]
     prior: FloatArray
     params: MatcherParams
+    minimum_response: float = 0.0
 
     def grid(self) -> CorrelationGrid:
-        """The correlation grid (with the pyramid branch and bound reads)."""
+        """The correlation grid (with the pyramid branch and bound reads), padded by the
+        coarsest level's block: a level's cell bounds the block of finer cells above and to
+        the right of it, so a point that falls off the grid under a block's corner while
+        some of the block's candidates bring it onto the map would otherwise count 0."""
         p = self.params
+        levels = pyramid_levels(p)
+        pad = (1 << (levels - 1)) * p.resolution
+        lo_x, lo_y, hi_x, hi_y = self.bounds
         return build_correlation_grid(
-            self.reference, self.bounds, p.resolution, p.smear_deviation, pyramid_levels(p)
+            self.reference,
+            (lo_x - pad, lo_y - pad, hi_x + pad, hi_y + pad),
+            p.resolution,
+            p.smear_deviation,
+            levels,
         )
 
-    def search(self, points: FloatArray, grid: CorrelationGrid | None = None) -> MatchResult:
-        """The best sensor pose of ``points`` (sensor frame) over the whole map."""
-        return match_scan(points, grid if grid is not None else self.grid(), self.prior, self.params)
+    def search(
+        self,
+        points: FloatArray,
+        grid: CorrelationGrid | None = None,
+        view: FloatArray | None = None,
+    ) -> MatchResult:
+        """The best sensor pose of ``points`` (sensor frame) over the whole map; with a
+        ``view`` (``points`` and the scans before them, same frame), the view's, found at the
+        scan's best places (`eddiebot.slam.mapper.global_search.search_view`)."""
+        grid = grid if grid is not None else self.grid()
+        if view is not None:
+            return search_view(
+                points, view, grid, self.prior, self.params, self.minimum_response
+            )
+        return match_scan(points, grid, self.prior, self.params)
 
 
 class GlobalSearch(Protocol):
     """Runs `GlobalMap.search` away from the scan's call (a process of its own)."""
 
-    def submit(self, source: GlobalMap, points: FloatArray) -> int:
-        """Start a search; its ticket."""
+    def submit(self, source: GlobalMap, points: FloatArray, view: FloatArray | None = None) -> int:
+        """Start ``source.search(points, view=view)``; its ticket."""
         ...
 
     def poll(self) -> tuple[int, MatchResult] | None:
@@ -347,19 +372,20 @@ class Localization(Mapping):
         fallback: FloatArray | None = None,
         covariance: FloatArray | None = None,
     ) -> ProcessResult:
-        # lost while tracking: search with the view of the recent scans (their poses relative
-        # to this one hold even when the map frame went wrong): a wider view fits fewer wrong
-        # places; and it must fit the map better than where the robot is tracked now
-        view = points if fallback is None else self._recent_view(points, fallback)
-        pending = _Pending(points, view, odom.copy(), stamp, why, fallback)
+        # lost while tracking: the scan's best places are checked with the view of the recent
+        # scans (their poses relative to this one hold even when the map frame went wrong): a
+        # wider view fits fewer wrong places; and it must fit the map better than where the
+        # robot is tracked now
+        view = None if fallback is None else self._recent_view(points, fallback)
+        pending = _Pending(points, points if view is None else view, odom.copy(), stamp, why, fallback)
         if self.global_search is not None:
             self._pending = pending
-            pending.ticket = self.global_search.submit(self._global_source(), view)
+            pending.ticket = self.global_search.submit(self._global_source(), points, view)
             if fallback is None:
                 return ProcessResult(ProcessStatus.LOST, self.map_to_odom, warnings=tuple(warnings))
             return self._localized(fallback, odom, 0.0, covariance, warnings)
         grid, source = self._global_grid()
-        found = self._conclude(pending, source.search(view, grid), warnings)
+        found = self._conclude(pending, source.search(points, grid, view), warnings)
         if found.accepted:
             self._restart_buffer(points, found.pose)
             return self._localized(found.pose, odom, found.response, None, warnings)
@@ -481,8 +507,15 @@ class Localization(Mapping):
             return cached[1]
         ref, _ = self._reference([int(i) for i in active], poses)
         lo, hi = ref.min(axis=0), ref.max(axis=0)
-        centre = 0.5 * (lo + hi)
-        side = float(max(hi - lo)) + 2.0 * self.config.max_laser_range
+        # the robot stands where the map's scans were taken or what they saw: its sensor is
+        # searched for over both, not beyond (a laser's range outside the map is empty)
+        sensors = se2_compose(
+            poses[active], np.broadcast_to(self.sensor_offset, (active.size, 3))
+        )[:, :2]
+        where_lo = np.minimum(lo, sensors.min(axis=0))
+        where_hi = np.maximum(hi, sensors.max(axis=0))
+        centre = 0.5 * (where_lo + where_hi)
+        side = float(max(where_hi - where_lo))
         self._global_key += 1
         source = GlobalMap(
             key=self._global_key,
@@ -490,6 +523,7 @@ class Localization(Mapping):
             bounds=(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
             prior=np.array([centre[0], centre[1], 0.0]),
             params=self._global_params(side),
+            minimum_response=self.config.loop_match_minimum_response_coarse,
         )
         self._global_map = (fingerprint, source)
         self._global = None
