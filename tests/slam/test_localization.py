@@ -171,19 +171,27 @@ class HeldSearch:
     itself runs in the test's process, on release)."""
 
     def __init__(self) -> None:
-        self.requests: list[tuple[int, GlobalMap, np.ndarray, np.ndarray | None]] = []
+        self.requests: list[
+            tuple[int, GlobalMap, np.ndarray, np.ndarray | None, np.ndarray | None]
+        ] = []
         self.ready: list[tuple[int, MatchResult]] = []
 
-    def submit(self, source: GlobalMap, points: np.ndarray, view: np.ndarray | None = None) -> int:
-        self.requests.append((len(self.requests) + 1, source, points.copy(), view))
+    def submit(
+        self,
+        source: GlobalMap,
+        points: np.ndarray,
+        view: np.ndarray | None = None,
+        tracked: np.ndarray | None = None,
+    ) -> int:
+        self.requests.append((len(self.requests) + 1, source, points.copy(), view, tracked))
         return len(self.requests)
 
     def poll(self) -> tuple[int, MatchResult] | None:
         return self.ready.pop(0) if self.ready else None
 
     def release(self) -> None:
-        ticket, source, points, view = self.requests[-1]
-        self.ready.append((ticket, source.search(points, view=view)))
+        ticket, source, points, view, tracked = self.requests[-1]
+        self.ready.append((ticket, source.search(points, view=view, tracked=tracked)))
 
 
 def test_a_tracked_robot_off_the_map_is_searched_for_every_scan_buffer_size_scans(

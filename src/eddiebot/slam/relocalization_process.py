@@ -26,8 +26,8 @@ __all__ = ["RelocalizationProcess"]
 
 
 def _child(conn: Connection) -> None:
-    """Serve (ticket, map or None, points, view or None) requests with (ticket, match, CPU
-    seconds)."""
+    """Serve (ticket, map or None, points, view or None, tracked or None) requests with
+    (ticket, match, CPU seconds)."""
     source: GlobalMap | None = None
     grid: CorrelationGrid | None = None
     while True:
@@ -37,12 +37,12 @@ def _child(conn: Connection) -> None:
             return
         if request is None:
             return
-        ticket, new_source, points, view = request
+        ticket, new_source, points, view, tracked = request
         t0 = time.process_time()
         if new_source is not None:
             source, grid = new_source, new_source.grid()
         assert source is not None and grid is not None
-        match = source.search(points, grid, view)
+        match = source.search(points, grid, view, tracked)
         conn.send((ticket, match, time.process_time() - t0))
 
 
@@ -62,7 +62,13 @@ class RelocalizationProcess:
         self._in_flight = 0
         self.search_cpu_s: list[float] = []
 
-    def submit(self, source: GlobalMap, points: FloatArray, view: FloatArray | None = None) -> int:
+    def submit(
+        self,
+        source: GlobalMap,
+        points: FloatArray,
+        view: FloatArray | None = None,
+        tracked: FloatArray | None = None,
+    ) -> int:
         with self._lock:
             if self._conn is None:
                 parent, child = self._ctx.Pipe(duplex=True)
@@ -75,7 +81,7 @@ class RelocalizationProcess:
                 self._sent_key = None
             self._tickets += 1
             send = source if source.key != self._sent_key else None
-            self._conn.send((self._tickets, send, points, view))
+            self._conn.send((self._tickets, send, points, view, tracked))
             self._sent_key = source.key
             self._in_flight += 1
             return self._tickets

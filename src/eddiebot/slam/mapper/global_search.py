@@ -9,15 +9,20 @@ keeps the `CANDIDATES` best *distinct* places (a leaf within `SEPARATION` of a k
 heading within two steps, replaces it if better, as non-maximum suppression), and the view is
 matched locally around each (±`SEPARATION` and ±2 heading steps, on the same grid). The
 candidate where the view fits best is the answer, with the response of the view there.
+Where tracking holds the robot is a candidate too: the map supports the newest scan poorly
+there (that is why it is searched), yet the view may fit there best, and then the answer is
+the tracked pose (which the caller does not take as a relocalisation) or, if another place
+fits nearly as well, ambiguous.
 Candidates are the places whose scan response comes within 0.1 of the best (Karto's
 covariance keeps the candidates within 0.1 of the best alike) and reaches the coarse
 acceptance threshold (``loop_match_minimum_response_coarse``, which the view must reach too):
 the branch and bound prunes with that bar, so a scan the map does not hold costs little.
 
-Its covariance is Karto's over the two stages: the local match's (the spread of the view's
-translations within 0.1 of its best) plus the response-weighted spread of the candidates
-whose view response comes within 0.1 of the best — a view that fits two places of the map
-nearly equally is as ambiguous as a whole-map search of the view would find it.
+Its covariance is what a whole-map search of the view reports (Karto's: the response-weighted
+spread of every translation of the whole window, at the answer's heading, whose response
+comes within 0.1 of the best; found through the pyramid's bounds) plus the spread of the
+candidates whose view response comes within 0.1 of the best (places at other headings): a
+view that fits two places of the map nearly equally is refused as ambiguous.
 """
 
 from __future__ import annotations
@@ -31,10 +36,10 @@ from numba import njit
 
 from eddiebot.slam.mapper.results import FloatArray
 from eddiebot.slam.scan_matcher import CorrelationGrid, MatcherParams, MatchResult, match_scan
-from eddiebot.slam.scan_matcher.branch_and_bound import _top_level_scores
+from eddiebot.slam.scan_matcher.branch_and_bound import _top_level_scores, _window_near_best
 from eddiebot.slam.scan_matcher.covariance import _weighted_covariance
 from eddiebot.slam.scan_matcher.grid import _MAX_LEVELS, _score
-from eddiebot.slam.scan_matcher.lookup import _cells_for_angles, _thin
+from eddiebot.slam.scan_matcher.lookup import _cells_for_angles, _thin, _window_offsets
 
 __all__ = ["CANDIDATES", "MARGIN", "SEPARATION", "scan_candidates", "search_view"]
 
@@ -216,12 +221,16 @@ def search_view(
     prior: FloatArray,
     params: MatcherParams,
     minimum_response: float = 0.0,
+    tracked: FloatArray | None = None,
 ) -> MatchResult:
     """The sensor pose (map frame) of ``view`` — the newest scan ``points`` with the scans
     before it, all in its sensor frame — over ``params``' window around ``prior`` (see the
     module docstring); only places where the scan's response exceeds ``minimum_response``
-    are candidates (none: response 0)."""
+    are candidates (none: response 0), and ``tracked`` (the sensor pose tracking holds) is
+    one too."""
     poses, _ = scan_candidates(points, grid, prior, params, floor=minimum_response)
+    if tracked is not None:
+        poses = np.concatenate([poses, np.asarray(tracked, float).reshape(1, 3)])
     if poses.shape[0] == 0:
         return MatchResult(np.asarray(prior, float).copy(), 0.0, np.diag([1e3, 1e3, 1e3]))
     step = max(params.coarse_angle_resolution, 1e-6)
@@ -240,5 +249,38 @@ def search_view(
     where = np.array([m.pose[:2] for m in matches])
     spread = _weighted_covariance(responses, where, float(responses[best]), np.zeros(2))
     covariance = chosen.covariance.copy()
-    covariance[:2, :2] += spread / max(float(responses[best]), 1e-3)
+    covariance[:2, :2] = _window_spread(view, grid, prior, params, chosen.pose)
+    covariance[:2, :2] += spread
+    covariance[:2, :2] /= max(float(chosen.response), 1e-3)
     return MatchResult(chosen.pose, chosen.response, covariance)
+
+
+def _window_spread(
+    view: FloatArray,
+    grid: CorrelationGrid,
+    prior: FloatArray,
+    params: MatcherParams,
+    pose: FloatArray,
+) -> FloatArray:
+    """Karto's translation spread (2×2, m², before the 1/response scaling) of the view at
+    ``pose``'s heading over the whole window: every translation whose response comes within
+    0.1 of the best, weighted by it — what a whole-map search of the view would report."""
+    res = grid.resolution
+    pts = _thin(np.ascontiguousarray(view, dtype=np.float64),
+                max(0.5 * params.smear_deviation, 2.0 * res))
+    prior = np.asarray(prior, dtype=np.float64)
+    window = max(1, round(0.5 * params.search_dimension / res))
+    levels = list(grid.levels[:_MAX_LEVELS])
+    n_levels = len(levels)
+    while len(levels) < _MAX_LEVELS:
+        levels.append(levels[-1])
+    px, py = _cells_for_angles(pts, prior, np.array([pose[2]]), grid)
+    full = _window_near_best(
+        levels[0], levels[1], levels[2], levels[3], levels[4], levels[5], n_levels,
+        px[0], py[0], 0.0, window,
+        round((pose[0] - prior[0]) / res), round((pose[1] - prior[1]) / res), res,
+        False, 1.0, 1.0, 0.0, 0.0,
+    )
+    return _weighted_covariance(
+        full.ravel(), _window_offsets(window, res), float(full.max()), np.full(2, 0.1 * res * res)
+    )

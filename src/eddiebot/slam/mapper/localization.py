@@ -125,14 +125,16 @@ class GlobalMap:
         points: FloatArray,
         grid: CorrelationGrid | None = None,
         view: FloatArray | None = None,
+        tracked: FloatArray | None = None,
     ) -> MatchResult:
         """The best sensor pose of ``points`` (sensor frame) over the whole map; with a
         ``view`` (``points`` and the scans before them, same frame), the view's, found at the
-        scan's best places (`eddiebot.slam.mapper.global_search.search_view`)."""
+        scan's best places and at ``tracked``, the sensor pose tracking holds
+        (`eddiebot.slam.mapper.global_search.search_view`)."""
         grid = grid if grid is not None else self.grid()
         if view is not None:
             return search_view(
-                points, view, grid, self.prior, self.params, self.minimum_response
+                points, view, grid, self.prior, self.params, self.minimum_response, tracked
             )
         return match_scan(points, grid, self.prior, self.params)
 
@@ -140,8 +142,14 @@ class GlobalMap:
 class GlobalSearch(Protocol):
     """Runs `GlobalMap.search` away from the scan's call (a process of its own)."""
 
-    def submit(self, source: GlobalMap, points: FloatArray, view: FloatArray | None = None) -> int:
-        """Start ``source.search(points, view=view)``; its ticket."""
+    def submit(
+        self,
+        source: GlobalMap,
+        points: FloatArray,
+        view: FloatArray | None = None,
+        tracked: FloatArray | None = None,
+    ) -> int:
+        """Start ``source.search(points, view=view, tracked=tracked)``; its ticket."""
         ...
 
     def poll(self) -> tuple[int, MatchResult] | None:
@@ -376,16 +384,21 @@ class Localization(Mapping):
         # scans (their poses relative to this one hold even when the map frame went wrong): a
         # wider view fits fewer wrong places; and it must fit the map better than where the
         # robot is tracked now
-        view = None if fallback is None else self._recent_view(points, fallback)
+        view = tracked = None
+        if fallback is not None:
+            view = self._recent_view(points, fallback)
+            tracked = _compose1(fallback, self.sensor_offset)
         pending = _Pending(points, points if view is None else view, odom.copy(), stamp, why, fallback)
         if self.global_search is not None:
             self._pending = pending
-            pending.ticket = self.global_search.submit(self._global_source(), points, view)
+            pending.ticket = self.global_search.submit(
+                self._global_source(), points, view, tracked
+            )
             if fallback is None:
                 return ProcessResult(ProcessStatus.LOST, self.map_to_odom, warnings=tuple(warnings))
             return self._localized(fallback, odom, 0.0, covariance, warnings)
         grid, source = self._global_grid()
-        found = self._conclude(pending, source.search(points, grid, view), warnings)
+        found = self._conclude(pending, source.search(points, grid, view, tracked), warnings)
         if found.accepted:
             self._restart_buffer(points, found.pose)
             return self._localized(found.pose, odom, found.response, None, warnings)
