@@ -122,7 +122,8 @@ def test_drag_then_manual_loop_closure_moves_the_node(rig_factory: Any) -> None:
     assert np.array_equal(node.core.node_poses(), before)  # staged only
     rig.call(LoopClosure, "manual_loop_closure")
     after = node.core.node_poses()
-    assert np.hypot(*(after[6, :2] - target[:2])) < 0.02
+    # the move's 0.01 m σ against the neighbours' scan-match edges: within a few centimetres
+    assert np.hypot(*(after[6, :2] - target[:2])) < 0.03
     assert abs(after[6, 2] - (before[6, 2] + 0.05)) < 0.01
     assert np.hypot(*(after[5, :2] - before[5, :2])) > 0.25
     assert np.hypot(*(after[7, :2] - before[7, :2])) > 0.25

@@ -19,10 +19,12 @@ from eddiebot.slam.mapper.lifelong import ScanBox, rescore, scan_box, scan_boxes
 from eddiebot.slam.mapper.matching import ScanMatching
 from eddiebot.slam.mapper.measurement import (
     _NO_HEADING_VARIANCE,
+    SEQUENTIAL_POSITION_VARIANCE_SCALE,
     _odometry_covariance,
     _rotate_covariance,
     constrained_information,
     fuse_increments,
+    sequential_edge_covariance,
 )
 from eddiebot.slam.mapper.results import (
     FloatArray,
@@ -99,10 +101,14 @@ class Mapping(ScanMatching):
                     # a scan-match edge whose information is the match's restricted to the
                     # directions the scan observes (a corridor match only across it)
                     info, _ = constrained_information(cov, cfg.corridor_covariance_threshold)
+                    # (its position information as the unfused edge's: ×1/0.2)
+                    info[:2, :2] /= SEQUENTIAL_POSITION_VARIANCE_SCALE
                     delta, cov = fuse_increments(
                         odo_delta, self._step_odometry_covariance(odo_delta), delta, info
                     )
                     pose = _compose1(prev_pose, delta)
+                else:
+                    cov = sequential_edge_covariance(cov)
                 edge = (delta, cov, EdgeKind.SCAN_MATCH)
             elif odo_delta is not None:
                 edge = (odo_delta, _odometry_covariance(odo_delta, cfg), EdgeKind.ODOMETRY)

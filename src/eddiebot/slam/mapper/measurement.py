@@ -53,6 +53,30 @@ _NO_HEADING_VARIANCE = 1.0e4
 """Odometry heading variance (rad²) standing for no heading information in a fused step."""
 
 
+SEQUENTIAL_POSITION_VARIANCE_SCALE = 0.2
+"""Factor on a sequential match's position covariance (Karto's) in its graph edge.
+
+Karto's covariance is the response-weighted spread of the candidates within 0.1 of the best
+response, divided by it: it measures the width of the smeared response peak (a fraction of
+``correlation_search_space_smear_deviation``², however many points pin the pose), and along a
+corridor the search window. Whitened against the corrected Intel and ACES logs (degraded
+odometry), sequential edges with it had a median χ² of 0.75–0.78 (Intel) and 0.54 (ACES)
+(χ²₃: 2.37), their position variance ~5× the true error's along both the weak and the strong
+direction, the heading's close (median 0.15–0.31 against χ²₁'s 0.45); a false loop then fits
+by stretching a few corridor edges cheaply. With the position block ×0.2 the medians are
+1.7–2.0 and per direction 0.35–0.57. The match's own covariance (warnings, fusion thresholds,
+results) stays Karto's; with ``fuse_odometry`` the match's information in the directions it
+keeps is ×5 (docs/benchmarks/slam.md#slam-sequential-covariance)."""
+
+
+def sequential_edge_covariance(covariance: FloatArray) -> FloatArray:
+    """The covariance a sequential scan-match edge carries: Karto's match covariance with its
+    position block scaled by `SEQUENTIAL_POSITION_VARIANCE_SCALE` (heading unchanged)."""
+    out = np.array(covariance, dtype=np.float64)
+    out[:2, :2] *= SEQUENTIAL_POSITION_VARIANCE_SCALE
+    return out
+
+
 def _odometry_covariance(delta: FloatArray, config: SlamConfig | None = None) -> FloatArray:
     """Covariance (x, y, theta) of an odometry increment under the config's noise model."""
     cfg = config or SlamConfig()
