@@ -185,3 +185,22 @@ def test_person_walks_and_yields():
     for _ in range(100):
         ps = step_people(world, ps, robot, 0.1)
     assert ps.direction[0] == -1
+
+
+def test_a_person_stepping_aside_never_steps_into_a_robot_facing_the_path():
+    # the warehouse's aisle walker passing a robot stopped 0.47-0.55 m beside its path and
+    # facing it: the step away from the robot's heading point is towards the robot
+    world = parse_world({"start": {"x": 0, "y": 0},
+                         "people": [{"path": [[2.0, 7.8], [28.0, 7.8]], "speed": 0.8,
+                                     "loop": False}]})
+    worst = np.inf
+    for theta in np.linspace(-math.pi, math.pi, 16, endpoint=False):
+        for dy in (0.3, 0.47, 0.55, -0.47):
+            ps = init_people(world)
+            robot = RobotState(x=20.0, y=7.8 + dy, theta=theta)
+            for _ in range(2000):  # 40 s: past the robot
+                ps = step_people(world, ps, robot, 0.02)
+                px, py = people_positions(world, ps)[0, :2]
+                worst = min(worst, math.hypot(px - robot.x, py - robot.y) - 0.25 - 0.2245)
+            assert people_positions(world, ps)[0, 0] > 20.5, (theta, dy)  # got past
+    assert worst >= 0.0  # before: -0.17 m (overlapping the robot: contacts it never made)

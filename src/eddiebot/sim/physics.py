@@ -362,7 +362,18 @@ def step_people(world: World, state: PeopleState, robot: RobotState, dt: float,
             side = 1.0 if (now_x - hx) * left[0] + (now_y - hy) * left[1] >= 0 else -1.0
             if off != 0.0:
                 side = math.copysign(1.0, off)
-            off = side * min(STEP_ASIDE_M, abs(off) + STEP_ASIDE_SPEED * dt)
+            # ... but never into the robot: a robot facing the path has its heading point
+            # on the far side of the path, and the step away from that point is towards it
+            for sign in (side, -side):
+                # turning to the other side starts from the path (a side once left is not
+                # taken again, or the person would dither between the two)
+                base = abs(off) if off * sign >= 0 else 0.0
+                step_off = sign * min(STEP_ASIDE_M, base + STEP_ASIDE_SPEED * dt)
+                ax, ay = _pos(p, s, step_off, d)
+                if math.hypot(ax - robot.x, ay - robot.y) - p.radius - robot_radius >= min(
+                        now_clear, margin):
+                    off = step_off
+                    break
             s_out.append(s)
             d_out.append(d)
             w_out.append(True)
