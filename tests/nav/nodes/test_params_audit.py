@@ -52,7 +52,7 @@ def test_unloadable_controller_is_named(distro: str) -> None:
 def test_jazzy_warnings_name_each_entry_once() -> None:
     audit = audit_nav2_params(upstream("jazzy", RPP))
     w = audit.warnings
-    assert len(w) == len(set(w)) == 17
+    assert len(w) == len(set(w)) == 15
     for section in ("route_server", "docking_server", "loopback_simulator"):
         assert f"not supported: {section} (whole section)" in w
         assert section not in audit.supported
@@ -67,7 +67,7 @@ def test_jazzy_warnings_name_each_entry_once() -> None:
 
 def test_kilted_warnings() -> None:
     w = audit_nav2_params(upstream("kilted", "dwb_core::DWBLocalPlanner")).warnings
-    assert len(w) == len(set(w)) == 28
+    assert len(w) == len(set(w)) == 26
     assert "ignored: bt_navigator.error_code_name_prefixes" not in w
     for section in ("route_server", "docking_server", "loopback_simulator"):
         assert f"not supported: {section} (whole section)" in w
@@ -142,3 +142,29 @@ def test_unloadable_controller_fails_the_controller_server_with_its_name(tmp_pat
         assert GRACEFUL in cs.last_error and "FollowPath.plugin" in cs.last_error
     finally:
         ctx.shutdown()
+
+
+def test_behavior_server_reads_jazzy_topic_names() -> None:
+    from eddiebot.core import Context
+    from eddiebot.nav.nodes.behavior_server import BehaviorServer
+
+    ctx = Context(use_sim_time=True)
+    try:
+        for over, costmap, footprint in (
+                ({}, "/local_costmap/costmap_raw", "/local_costmap/published_footprint"),
+                ({"costmap_topic": "humble/costmap_raw"}, "/humble/costmap_raw",
+                 "/local_costmap/published_footprint"),
+                ({"costmap_topic": "humble/costmap_raw", "local_costmap_topic": "/lc/raw",
+                  "local_footprint_topic": "lc/footprint"}, "/lc/raw", "/lc/footprint")):
+            node = BehaviorServer(context=ctx, parameter_overrides={
+                "behavior_plugins": ["wait"], "wait.plugin": "nav2_behaviors::Wait", **over})
+            assert node.trigger_configure() == 97, node.last_error
+            assert node.trigger_activate() == 97
+            assert [s.topic_name for s in node._subs[:2]] == [costmap, footprint]
+            node.trigger_deactivate()
+            node.destroy_node()
+    finally:
+        ctx.shutdown()
+    w = audit_nav2_params(upstream("jazzy", RPP)).warnings
+    assert "ignored: behavior_server.local_costmap_topic" not in w
+    assert "ignored: behavior_server.global_costmap_topic" in w  # no global-costmap behaviour

@@ -6,7 +6,10 @@ Parameters as Nav2's ``behavior_server`` (``behavior_plugins`` with ``plugin:``,
 plugin instance (``spin``, ``backup``, …) that publishes on ``cmd_vel`` — remapped to
 ``/cmd_vel_nav`` so the velocity smoother and the collision monitor stay in the chain — and
 checks collisions on the local costmap (``/local_costmap/costmap_raw`` with
-``/local_costmap/published_footprint``). Every end (success, failure, cancel) sends zero.
+``/local_costmap/published_footprint``: Jazzy's ``local_costmap_topic`` and
+``local_footprint_topic``, or Humble's ``costmap_topic`` and ``footprint_topic``; Jazzy's
+``global_*_topic`` feed behaviours of the global costmap, which none of these is). Every end
+(success, failure, cancel) sends zero.
 """
 
 from __future__ import annotations
@@ -69,6 +72,9 @@ class BehaviorServer(NavServer):
     PARAMETERS = {
         "costmap_topic": "local_costmap/costmap_raw",
         "footprint_topic": "local_costmap/published_footprint",
+        # Jazzy's names for the same topics (a value set here wins over Humble's)
+        "local_costmap_topic": "local_costmap/costmap_raw",
+        "local_footprint_topic": "local_costmap/published_footprint",
         "cycle_frequency": 10.0, "local_frame": "odom", "global_frame": "map",
         "robot_base_frame": "base_link", "transform_tolerance": 0.1,
         "simulate_ahead_time": 2.0, "max_rotational_vel": 1.0, "min_rotational_vel": 0.4,
@@ -93,7 +99,8 @@ class BehaviorServer(NavServer):
     def on_configure(self, state: State) -> TransitionCallbackReturn:
         def build() -> None:
             tree = self.params_tree()
-            for key in ("costmap_topic", "footprint_topic", "enable_stamped_cmd_vel"):
+            for key in ("costmap_topic", "footprint_topic", "local_costmap_topic",
+                        "local_footprint_topic", "enable_stamped_cmd_vel"):
                 tree.pop(key, None)
             # Humble spelled the local frame global_frame; Jazzy has both.
             self.config, self.behaviors = build_behaviors(tree, server=self.get_name())
@@ -106,6 +113,14 @@ class BehaviorServer(NavServer):
             self._cmd_pub = self.create_lifecycle_publisher(Twist, "cmd_vel", 1)
         return self.configure_with(build)
 
+    def _topic(self, kind: str) -> str:
+        """The local costmap's ``kind`` ("costmap" / "footprint") topic: Jazzy's
+        ``local_<kind>_topic`` when set away from its default, else Humble's ``<kind>_topic``."""
+        jazzy = str(self.param(f"local_{kind}_topic"))
+        topic = jazzy if jazzy != self.PARAMETERS[f"local_{kind}_topic"] else str(
+            self.param(f"{kind}_topic"))
+        return "/" + topic.lstrip("/")
+
     def on_activate(self, state: State) -> TransitionCallbackReturn:
         from eddiebot.msgs.geometry_msgs import PolygonStamped
         from eddiebot.msgs.nav2_msgs import AssistedTeleop as AssistedTeleopAction
@@ -117,10 +132,8 @@ class BehaviorServer(NavServer):
 
         self._listener = TransformListener(self.tf_buffer, self)
         self._subs = [
-            self.create_subscription(Costmap, "/" + str(self.param("costmap_topic")).lstrip("/"),
-                                     self._on_costmap, 1),
-            self.create_subscription(PolygonStamped,
-                                     "/" + str(self.param("footprint_topic")).lstrip("/"),
+            self.create_subscription(Costmap, self._topic("costmap"), self._on_costmap, 1),
+            self.create_subscription(PolygonStamped, self._topic("footprint"),
                                      self._on_footprint, 1),
             self.create_subscription(Twist, "cmd_vel_teleop", self._on_teleop, 1),
         ]
