@@ -249,7 +249,9 @@ def search_view(
     where = np.array([m.pose[:2] for m in matches])
     spread = _weighted_covariance(responses, where, float(responses[best]), np.zeros(2))
     covariance = chosen.covariance.copy()
-    covariance[:2, :2] = _window_spread(view, grid, prior, params, chosen.pose)
+    if chosen.response >= minimum_response:
+        # (below, the answer is refused on its response whatever its spread)
+        covariance[:2, :2] = _window_spread(view, grid, prior, params, chosen.pose)
     covariance[:2, :2] += spread
     covariance[:2, :2] /= max(float(chosen.response), 1e-3)
     return MatchResult(chosen.pose, chosen.response, covariance)
