@@ -1,7 +1,8 @@
 """Executors: who runs the callbacks, in what order, and how time moves.
 
 ``SingleThreadedExecutor`` is deterministic: work runs in the order it arrived, timers in
-the order they fall due. On a simulated clock that this executor drives, it does not wait
+the order they fall due, and a due timer waits for at most ``_FAIR_TIMER_EVERY`` callbacks
+while work keeps arriving. On a simulated clock that this executor drives, it does not wait
 for a timer — it moves the clock to the timer's due time (optionally paced to a real-time
 factor), so a ten-minute run of idle nodes takes milliseconds and a test never sleeps.
 
@@ -25,6 +26,9 @@ if TYPE_CHECKING:
     from eddiebot.core.node import Node, Timer
 
 __all__ = ["Executor", "MultiThreadedExecutor", "SingleThreadedExecutor"]
+
+#: After this many ready callbacks in a row, a due timer runs before the next one.
+_FAIR_TIMER_EVERY = 16
 
 
 class _TaskEntity:
@@ -56,6 +60,7 @@ class Executor:
         self._nodes: list[Node] = []
         self._timer_cache: list[Timer] | None = None
         self._ready: deque[Any] = deque()
+        self._ready_streak = 0
         self._cond = threading.Condition()
         self._spinning: set[int] = set()
         self._shutdown = False
@@ -211,7 +216,20 @@ class Executor:
         while not self._shutdown and self.context.ok():
             with self._cond:
                 if self._ready:
-                    return self._ready.popleft()
+                    # a due timer gets a turn now and then even while messages keep coming
+                    # (as rclpy's wait set offers ready timers first): a recorder that cannot
+                    # keep up with a camera still polls the graph
+                    self._ready_streak += 1
+                    if self._ready_streak <= _FAIR_TIMER_EVERY:
+                        return self._ready.popleft()
+            self._ready_streak = 0
+            if self._ready:
+                timer = self._due_timer()
+                if timer is not None:
+                    return timer
+                with self._cond:
+                    if self._ready:
+                        return self._ready.popleft()
             if self.drive_sim_time:
                 # fast path: the earliest timer is on the driven sim clock
                 first = self._earliest_timer()
