@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import print_table, write_results
 
-COLUMNS = ["world", "seed", "reason", "coverage", "map_agreement", "ate_m", "distance_m",
+COLUMNS = ["world", "seed", "reason", "coverage", "coverage_aligned", "map_agreement", "ate_m", "distance_m",
            "explore_time_s", "sim_time_s", "oracle_s", "vs_oracle", "wall_time_s", "turning_share",
            "waiting_share", "collisions",
            "returned_home", "frontiers_visited", "frontiers_abandoned"]
