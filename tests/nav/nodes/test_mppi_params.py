@@ -120,3 +120,35 @@ def test_stack_reaches_a_goal_with_the_jazzy_mppi_section(make_stack, nav_stub_p
     x, y, th = stack.robot.pose
     assert math.hypot(x - 4.5, y - 4.5) < 0.25
     assert abs(math.remainder(th - math.pi / 2, 2 * math.pi)) < 0.3
+
+
+def test_the_shipped_jazzy_example_names_14_entries_and_brings_mppi_up(tmp_path: Path) -> None:
+    # config/examples: Jazzy's sample with Eddie's frames, radius, command topic and the
+    # sample's own local static layer listed; what it does not use is named, the rest runs
+    import eddiebot
+
+    example = Path(eddiebot.__file__).parent / "config" / "examples" / "nav2_params_jazzy_eddie.yaml"
+    audit = audit_nav2_params(yaml.safe_load(example.read_text()))
+    w = audit.warnings
+    assert len(w) == len(set(w)) == 14, w
+    assert "not supported: docking_server (whole section)" in w
+    assert not [x for x in w if "static_layer" in x]
+    local = audit.supported["local_costmap"]["local_costmap"]["ros__parameters"]
+    assert local["plugins"][0] == "static_layer" and local["robot_base_frame"] == "base_footprint"
+    map_yaml = save_map(room_map(), tmp_path / "room")
+    params = tmp_path / "nav2_params.yaml"
+    params.write_text(yaml.safe_dump(nest_nav2_params(audit.supported)))
+    ctx = Context(use_sim_time=True)
+    desc = parse_launch_file(find_launch_file("nav"), {
+        "map": str(map_yaml), "params_file": str(params), "use_sim_time": "true"})
+    nodes = build_nodes(desc, ctx, NODES)
+    ex = SingleThreadedExecutor(context=ctx)
+    for n in nodes:
+        ex.add_node(n)
+    try:
+        ex.spin_for(1.0)
+        cs = next(n for n in nodes if n.get_name() == "controller_server")
+        assert cs.current_state.label == "active", cs.last_error
+        assert isinstance(cs.plugins.controller("FollowPath"), MPPIController)
+    finally:
+        ctx.shutdown()
