@@ -84,8 +84,9 @@ def test_unknown_critic_stops_the_audit_with_its_name() -> None:
         "controller_server", "FollowPath.critics", "WaypointCritic")
 
 
-def test_jazzy_file_brings_the_controller_server_up_with_mppi(tmp_path: Path) -> None:
-    doc = audit_nav2_params(upstream("jazzy")).supported
+def _controller_after_bring_up(doc: dict[str, Any], tmp_path: Path) -> Any:
+    """``launch nav`` with the supported part of ``doc`` on a room map, spun 1 s: the
+    controller server's FollowPath (the server active)."""
     map_yaml = save_map(room_map(), tmp_path / "room")
     params = tmp_path / "nav2_params.yaml"
     params.write_text(yaml.safe_dump(nest_nav2_params(doc)))
@@ -100,10 +101,14 @@ def test_jazzy_file_brings_the_controller_server_up_with_mppi(tmp_path: Path) ->
         ex.spin_for(1.0)
         cs = next(n for n in nodes if n.get_name() == "controller_server")
         assert cs.current_state.label == "active", cs.last_error
-        ctrl = cs.plugins.controller("FollowPath")
-        assert isinstance(ctrl, MPPIController) and ctrl.config.prune_distance == 1.7
+        return cs.plugins.controller("FollowPath")
     finally:
         ctx.shutdown()
+
+
+def test_jazzy_file_brings_the_controller_server_up_with_mppi(tmp_path: Path) -> None:
+    ctrl = _controller_after_bring_up(audit_nav2_params(upstream("jazzy")).supported, tmp_path)
+    assert isinstance(ctrl, MPPIController) and ctrl.config.prune_distance == 1.7
 
 
 def test_stack_reaches_a_goal_with_the_jazzy_mppi_section(make_stack, nav_stub_params) -> None:
@@ -135,20 +140,5 @@ def test_the_shipped_jazzy_example_names_14_entries_and_brings_mppi_up(tmp_path:
     assert not [x for x in w if "static_layer" in x]
     local = audit.supported["local_costmap"]["local_costmap"]["ros__parameters"]
     assert local["plugins"][0] == "static_layer" and local["robot_base_frame"] == "base_footprint"
-    map_yaml = save_map(room_map(), tmp_path / "room")
-    params = tmp_path / "nav2_params.yaml"
-    params.write_text(yaml.safe_dump(nest_nav2_params(audit.supported)))
-    ctx = Context(use_sim_time=True)
-    desc = parse_launch_file(find_launch_file("nav"), {
-        "map": str(map_yaml), "params_file": str(params), "use_sim_time": "true"})
-    nodes = build_nodes(desc, ctx, NODES)
-    ex = SingleThreadedExecutor(context=ctx)
-    for n in nodes:
-        ex.add_node(n)
-    try:
-        ex.spin_for(1.0)
-        cs = next(n for n in nodes if n.get_name() == "controller_server")
-        assert cs.current_state.label == "active", cs.last_error
-        assert isinstance(cs.plugins.controller("FollowPath"), MPPIController)
-    finally:
-        ctx.shutdown()
+    ctrl = _controller_after_bring_up(audit.supported, tmp_path)
+    assert isinstance(ctrl, MPPIController)
