@@ -200,9 +200,11 @@ def _tour(run: _Run) -> None:
                           "eddiebot_msgs/srv/ResetEncoder \"{}\"", expect="response"),
         lambda: run.check("eddie topic pub --once /chatter std_msgs/msg/String \"{data: hi}\""),
     )]
-    # topics are taken in name order: /tf_static comes last of the simulator's
-    # in one loaded -n 2 run of many the recorder (subscribing to the Kinect's 46 MB/s too)
-    # had not reported /tf_static after 60 s; the failure now shows its output
+    # the recorder starts once the tools above are done: in loaded -n 2 runs, started beside
+    # `topic bw /depth/image_raw` (the router then carrying the Kinect's 46 MB/s three times)
+    # it printed nothing for 120 s; topics are taken in name order, /tf_static last
+    for job in jobs:
+        job.exception()  # waits
     record = run.start("eddie record -o run1 -a", ready="recording /tf_static", timeout=120.0)
     time.sleep(2.0)  # everything for a while (the Kinect's images: 46 MB/s), SLAM's first scans
     assert "recorded" in run.stop(record)
