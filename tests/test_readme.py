@@ -77,6 +77,21 @@ def test_readme_commands_are_read_from_its_sh_blocks() -> None:
 
 
 # -- running README commands ---------------------------------------------------------------
+def _stacks(proc: Proc) -> str:
+    """Kill ``proc``; if it was still running, the Python stacks of its threads (it runs with
+    PYTHONFAULTHANDLER, which prints them on SIGABRT) — what a stalled command waited for."""
+    if proc.popen.poll() is not None:
+        return ""
+    before = len(proc.stderr)
+    proc.popen.send_signal(signal.SIGABRT)
+    try:
+        proc.popen.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        proc.popen.kill()
+    time.sleep(0.5)  # the pump thread reads the rest
+    return "\nits threads when it was stopped:\n" + proc.stderr[before:][-12000:]
+
+
 class _Run:
     """Runs README commands by their exact text in ``cwd`` on the router of ``env``."""
 
@@ -130,9 +145,9 @@ class _Run:
         deadline = time.monotonic() + timeout
         while not any(ready in line for line in proc.lines) and ready not in proc.stderr:
             if proc.popen.poll() is not None or time.monotonic() > deadline:
-                proc.popen.kill()
+                stacks = _stacks(proc)
                 pytest.fail(f"{command}: no {ready!r} (exit {proc.popen.poll()})\n"
-                            + "\n".join(proc.lines[-30:]) + f"\n{proc.stderr[-3000:]}")
+                            + "\n".join(proc.lines[-30:]) + f"\n{proc.stderr[-3000:]}{stacks}")
             time.sleep(0.05)
         print(f"{time.monotonic() - deadline + timeout:5.1f} s  {command} (started)")
         return proc
@@ -178,11 +193,8 @@ def _fakenect_dump(path: Path, frames: int = 10) -> None:
 def _tour(run: _Run) -> None:
     """The tour, the ROS 2-style tools and the map → navigate story on one simulator."""
     port = free_port()
-    # the Kinect at 320x240@10 (3.8 MB/s) rather than its full 640x480@30 (46 MB/s): in loaded
-    # -n 2 runs new subscribers (`eddie record -a`, `topic echo --once /odom`) started while
-    # the private router carried the full stream to `topic bw` too sometimes printed nothing
     sim = run.start("eddie sim --world office --dashboard", "--dashboard-port", str(port),
-                    "--camera", "320x240@10", ready="board on emulator")
+                    ready="board on emulator")
     assert f"http://127.0.0.1:{port}/" in sim.lines
     # an idle teleop window stays open through navigation
     teleop = run.start("eddie teleop", ready="Reading from the keyboard")
@@ -203,9 +215,8 @@ def _tour(run: _Run) -> None:
                           "eddiebot_msgs/srv/ResetEncoder \"{}\"", expect="response"),
         lambda: run.check("eddie topic pub --once /chatter std_msgs/msg/String \"{data: hi}\""),
     )]
-    # the recorder starts once the tools above are done: in loaded -n 2 runs, started beside
-    # `topic bw /depth/image_raw` (the router then carrying the Kinect's 46 MB/s three times)
-    # it printed nothing for 120 s; topics are taken in name order, /tf_static last
+    # the recorder starts once the tools above are done (topics are taken in name order,
+    # /tf_static last)
     for job in jobs:
         job.exception()  # waits
     record = run.start("eddie record -o run1 -a", ready="recording /tf_static", timeout=120.0)
@@ -348,7 +359,9 @@ def test_every_readme_command_runs(tmp_path: Path) -> None:
     with private_router() as env:
         # the user's home is the test's: the vSLAM database, the calibration file
         (tmp_path / "home").mkdir()
-        env = {**env, "PYTHONUNBUFFERED": "1", "HOME": str(tmp_path / "home")}
+        # a command stopped for hanging prints its threads' stacks (SIGABRT, see _stacks)
+        env = {**env, "PYTHONUNBUFFERED": "1", "PYTHONFAULTHANDLER": "1",
+               "HOME": str(tmp_path / "home")}
         env.pop("ROS_DOMAIN_ID", None)
         run = _Run(commands, clone, env)
         (clone / "robot").mkdir()

@@ -154,12 +154,7 @@ class ZenohTransport:
         self._wait_for_router(self.config.router_wait_s)
         self._lv_sub = lv.declare_subscriber(prefix, self._on_token, history=True)
         # The initial view of the graph, synchronously (as rmw_zenoh's liveliness_get).
-        try:
-            for reply in lv.get(prefix, timeout=3.0):
-                if reply.ok is not None:
-                    self._on_token(reply.ok)
-        except Exception as exc:  # pragma: no cover - a session without routes
-            log.debug("liveliness get failed: %s", exc)
+        initial_graph(self.session, prefix, self._on_token, timeout_s=3.0)
 
     def _wait_for_router(self, timeout_s: float) -> bool:
         """Give the session a moment to link up with a router (or, in LAN mode, a peer)."""
@@ -701,6 +696,31 @@ class ZenohTransport:
 
     def __repr__(self) -> str:
         return f"<ZenohTransport zid={self.zid} domain={self.domain} router={self.config.router}>"
+
+
+def initial_graph(session: Any, prefix: str, on_token: Callable[[Any], None],
+                  timeout_s: float) -> bool:
+    """Give ``on_token`` every liveliness token under ``prefix`` alive now; False if the
+    query had not ended within ``timeout_s`` (tokens arriving later still reach it).
+
+    The replies go to a callback, never to a channel this thread reads afterwards: Zenoh
+    answers tokens its session already knows inside ``get`` itself, and once they outnumber
+    a bounded channel's capacity (a graph of a few hundred entities) the call waited
+    forever for a reader that was itself.
+    """
+    done = threading.Event()
+
+    def on_reply(reply: Any) -> None:
+        if reply.ok is not None:
+            on_token(reply.ok)
+
+    try:
+        session.liveliness().get(prefix, zenoh.handlers.Callback(on_reply, done.set),
+                                 timeout=timeout_s)
+    except Exception as exc:  # pragma: no cover - a session without routes
+        log.debug("liveliness get failed: %s", exc)
+        return False
+    return done.wait(timeout_s + 1.0)
 
 
 def publisher_congestion_control(qos: QoSProfile) -> Any:
