@@ -184,8 +184,7 @@ def test_held_keys_teleop_then_stop(browser: Any, world: World, dash: DashboardH
     assert len(moving) >= 8, len(moving)
     span = moving[-1][0] - moving[0][0]
     assert (len(moving) - 1) / span >= 8.0
-    last_t, last = cmd[-1]
-    assert last.linear.x == 0.0 and last.angular.z == 0.0
+    assert until(lambda: cmd[-1][1].linear.x == 0.0 and cmd[-1][1].angular.z == 0.0)
     assert not [m for t, m in cmd if t > t1 + 0.2 and m.linear.x != 0.0]
     page.context.close()
 
@@ -196,12 +195,14 @@ def test_estop_publishes_zero_and_locks(browser: Any, world: World, dash: Dashbo
     page = open_page(browser, dash.url)
     page.click("#estop")
     page.wait_for_function("window.eddie.state.estop === true", timeout=5000)
-    assert lock and lock[-1][1].data is True
-    assert cmd and cmd[-1][1].linear.x == 0.0 and cmd[-1][1].angular.z == 0.0
+    # the server published before it told the page; the world's executor thread may not
+    # have run the recording callbacks yet on a loaded runner
+    assert until(lambda: bool(lock) and lock[-1][1].data is True)
+    assert until(lambda: bool(cmd)) and cmd[-1][1].linear.x == 0.0 and cmd[-1][1].angular.z == 0.0
     assert "ENGAGED" in page.inner_text("#estop")
     page.click("#estop")
     page.wait_for_function("window.eddie.state.estop === false", timeout=5000)
-    assert lock[-1][1].data is False
+    assert until(lambda: lock[-1][1].data is False)
     page.context.close()
 
 
@@ -228,6 +229,17 @@ def publish(world: World, cls: Any, topic: str, msg: Any, qos: Any = 10) -> Any:
     pub = world.node.create_publisher(cls, topic, qos)
     pub.publish(msg)
     return pub
+
+
+def until(cond: Any, timeout: float = 5.0) -> bool:
+    """True once ``cond()`` holds (it reads what the world's executor thread records), False
+    after ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.02)
+    return True
 
 
 def wait_js(page: Any, expr: str, timeout: int = 20000) -> None:
