@@ -118,9 +118,36 @@ def test_lost_tf_makes_the_controller_publish_zero(make_stack):
     assert len(cmds) > n
     result = h.result().get_result_async()
     stack.spin(0.2)
+    assert not result.done()  # held: a stale pose is a TF error after localization_lost_timeout
+    stack.spin(1.0)
+    assert result.done()
     assert result.result().status == GoalStatus.STATUS_ABORTED
     assert result.result().result.error_code == 102  # TF_ERROR
     assert stack.robot.cmd == (0.0, 0.0)
+
+
+def test_a_pose_stale_for_a_moment_holds_the_robot_and_the_goal_goes_on(make_stack):
+    """The driver's TF late by a few tenths of a second (a loaded machine) holds the robot
+    at zero; the goal is not aborted, and the robot drives on once the pose is fresh."""
+    stack = make_stack(servers=("map_server", "planner_server", "controller_server"))
+    cmds = []
+    stack.probe.create_subscription(Twist, "/cmd_vel_nav", cmds.append, 100)
+    follow = ActionClient(stack.probe, FollowPath, "/follow_path")
+    path = _plan(stack, 4.5, 1.0)
+    stack.robot.destroy_subscription(stack.robot.subscriptions[-1])
+    stack.robot.create_subscription(Twist, "/cmd_vel_nav", stack.robot._on_cmd, 10)
+    h = follow.send_goal_async(FollowPath.Goal(path=path))
+    stack.spin(2.0)
+    assert any(abs(c.linear.x) > 0.1 for c in cmds)
+    stack.robot.publish_tf = False
+    stack.spin(0.8)  # past transform_tolerance (0.3 s), within localization_lost_timeout
+    assert cmds[-1].linear.x == 0.0 and cmds[-1].angular.z == 0.0
+    stack.robot.publish_tf = True
+    n = len(cmds)
+    stack.spin(1.0)
+    result = h.result().get_result_async()
+    assert not result.done()
+    assert any(abs(c.linear.x) > 0.1 for c in cmds[n:])
 
 
 def test_lost_localization_holds_then_aborts_the_goal(make_stack, nav_stub_params):

@@ -65,7 +65,9 @@ class ControllerServer(NavServer):
         # eddiebot (never drive blind): with localization_check, a lost localization (see
         # nav.amcl.LocalizationLimits) holds the robot at zero, and aborts the goal with
         # a TF error once it has lasted localization_lost_timeout s -- the navigator's
-        # recovery spin, which the collision monitor lets through, then relocalizes
+        # recovery spin, which the collision monitor lets through, then relocalizes. A
+        # robot pose older than the local costmap's transform_tolerance holds it as well,
+        # and is a TF error after the same time.
         "localization_check": False, "global_frame_id": "map",
         "localization_pose_topic": "amcl_pose", "localization_tf_timeout": 1.0,
         "localization_max_xy_std": 0.5, "localization_max_yaw_std": 0.5,
@@ -90,6 +92,7 @@ class ControllerServer(NavServer):
         self._run_controller = ""
         self._watch: LocalizationWatch | None = None
         self._lost_since_ns: int | None = None
+        self._stale_since_ns: int | None = None
 
     # -- lifecycle ----------------------------------------------------------------------------
     def on_configure(self, state: State) -> TransitionCallbackReturn:
@@ -251,8 +254,23 @@ class ControllerServer(NavServer):
             now = self.now().nanoseconds
             pose = self.host.robot_pose()
             if pose is None:
-                return self._abort(handle, result, ControllerTFError(
-                    f"lost the robot pose ({self.host.global_frame} -> {self.host.base_frame})"))
+                # a pose older than transform_tolerance holds the robot, as stale odometry
+                # does (a loaded machine delays the driver's TF by a few tenths of a second);
+                # none at all, or one stale for localization_lost_timeout, is a TF error
+                tf_error = ControllerTFError(
+                    f"lost the robot pose ({self.host.global_frame} -> {self.host.base_frame})")
+                if self.host.latest_robot_pose() is None:
+                    return self._abort(handle, result, tf_error)
+                if self._stale_since_ns is None:
+                    self._stale_since_ns = now
+                    self.get_logger().warning("the robot pose is stale: holding the robot")
+                if (now - self._stale_since_ns) * 1e-9 >= float(self.param("localization_lost_timeout")):
+                    self._stale_since_ns = None
+                    return self._abort(handle, result, tf_error)
+                self.publish_zero()
+                await sleep(self, period)
+                continue
+            self._stale_since_ns = None
             lost = self._watch.problem(now) if self._watch is not None else ""
             if not lost:
                 self._lost_since_ns = None
