@@ -5,9 +5,9 @@ A stop jumps the board queue and abandons the exchange in flight. A controller h
 around zero (MPPI stalled in a doorway, the velocity smoother's output rounding to 0 wheel
 positions/s every other cycle) makes the board node alternate ``GOSPD 0 0`` holds and
 ``GOSPD`` commands at 20 Hz; when each stop threw away the ``DIST`` in flight, ``/joint_states``
-(hence ``odom → base_footprint``) went 0.45 s without a sample and the controller server,
-which refuses a pose older than the local costmap's ``transform_tolerance`` (0.3 s), aborted
-with "lost the robot pose".
+(hence ``odom → base_footprint``) went 0.45 s without a sample, and the controller server,
+which drives on no pose older than the local costmap's ``transform_tolerance`` (0.3 s), held
+the robot (it aborted with "lost the robot pose" while it did not wait for a late pose).
 """
 
 from __future__ import annotations
