@@ -99,18 +99,24 @@ def _plan(stack, x: float, y: float):
     return res.result().result.path
 
 
-def test_lost_tf_makes_the_controller_publish_zero(make_stack):
+def _following(make_stack, drive_s):
+    """A controller server following a planned path for ``drive_s`` s, the stub robot driven
+    by it directly: (stack, the goal handle's future, the commands published)."""
     stack = make_stack(servers=("map_server", "planner_server", "controller_server"))
     cmds = []
     stack.probe.create_subscription(Twist, "/cmd_vel_nav", cmds.append, 100)
     follow = ActionClient(stack.probe, FollowPath, "/follow_path")
     path = _plan(stack, 4.5, 1.0)
-    # Drive the stub from the controller directly.
     stack.robot.destroy_subscription(stack.robot.subscriptions[-1])
     stack.robot.create_subscription(Twist, "/cmd_vel_nav", stack.robot._on_cmd, 10)
     h = follow.send_goal_async(FollowPath.Goal(path=path))
-    stack.spin(3.0)
+    stack.spin(drive_s)
     assert any(abs(c.linear.x) > 0.1 for c in cmds)
+    return stack, h, cmds
+
+
+def test_lost_tf_makes_the_controller_publish_zero(make_stack):
+    stack, h, cmds = _following(make_stack, 3.0)
     stack.robot.publish_tf = False
     n = len(cmds)
     stack.spin(1.5)
@@ -129,16 +135,7 @@ def test_lost_tf_makes_the_controller_publish_zero(make_stack):
 def test_a_pose_stale_for_a_moment_holds_the_robot_and_the_goal_goes_on(make_stack):
     """The driver's TF late by a few tenths of a second (a loaded machine) holds the robot
     at zero; the goal is not aborted, and the robot drives on once the pose is fresh."""
-    stack = make_stack(servers=("map_server", "planner_server", "controller_server"))
-    cmds = []
-    stack.probe.create_subscription(Twist, "/cmd_vel_nav", cmds.append, 100)
-    follow = ActionClient(stack.probe, FollowPath, "/follow_path")
-    path = _plan(stack, 4.5, 1.0)
-    stack.robot.destroy_subscription(stack.robot.subscriptions[-1])
-    stack.robot.create_subscription(Twist, "/cmd_vel_nav", stack.robot._on_cmd, 10)
-    h = follow.send_goal_async(FollowPath.Goal(path=path))
-    stack.spin(2.0)
-    assert any(abs(c.linear.x) > 0.1 for c in cmds)
+    stack, h, cmds = _following(make_stack, 2.0)
     stack.robot.publish_tf = False
     stack.spin(0.8)  # past transform_tolerance (0.3 s), within localization_lost_timeout
     assert cmds[-1].linear.x == 0.0 and cmds[-1].angular.z == 0.0
