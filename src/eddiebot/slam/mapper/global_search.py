@@ -36,9 +36,14 @@ from numba import njit
 
 from eddiebot.slam.mapper.results import FloatArray
 from eddiebot.slam.scan_matcher import CorrelationGrid, MatcherParams, MatchResult, match_scan
-from eddiebot.slam.scan_matcher.branch_and_bound import _top_level_scores, _window_near_best
+from eddiebot.slam.scan_matcher.branch_and_bound import (
+    _push_children,
+    _seed_stack,
+    _top_level_scores,
+    _window_near_best,
+)
 from eddiebot.slam.scan_matcher.covariance import _weighted_covariance
-from eddiebot.slam.scan_matcher.grid import _MAX_LEVELS, _score
+from eddiebot.slam.scan_matcher.grid import _MAX_LEVELS
 from eddiebot.slam.scan_matcher.lookup import _cells_for_angles, _thin, _window_offsets
 
 __all__ = ["CANDIDATES", "MARGIN", "SEPARATION", "scan_candidates", "search_view"]
@@ -80,25 +85,8 @@ def _top_candidates(
     ``top_scores`` are `_top_level_scores` on the coarsest level, ``order`` their ascending
     argsort."""
     grids = (g0, g1, g2, g3, g4, g5)
-    top = n_levels - 1
-    step = 1 << top
     n_ang = px.shape[0]
-    n_side = (2 * window + 1 + step - 1) // step
-    cap = order.size + 8 * n_levels + 8
-    s_a = np.empty(cap, np.int64)
-    s_x = np.empty(cap, np.int64)
-    s_y = np.empty(cap, np.int64)
-    s_h = np.empty(cap, np.int64)
-    s_s = np.empty(cap, np.float64)
-    n = 0
-    for j in range(order.size):
-        flat = order[j]
-        s_a[n] = flat // (n_side * n_side)
-        s_x[n] = -window + ((flat // n_side) % n_side) * step
-        s_y[n] = -window + (flat % n_side) * step
-        s_h[n] = top
-        s_s[n] = top_scores[flat]
-        n += 1
+    s_a, s_x, s_y, s_h, s_s, n = _seed_stack(n_levels, window, top_scores, order)
     r_a = np.zeros(k, np.int64)
     r_x = np.zeros(k, np.int64)
     r_y = np.zeros(k, np.int64)
@@ -143,32 +131,8 @@ def _top_candidates(
                     kth = min(kth, r_s[j])
                 bar = max(bar, kth)
             continue
-        half = 1 << (h - 1)
-        q = 0
-        for ox in (0, half):
-            for oy in (0, half):
-                cx = x + ox
-                cy = y + oy
-                if cx > window or cy > window:
-                    continue
-                c_x[q] = cx
-                c_y[q] = cy
-                c_s[q] = _score(grids[h - 1], px[a], py[a], cx, cy)
-                q += 1
-        # ascending, so the best child is popped first
-        for _ in range(q):
-            low = -1
-            v = 1e300
-            for j in range(q):
-                if c_s[j] >= 0.0 and c_s[j] < v:
-                    v = c_s[j]
-                    low = j
-            if low < 0:
-                break
-            if v > bar:
-                s_a[n], s_x[n], s_y[n], s_h[n], s_s[n] = a, c_x[low], c_y[low], h - 1, v
-                n += 1
-            c_s[low] = -1.0
+        n = _push_children(grids[h - 1], px[a], py[a], a, x, y, h, window, bar,
+                           s_a, s_x, s_y, s_h, s_s, n, c_x, c_y, c_s)
     return r_a[:m], r_x[:m], r_y[:m], r_s[:m]
 
 

@@ -48,6 +48,95 @@ def _top_level_scores(
 
 
 @njit(cache=True)
+def _seed_stack(
+    n_levels: int,
+    window: int,
+    top_scores: npt.NDArray[np.float64],
+    order: npt.NDArray[np.int64],
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64],
+           npt.NDArray[np.int64], npt.NDArray[np.float64], int]:
+    """The depth-first stack with the coarsest level's candidates on it in ``order``
+    (ascending, so the best is popped first): angle indices, dx, dy, heights, scores and
+    the stack's size."""
+    top = n_levels - 1
+    step = 1 << top
+    n_side = (2 * window + 1 + step - 1) // step
+    cap = order.size + 8 * n_levels + 8
+    s_a = np.empty(cap, np.int64)
+    s_x = np.empty(cap, np.int64)
+    s_y = np.empty(cap, np.int64)
+    s_h = np.empty(cap, np.int64)
+    s_s = np.empty(cap, np.float64)
+    n = 0
+    for k in range(order.size):
+        flat = order[k]
+        s_a[n] = flat // (n_side * n_side)
+        s_x[n] = -window + ((flat // n_side) % n_side) * step
+        s_y[n] = -window + (flat % n_side) * step
+        s_h[n] = top
+        s_s[n] = top_scores[flat]
+        n += 1
+    return s_a, s_x, s_y, s_h, s_s, n
+
+
+@njit(cache=True)
+def _push_children(
+    grid: npt.NDArray[np.float32],
+    pxa: npt.NDArray[np.int64],
+    pya: npt.NDArray[np.int64],
+    a: int,
+    x: int,
+    y: int,
+    h: int,
+    window: int,
+    bar: float,
+    s_a: npt.NDArray[np.int64],
+    s_x: npt.NDArray[np.int64],
+    s_y: npt.NDArray[np.int64],
+    s_h: npt.NDArray[np.int64],
+    s_s: npt.NDArray[np.float64],
+    n: int,
+    c_x: npt.NDArray[np.int64],
+    c_y: npt.NDArray[np.int64],
+    c_s: npt.NDArray[np.float64],
+) -> int:
+    """Score the (up to four) children of candidate (``a``, ``x``, ``y``) at height ``h`` on
+    ``grid`` (height ``h - 1``) and push those scoring above ``bar`` in ascending order, so
+    the best child is popped first; the new stack size. ``c_x``, ``c_y``, ``c_s``: scratch
+    arrays of four."""
+    half = 1 << (h - 1)
+    q = 0
+    for ox in (0, half):
+        for oy in (0, half):
+            cx = x + ox
+            cy = y + oy
+            if cx > window or cy > window:
+                continue
+            c_x[q] = cx
+            c_y[q] = cy
+            c_s[q] = _score(grid, pxa, pya, cx, cy)
+            q += 1
+    for _ in range(q):
+        low = -1
+        v = 1e300
+        for j in range(q):
+            if c_s[j] >= 0.0 and c_s[j] < v:
+                v = c_s[j]
+                low = j
+        if low < 0:
+            break
+        if v > bar:
+            s_a[n] = a
+            s_x[n] = c_x[low]
+            s_y[n] = c_y[low]
+            s_h[n] = h - 1
+            s_s[n] = v
+            n += 1
+        c_s[low] = -1.0
+    return n
+
+
+@njit(cache=True)
 def _branch_and_bound(
     g0: npt.NDArray[np.float32],
     g1: npt.NDArray[np.float32],
@@ -75,33 +164,8 @@ def _branch_and_bound(
     argsort (done outside: numba's sort costs seconds of compilation).
     """
     grids = (g0, g1, g2, g3, g4, g5)
-    top = n_levels - 1
-    step = 1 << top
-    n_ang = px.shape[0]
-    span = 2 * window + 1
-    n_side = (span + step - 1) // step
-    cap = n_ang * n_side * n_side + 8 * n_levels + 8
-    s_a = np.empty(cap, np.int64)
-    s_x = np.empty(cap, np.int64)
-    s_y = np.empty(cap, np.int64)
-    s_h = np.empty(cap, np.int64)
-    s_s = np.empty(cap, np.float64)
-    # top level candidates (scored and ordered by the caller), ascending so the best is
-    # popped first
-    n = 0
-    for k in range(order.size):
-        flat = order[k]
-        a = flat // (n_side * n_side)
-        ix = (flat // n_side) % n_side
-        iy = flat % n_side
-        s_a[n] = a
-        s_x[n] = -window + ix * step
-        s_y[n] = -window + iy * step
-        s_h[n] = top
-        s_s[n] = top_scores[flat]
-        n += 1
+    s_a, s_x, s_y, s_h, s_s, n = _seed_stack(n_levels, window, top_scores, order)
     best_a, best_x, best_y, best_s = -1, 0, 0, 0.0
-    c_a = np.empty(4, np.int64)
     c_x = np.empty(4, np.int64)
     c_y = np.empty(4, np.int64)
     c_s = np.empty(4, np.float64)
@@ -116,37 +180,8 @@ def _branch_and_bound(
             if s > best_s:
                 best_a, best_x, best_y, best_s = a, x, y, s
             continue
-        half = 1 << (h - 1)
-        m = 0
-        for ox in (0, half):
-            for oy in (0, half):
-                cx = x + ox
-                cy = y + oy
-                if cx > window or cy > window:
-                    continue
-                c_a[m] = a
-                c_x[m] = cx
-                c_y[m] = cy
-                c_s[m] = _score(grids[h - 1], px[a], py[a], cx, cy)
-                m += 1
-        # push in ascending order of score
-        for _ in range(m):
-            k_min = -1
-            v_min = 1e300
-            for k in range(m):
-                if c_s[k] >= 0.0 and c_s[k] < v_min:
-                    v_min = c_s[k]
-                    k_min = k
-            if k_min < 0:
-                break
-            if v_min > best_s:
-                s_a[n] = c_a[k_min]
-                s_x[n] = c_x[k_min]
-                s_y[n] = c_y[k_min]
-                s_h[n] = h - 1
-                s_s[n] = v_min
-                n += 1
-            c_s[k_min] = -1.0
+        n = _push_children(grids[h - 1], px[a], py[a], a, x, y, h, window, best_s,
+                           s_a, s_x, s_y, s_h, s_s, n, c_x, c_y, c_s)
     return best_a, best_x, best_y, best_s
 
 
