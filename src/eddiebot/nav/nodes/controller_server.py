@@ -236,6 +236,7 @@ class ControllerServer(NavServer):
         assert self.host is not None and self.plugins is not None
         previous = self._handle
         self._handle = handle
+        self._stale_since_ns = None  # a new goal times a stale pose afresh
         if previous is not None and previous.is_active:
             self.get_logger().info("preempting the running goal with a new path")
         try:
