@@ -204,6 +204,53 @@ def test_slowdown_band_scales_arcs_along_their_curve():
     assert limit_twist(0.4, 0.0, _wall(0.26), no_band, NOW) == (0.4, 0.0)
 
 
+def _ping_left(r: float) -> VetoState:
+    """Eddie's sensors all clear but the left PING (yaw 22.5°), which sees something r m off."""
+    state = clear_state()
+    state.update({**CLEAR, "ping_left": r}, 100 * MS)
+    state.update({**CLEAR, "ping_left": r}, 150 * MS)
+    return state
+
+
+def test_an_arc_is_not_slowed_by_a_jamb_on_the_side_it_turns_away_from():
+    # entering a door at an angle (the house, exploring): the left PING sees the jamb
+    # 0.34 m off, its axis point 0.22 m left of the centre line, 0.28 m ahead of the front;
+    # the controller turns right into the door (0.15 m/s, -0.44 rad/s). Judged on the
+    # straight corridor the band held the robot at 7 % of that, for 20-45 s at a time.
+    cfg = SafetyConfig()
+    state = _ping_left(0.34)
+    assert state.clearance(NOW) == pytest.approx(0.195 + 0.34 * math.cos(math.pi / 8) - 0.2245)
+    f = forward_factor(state, cfg, NOW)
+    assert f == pytest.approx(0.069, abs=0.001)
+    assert limit_twist(0.15, -0.44, state, cfg, NOW) == (0.15, -0.44)
+    # straight on, or turning towards it, it stays in the way
+    assert limit_twist(0.15, 0.0, state, cfg, NOW)[0] == pytest.approx(0.15 * f)
+    v, w = limit_twist(0.15, 0.44, state, cfg, NOW)
+    assert v == pytest.approx(0.15 * f) and w / v == pytest.approx(0.44 / 0.15)
+    # a gentle right arc (10 m radius) still sweeps the point: slowed as before
+    assert limit_twist(0.3, -0.03, state, cfg, NOW)[0] == pytest.approx(0.3 * f)
+    # too close to measure is too close, whichever way the arc turns
+    assert limit_twist(0.15, -0.44, _ping_left(-math.inf), cfg, NOW) == (0.0, 0.0)
+    # the published verdict is the straight one: forward motion is refused within the veto
+    assert _ping_left(0.28).vetoed_at(NOW)
+    assert limit_twist(0.15, -0.44, _ping_left(0.28), cfg, NOW) == (0.15, -0.44)
+
+
+def test_a_wall_across_a_turn_still_slows_it():
+    # a wall 0.3 m ahead of the front, square to the robot: the centre IR sees it on the
+    # centre line and the right PING on the right; an arc to the right is judged on both
+    cfg = SafetyConfig()
+    wall_x = 0.2245 + 0.3
+    ping_r = (wall_x - 0.195) / math.cos(math.pi / 8)
+    state = clear_state()
+    for t in (100 * MS, 150 * MS):
+        state.update({**CLEAR, "ir_center": wall_x - 0.21, "ping_right": ping_r,
+                      "ping_left": ping_r}, t)
+    for w in (-0.44, 0.0, 0.44):
+        v, _ = limit_twist(0.15, w, state, cfg, NOW)
+        assert v == pytest.approx(0.15 * 0.1, abs=0.002)
+
+
 def test_veto_stops_arcs_but_not_rotation_in_place():
     cfg = SafetyConfig()
     state = _wall(0.2)

@@ -13,7 +13,8 @@ Core (no bus, no clock: every call takes ``now_ns``):
   PING is not debounced.
 - :func:`limit_twist` turns a command into the one the motors may get: forward motion stops
   inside the veto and slows linearly in the ``slowdown_distance`` band beyond it, arcs keep
-  their curvature, rotation in place passes, reverse is capped at ``max_reverse_speed``
+  their curvature (and are judged on their own path: a jamb beside the robot on the side
+  it turns away from does not slow it), rotation in place passes, reverse is capped at ``max_reverse_speed``
   because Eddie has no rear sensors.
 
 The board node applies :func:`limit_twist` last before GOSPD, so every command source is
@@ -177,9 +178,10 @@ class VetoState:
         """Time of the latest update (ns), None before the first."""
         return self._latest_ns
 
-    def _ahead_of_front(self, name: str, r: float) -> float:
+    def _ahead_of_front(self, name: str, r: float, curvature: float = 0.0) -> float:
         """How far ahead of the robot's front reading ``r`` of ``name`` lies (m); +inf when
-        it is not in the robot's path; -inf (too close to measure) stays -inf unmounted."""
+        it is not in the robot's path (see :meth:`obstacles` for ``curvature``); -inf (too
+        close to measure) stays -inf unmounted."""
         if r == math.inf:
             return math.inf
         mount = self.mounts.get(name)
@@ -188,14 +190,28 @@ class VetoState:
         mx, my, myaw = mount
         rr = 0.0 if r == -math.inf else r  # the obstacle is at the sensor itself
         px, py = mx + rr * math.cos(myaw), my + rr * math.sin(myaw)
-        if abs(py) <= self.robot_radius + _CORRIDOR_MARGIN_M and px >= 0.0:
-            return px - self.robot_radius
-        return math.inf
+        half_width = self.robot_radius + _CORRIDOR_MARGIN_M
+        if abs(py) > half_width or px < 0.0:
+            return math.inf
+        if py * curvature < 0.0 and r != -math.inf:
+            # beside the path on the side the arc turns away from: in the way only when
+            # inside the band the arc sweeps (centre (0, 1/k), radius 1/|k| ± half width)
+            radius = 1.0 / abs(curvature)
+            if math.hypot(px, abs(py) + radius) > radius + half_width:
+                return math.inf
+        return px - self.robot_radius
 
-    def obstacles(self, now_ns: int) -> dict[str, float]:
+    def obstacles(self, now_ns: int, curvature: float = 0.0) -> dict[str, float]:
         """Per sensor, the distance (m) ahead of the front of its return in the robot's path
         (+inf: clear), -inf for a sensor that is stale or expected and not yet seen;
-        ``{NO_READING_YET: -inf}`` while nothing has reported."""
+        ``{NO_READING_YET: -inf}`` while nothing has reported.
+
+        The path is the straight corridor ahead, for ``curvature`` (rad/m, left positive) 0.
+        For an arc, a return in that corridor on the side the arc turns away from is in
+        the path only when the band the arc sweeps holds it: a door jamb beside a robot
+        that turns into the door does not slow it down. Returns on the side it turns
+        towards, and on the centre line, are judged as for the straight path (a sensor
+        sees a point of what may be a wall across the arc)."""
         names = set(self.expected) | set(self._stamp_ns)
         if not names:
             return {NO_READING_YET: -math.inf}
@@ -209,13 +225,14 @@ class VetoState:
             else:
                 # debounced: a return counts at the farthest of the window's samples, so one
                 # spike does not; a window not yet full (start-up) counts what it has
-                out[name] = max(self._ahead_of_front(name, r) for r in history)
+                out[name] = max(self._ahead_of_front(name, r, curvature) for r in history)
         return out
 
-    def clearance(self, now_ns: int) -> float:
-        """Free distance ahead of the front (m): the nearest obstacle in the path, -inf when
-        anything is unknown, +inf when the path is clear."""
-        return min(self.obstacles(now_ns).values())
+    def clearance(self, now_ns: int, curvature: float = 0.0) -> float:
+        """Free distance ahead of the front (m): the nearest obstacle in the path (straight,
+        or the arc of ``curvature``: :meth:`obstacles`), -inf when anything is unknown,
+        +inf when the path is clear."""
+        return min(self.obstacles(now_ns, curvature).values())
 
     def too_close(self, now_ns: int, distance: float | None = None) -> list[str]:
         """Sensors that forbid forward motion at ``now_ns``: a return in the path within
@@ -228,12 +245,14 @@ class VetoState:
         return bool(self.too_close(now_ns))
 
 
-def forward_factor(state: VetoState, config: SafetyConfig, now_ns: int) -> float:
-    """Share of a forward command the motors may get: 0 within ``veto_distance`` (or when
-    anything is unknown), rising linearly to 1 at ``veto_distance + slowdown_distance``."""
+def forward_factor(state: VetoState, config: SafetyConfig, now_ns: int,
+                   curvature: float = 0.0) -> float:
+    """Share of a forward command along an arc of ``curvature`` (rad/m; 0 straight) the
+    motors may get: 0 within ``veto_distance`` (or when anything is unknown), rising
+    linearly to 1 at ``veto_distance + slowdown_distance``."""
     if not config.enabled:
         return 1.0
-    clear = state.clearance(now_ns)
+    clear = state.clearance(now_ns, curvature)
     if clear <= config.veto_distance:
         return 0.0
     if clear >= config.veto_distance + config.slowdown_distance:
@@ -246,8 +265,10 @@ def limit_twist(
 ) -> tuple[float, float]:
     """The (linear m/s, angular rad/s) the motors may get for the command (linear, angular).
 
-    - forward: scaled by :func:`forward_factor`, angular too so an arc slows down along the
-      same curve instead of tightening; a vetoed arc becomes (0, 0), not a spin in place;
+    - forward: scaled by :func:`forward_factor` of the arc's own path (a return beside
+      the robot on the side it turns away from counts only inside the band the arc
+      sweeps), angular too so an arc slows down along the same curve instead of
+      tightening; a vetoed arc becomes (0, 0), not a spin in place;
     - rotation in place (linear == 0): unchanged — the robot is round, turning sweeps
       nothing new, and it is how the robot gets itself out;
     - reverse: capped at ``max_reverse_speed``, angular scaled to keep the curvature;
@@ -263,7 +284,7 @@ def limit_twist(
         return -config.max_reverse_speed + 0.0, angular * scale
     if linear == 0.0:
         return 0.0, angular
-    factor = forward_factor(state, config, now_ns)
+    factor = forward_factor(state, config, now_ns, angular / linear)
     if factor == 0.0:
         return 0.0, 0.0
     return linear * factor, angular * factor
