@@ -91,3 +91,37 @@ def test_new_goal_preempts_running_one(make_stack):
     r2 = wait_for(stack, second.get_result_async(), 60.0)
     assert r2.status == GoalStatus.STATUS_SUCCEEDED
     assert math.hypot(stack.robot.pose[0] - 2.0, stack.robot.pose[1] - 1.0) < 0.25
+
+
+def test_a_goal_preempting_one_about_to_end_is_not_reported_reached_there(make_stack):
+    # Nav2's race (navigation2#920): the planner runs at the RateController's 1 Hz, so for
+    # up to a second after a preemption the controller still follows the old goal's path;
+    # when that path ends first, the tree succeeds. Exploring hit it going home: "back at
+    # the start" 0.5 s after the goal was sent, 4.2 m from the start. The new goal is sent
+    # just after a plan, 0.2-0.35 m before the first goal: the old path ends within the
+    # planner's period.
+    from eddiebot.msgs.nav_msgs import Path as PathMsg
+
+    stack = make_stack()
+    plans: list[float] = []
+    stack.probe.create_subscription(PathMsg, "/plan", lambda _m: plans.append(1.0), 10)
+    client = ActionClient(stack.probe, NavigateToPose, "/navigate_to_pose")
+    sx, sy = float(stack.robot.start[0]), float(stack.robot.start[1])
+    first = wait_for(stack, client.send_goal_async(
+        NavigateToPose.Goal(pose=pose_stamped(sx + 1.5, sy, 0.0, "map"))))
+    done = first.get_result_async()
+    sent = False
+    for _ in range(1000):
+        seen = len(plans)
+        stack.spin(0.02)
+        d = math.hypot(stack.robot.pose[0] - sx - 1.5, stack.robot.pose[1] - sy)
+        if len(plans) > seen and 0.2 <= d <= 0.35 and not done.done():
+            sent = True
+            break
+    assert sent
+    second = wait_for(stack, client.send_goal_async(
+        NavigateToPose.Goal(pose=pose_stamped(2.0, 4.8, 0.0, "map"))))
+    assert wait_for(stack, done, 5.0).status == GoalStatus.STATUS_ABORTED
+    r2 = wait_for(stack, second.get_result_async(), 90.0)
+    assert r2.status == GoalStatus.STATUS_SUCCEEDED, r2.result.error_msg
+    assert math.hypot(stack.robot.pose[0] - 2.0, stack.robot.pose[1] - 4.8) < 0.25

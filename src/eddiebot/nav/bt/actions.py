@@ -64,6 +64,7 @@ class BtActionNode(_Remote):
         self._result_future: Any = None
         self._since = 0
         self._sent = 0
+        self._request = 0
         if getattr(self.context, "node", None) is not None:  # made with the tree, as Nav2 does
             self._client = self.context.action_client(_nav2(self.ACTION), self.server_name())
 
@@ -193,6 +194,8 @@ class ComputePathToPose(BtActionNode):
     }
 
     def on_tick(self) -> None:
+        self.context.plan_requests += 1
+        self._request = self.context.plan_requests
         self.goal.goal = self.get_input("goal")
         self.goal.planner_id = str(self.get_input("planner_id") or "")
         start = self.get_input("start")
@@ -203,6 +206,7 @@ class ComputePathToPose(BtActionNode):
 
     def on_success(self, result: Any) -> Status:
         self.set_output("path", result.path)
+        self.context.planned_request = self._request
         return super().on_success(result)
 
     def on_aborted(self, result: Any) -> Status:
@@ -227,6 +231,8 @@ class ComputePathThroughPoses(ComputePathToPose):
     }
 
     def on_tick(self) -> None:
+        self.context.plan_requests += 1
+        self._request = self.context.plan_requests
         self.goal.goals = list(self.get_input("goals") or [])
         self.goal.planner_id = str(self.get_input("planner_id") or "")
         start = self.get_input("start")

@@ -39,6 +39,11 @@ class TreeContext:
         self.active_goals: dict[str, set[Any]] = {}
         #: the message of the last server failure, for the navigation's result
         self.last_error_msg = ""
+        #: ComputePath* requests made so far (numbered from 1), and the number of the one
+        #: whose path came last (None before one): a path requested before a preemption
+        #: is the old goal's
+        self.plan_requests = 0
+        self.planned_request: int | None = None
 
     # -- time, pose, speed --------------------------------------------------------------------
     def now_ns(self) -> int:

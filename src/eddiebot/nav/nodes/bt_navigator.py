@@ -16,7 +16,10 @@ or ``goals_blackboard_id`` (``goals``); feedback as Nav2's: ``current_pose``,
 blackboard's ``number_recoveries``), ``distance_remaining`` (along
 ``path_blackboard_id``) and ``number_of_poses_remaining``. A new goal for the same tree
 updates the running tree's goal (the old goal is aborted, as Nav2's preemption does); one
-for another tree is refused and the running goal continues. Cancel halts the tree, which
+for another tree is refused and the running goal continues. A preempting goal does not
+succeed on the old goal's path: when the tree ends in success before a plan requested
+after the preemption came back, it is started over for the new goal (Nav2 would report
+success there, navigation2#920). Cancel halts the tree, which
 cancels the running server goals. A failed navigation's error code is the lowest non-zero
 one among the blackboard entries named by ``error_code_names`` (Jazzy) and
 ``<prefix>_error_code`` for each of ``error_code_name_prefixes`` (Kilted).
@@ -292,7 +295,11 @@ class BtNavigator(NavServer):
             self.get_logger().info(f"{kind}: new goal preempts the running one")
             assert self._tree is not None
             self._load_goal(kind, handle.request, self._tree.blackboard)
+            # the path the controller follows is the old goal's until the tree plans again
+            # (its RateController ticks the planner up to a period later): see below
+            preempted_at: int | None = self.tree_context.plan_requests
         else:
+            preempted_at = None
             try:
                 path, tree = self.tree_for(kind, requested)
             except TreeError as exc:
@@ -307,6 +314,7 @@ class BtNavigator(NavServer):
             self._kind = kind
             tree.halt()
             self.tree_context.last_error_msg = ""
+            self.tree_context.planned_request = None
             for name in self.error_code_keys():
                 tree.blackboard.set(name, 0)
             self._load_goal(kind, handle.request, tree.blackboard)
@@ -330,6 +338,18 @@ class BtNavigator(NavServer):
                 return result
             status = tree.tick_once()
             now = self.now().nanoseconds
+            planned = self.tree_context.planned_request
+            if status == Status.SUCCESS and preempted_at is not None and planned is not None \
+                    and planned <= preempted_at:
+                # the controller finished the preempted goal's path before a plan for this
+                # goal came (Nav2's race, navigation2#920): that is not this goal reached.
+                # Start the tree over, which plans for this goal at once.
+                self.get_logger().info(f"{kind}: the preempted goal's path ended before one to "
+                                       "the new goal was made; planning for the new goal")
+                tree.halt()
+                preempted_at = None
+                await sleep(self, loop_s)
+                continue
             if status == Status.SUCCESS:
                 self.get_logger().info(f"{kind}: goal succeeded")
                 tree.halt()
