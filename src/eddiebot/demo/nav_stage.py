@@ -51,6 +51,8 @@ class GoalOutcome:
     straight_m: float = 0.0
     final_error_m: float = math.nan
     reached: bool = False
+    retried: str = ""
+    """Why the goal was sent a second time ("" when it was not)."""
 
 
 @dataclass
@@ -67,6 +69,12 @@ def _resolved_params(out: Path, initial_pose: tuple[float, float, float]) -> Pat
     from eddiebot.nav.params_file import default_params, resolve_params
 
     return resolve_params(default_params(), out, initial_pose)
+
+
+#: ComputePathToPose's GOAL_OCCUPIED: the goal cell is an obstacle (in the office, the
+#: walking person may stand there); such a goal is sent again once after RETRY_WAIT_S.
+GOAL_OCCUPIED = 206
+RETRY_WAIT_S = 5.0
 
 
 def run_nav_stage(out: Path, report: Report, *, seed: int = 0,
@@ -122,29 +130,39 @@ def run_nav_stage(out: Path, report: Report, *, seed: int = 0,
         o.x, o.y, o.z, o.w = q
         n_before = len(truth)
         t_goal = context.sim_clock.now_ns()
-        send = client.send_goal_async(msg)
         deadline = t_goal + round(goal_timeout_s * 1e9)
-        while not send.done() and context.sim_clock.now_ns() < deadline:
-            executor.spin_for(0.1)
-        handle = send.result() if send.done() else None
-        if handle is None or not handle.accepted:
-            outcome.status = "rejected"
+        for attempt in range(2):
+            send = client.send_goal_async(msg)
+            while not send.done() and context.sim_clock.now_ns() < deadline:
+                executor.spin_for(0.1)
+            handle = send.result() if send.done() else None
+            if handle is None or not handle.accepted:
+                outcome.status = "rejected"
+                break
+            res_future = handle.get_result_async()
+            while not res_future.done() and context.sim_clock.now_ns() < deadline:
+                executor.spin_for(0.2)
+            outcome.seconds = (context.sim_clock.now_ns() - t_goal) / 1e9
+            if not res_future.done():
+                outcome.status = "timed out"
+                cancel = handle.cancel_goal_async()
+                executor.spin_for(1.0)
+                _ = cancel
+                break
+            wrapped = res_future.result()
+            status = int(getattr(wrapped, "status", 0))
+            res = getattr(wrapped, "result", wrapped)
+            outcome.error_code = int(getattr(res, "error_code", 0))
+            outcome.status = {4: "succeeded", 5: "canceled", 6: "aborted"}.get(status, str(status))
+            if attempt == 0 and outcome.error_code == GOAL_OCCUPIED:
+                # the office's walking person standing on the goal: as an operator would,
+                # wait for them to walk on and send the goal again, once
+                outcome.retried = f"code {GOAL_OCCUPIED}, goal occupied: sent again after {RETRY_WAIT_S:.0f} s"
+                executor.spin_for(RETRY_WAIT_S)
+                continue
+            break
+        if outcome.status in ("rejected", "timed out"):
             continue
-        res_future = handle.get_result_async()
-        while not res_future.done() and context.sim_clock.now_ns() < deadline:
-            executor.spin_for(0.2)
-        outcome.seconds = (context.sim_clock.now_ns() - t_goal) / 1e9
-        if not res_future.done():
-            outcome.status = "timed out"
-            cancel = handle.cancel_goal_async()
-            executor.spin_for(1.0)
-            _ = cancel
-            continue
-        wrapped = res_future.result()
-        status = int(getattr(wrapped, "status", 0))
-        res = getattr(wrapped, "result", wrapped)
-        outcome.error_code = int(getattr(res, "error_code", 0))
-        outcome.status = {4: "succeeded", 5: "canceled", 6: "aborted"}.get(status, str(status))
         seg = np.array(truth[n_before:]) if len(truth) > n_before else np.zeros((0, 3))
         if len(seg) > 1:
             outcome.driven_m = float(np.sum(np.hypot(np.diff(seg[:, 0]), np.diff(seg[:, 1]))))
@@ -166,7 +184,7 @@ def run_nav_stage(out: Path, report: Report, *, seed: int = 0,
     for o in result.outcomes:
         print(f"  goal ({o.goal[0]:.2f}, {o.goal[1]:.2f}): {o.status} (code {o.error_code}) in "
               f"{o.seconds:.1f} s, drove {o.driven_m:.2f} m for {o.straight_m:.2f} m straight, "
-              f"final error {o.final_error_m:.3f} m")
+              f"final error {o.final_error_m:.3f} m" + (f"; first try {o.retried}" if o.retried else ""))
     return reached == len(result.outcomes)
 
 
@@ -178,8 +196,8 @@ def _report(out: Path, report: Report, result: NavStageResult, map_yaml: Path) -
             "|---|---|---|---|---|---|"]
     for o in result.outcomes:
         rows.append(f"| ({o.goal[0]:.2f}, {o.goal[1]:.2f}, {math.degrees(o.goal[2]):.0f}°) | "
-                    f"{o.status} ({o.error_code}) | {o.seconds:.1f} | {o.driven_m:.2f} | "
-                    f"{o.straight_m:.2f} | {o.final_error_m:.3f} |")
+                    f"{o.status} ({o.error_code}){f'; first try {o.retried}' if o.retried else ''} | "
+                    f"{o.seconds:.1f} | {o.driven_m:.2f} | {o.straight_m:.2f} | {o.final_error_m:.3f} |")
     trajectories: dict[str, Any] = {"driven (ground truth)": result.driven}
     if result.plans:
         trajectories["last global plan"] = result.plans[-1]
