@@ -89,11 +89,11 @@ def _drive(route: tuple[Waypoint, ...], start: tuple[float, float, float],
     return driver, plant
 
 
-def test_the_stall_pose_vetoes_the_arc_the_driver_sends_there() -> None:
-    """Why the route stopped: facing -122°, the right PING (yaw -22.5°, 28.6° cone) reads the
+def test_the_stall_pose_vetoes_driving_towards_the_leaf() -> None:
+    """Where the route stops: facing -122°, the right PING (yaw -22.5°, 28.6° cone) reads the
     door leaf at 0.26–0.27 m; projected on its axis the return lies 0.19 m right of the centre
-    line, inside the 0.2445 m corridor, 0.21 m ahead of the front: vetoed. Square to the
-    doorway (-90°) nothing is in the corridor."""
+    line, inside the 0.2445 m corridor, 0.21 m ahead of the front: straight on and to the
+    right, vetoed. Square to the doorway (-90°) nothing is in the corridor."""
     world, mounts, config = load_world("office"), mounts_from_table((*IR_SENSORS, *PING_SENSORS)), SafetyConfig()
     for yaw_deg, factor in ((-122.0, 0.0), (-90.0, 1.0)):
         veto = VetoState.from_config(config)
@@ -103,7 +103,13 @@ def test_the_stall_pose_vetoes_the_arc_the_driver_sends_there() -> None:
         if yaw_deg == -122.0:
             ahead = veto.obstacles(0)
             assert 0.20 < ahead["ping_right"] < 0.23
-            assert limit_twist(0.35, 0.7, veto, config, 0) == (0.0, 0.0)
+            assert limit_twist(0.35, 0.0, veto, config, 0) == (0.0, 0.0)
+            assert limit_twist(0.35, -0.7, veto, config, 0) == (0.0, 0.0)
+            # an arc to the left turns away from the leaf, whose line lies 0.81 m from the
+            # arc's centre, outside the 0.74 m its right side sweeps: judged on its own path
+            # it is not vetoed (slowed by what the sensors on its left see)
+            v, w = limit_twist(0.35, 0.7, veto, config, 0)
+            assert 0.15 < v < 0.35 and w / v == pytest.approx(2.0)
 
 
 def test_a_vetoed_arc_makes_the_operator_face_the_carrot_and_drive_on() -> None:
@@ -111,14 +117,17 @@ def test_a_vetoed_arc_makes_the_operator_face_the_carrot_and_drive_on() -> None:
     assert driver.done.is_set() and not driver.failed
     assert driver.realignments == 1
     sx, sy = driver.stuck_at[0]
-    assert math.hypot(sx - STALL[0], sy - STALL[1]) < 0.02  # it never moved before realigning
+    assert math.hypot(sx - STALL[0], sy - STALL[1]) < 0.15  # the arc away from the leaf, then the veto
     end = plant.track[-1]
     assert math.hypot(end[0] - 3.45, end[1] - 7.5) < 0.12
-    # through the doorway (x 3.0–3.9, leaf at x 3.0) within 3 cm of its centre line
+    # through the doorway (x 3.0–3.9, leaf at x 3.0) within 5 cm of its centre line (the
+    # body clears each jamb by 0.18 m or more)
     at_door = min(plant.track, key=lambda p: abs(p[1] - 8.5))
-    assert abs(at_door[0] - 3.45) < 0.03
-    # every forward command after the turn got full speed: no arc into the slowdown band
-    moving = [v for v, _ in plant.applied if v > 0.0]
+    assert abs(at_door[0] - 3.45) < 0.05
+    # every forward command after the turn in place got full speed: no arc into the
+    # slowdown band
+    turned = next(i for i, (v, w) in enumerate(plant.applied) if v == 0.0 and w != 0.0)
+    moving = [v for v, _ in plant.applied[turned:] if v > 0.0]
     assert len(moving) > 50 and min(moving[:40]) > 0.3
 
 
