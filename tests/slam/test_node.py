@@ -208,6 +208,29 @@ def test_transform_publish_period_sets_the_rate(rig_factory: Any) -> None:
     assert _map_odom_count(rig) == 10
 
 
+def test_the_map_goes_out_every_interval_even_when_the_graph_is_unchanged(rig_factory: Any) -> None:
+    # slam_toolbox's updateMap publishes every map_update_interval, stamped now. Sending
+    # only changed maps kept an explorer that waits for a map made after its arrival
+    # waiting up to its 10 s bound whenever the arrival added no node (the warehouse:
+    # 9 such waits in 600 s)
+    from eddiebot.msgs.nav_msgs import OccupancyGrid
+
+    rig = rig_factory(map_update_interval=1.0)
+    maps: list[Any] = []
+    rig.probe.create_subscription(OccupancyGrid, "/map", maps.append, 10)
+    rig.drive(5)
+    rig.ex.spin_for(1.05)  # the last node's map
+    nodes = len(rig.node.core.nodes)
+    built = len(rig.node.map_update_cpu_s)
+    before = len(maps)
+    rig.ex.spin_for(3.0)  # standing still: no scan, no new node
+    assert len(rig.node.core.nodes) == nodes
+    stamps = [m.header.stamp.sec + m.header.stamp.nanosec * 1e-9 for m in maps[before:]]
+    assert len(stamps) == 3 and all(b - a == pytest.approx(1.0) for a, b in zip(stamps, stamps[1:]))
+    assert len(rig.node.map_update_cpu_s) == built  # sent again, not rebuilt
+    assert np.array_equal(np.asarray(maps[-1].data), np.asarray(maps[before - 1].data))
+
+
 # -- services --------------------------------------------------------------------------------
 def _mapped(rig: Rig) -> None:
     rig.drive(17)  # x 2 → 6 along y = 4

@@ -83,6 +83,7 @@ from eddiebot.core.qos import (
 from eddiebot.core.tf import Buffer, TransformBroadcaster, TransformListener
 from eddiebot.core.time import stamp_to_ns
 from eddiebot.geometry import quaternion_to_yaw, yaw_to_quaternion
+from eddiebot.maps import OccupancyMap
 from eddiebot.msgs.geometry_msgs import PoseWithCovarianceStamped
 from eddiebot.msgs.nav_msgs import MapMetaData, OccupancyGrid
 from eddiebot.msgs.sensor_msgs import LaserScan
@@ -168,6 +169,8 @@ class SlamNode(SlamOutputs, SlamSessionFiles):
         self._last_scan_ns: int | None = None
         self._scan_count = 0
         self._map_dirty = False
+        self._last_map: OccupancyMap | None = None
+        """The map last built and published (sent again while the graph is unchanged)."""
         self.scans_received = 0
         """Scans delivered to the node (before throttling, pausing and queueing)."""
         self.scans_dropped = 0

@@ -14,7 +14,7 @@ from eddiebot.core.node import Node
 from eddiebot.core.tf import TransformBroadcaster, make_transform_2d
 from eddiebot.core.time import ns_to_stamp
 from eddiebot.geometry import yaw_to_quaternion
-from eddiebot.maps import map_to_msg
+from eddiebot.maps import OccupancyMap, map_to_msg
 from eddiebot.msgs.geometry_msgs import Point, PoseWithCovarianceStamped
 from eddiebot.msgs.visualization_msgs import Marker, MarkerArray
 from eddiebot.slam.config import SlamConfig
@@ -39,6 +39,7 @@ class SlamOutputs(Node):
     pose_pub: Publisher
     map_update_cpu_s: deque[float]
     _map_dirty: bool
+    _last_map: OccupancyMap | None
 
     def _publish_transform(self) -> None:
         x, y, th = (float(v) for v in self.core.map_to_odom)
@@ -64,18 +65,27 @@ class SlamOutputs(Node):
         self.pose_pub.publish(msg)
 
     def _publish_map(self) -> None:
-        if not self._map_dirty and self.map_pub.sequence > 0:
-            return
+        """The map, every ``map_update_interval``, stamped now, as slam_toolbox's
+        ``updateMap``: rebuilt when the graph changed, else the last one sent again (a
+        consumer that waits for a map made after some moment, as exploring does after
+        each arrival, must not wait for the robot to move)."""
         if len(self.core.nodes) == 0:
+            return
+        now = self.get_clock().now_ns()
+        if not self._map_dirty and self._last_map is not None:
+            msg = map_to_msg(self._last_map, frame_id=self.config.map_frame, stamp_ns=now)
+            self.map_pub.publish(msg)
+            self.meta_pub.publish(msg.info)
             return
         cpu0 = time.thread_time()
         self.core.update_map()
         grid = self.core.occupancy_map()
         self.map_update_cpu_s.append(time.thread_time() - cpu0)
-        msg = map_to_msg(grid, frame_id=self.config.map_frame, stamp_ns=self.get_clock().now_ns())
+        msg = map_to_msg(grid, frame_id=self.config.map_frame, stamp_ns=now)
         self.map_pub.publish(msg)
         self.meta_pub.publish(msg.info)
         self._map_dirty = False
+        self._last_map = grid
         self._publish_graph()
 
     def _publish_graph(self) -> None:
