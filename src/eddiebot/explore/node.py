@@ -62,8 +62,15 @@ _LOOK_STEP = 0.1
 _LOOK_TURN = 0.15
 #: A goal without progress marks the spot this far ahead of the robot as blocked (m).
 _BLOCK_AHEAD = 0.4
-#: After an arrival the next plan waits for a map made since, at most this long (s).
+#: After an arrival the next plan waits for a map whose content changed since, at most this
+#: long (s) ...
 _MAP_WAIT_S = 10.0
+#: ... or, once the map's period is known, this many periods plus _MAP_WAIT_SLACK_S: SLAM
+#: adds the last node of an arrival within a scan or two of the stop, and maps it at its
+#: next update; later maps are the same map sent again (slam_toolbox sends one every
+#: map_update_interval, changed or not).
+_MAP_WAIT_PERIODS = 1.5
+_MAP_WAIT_SLACK_S = 0.5
 #: Attempts at getting home (each after a recovery but the first) before giving up.
 _HOME_ATTEMPTS = 4
 #: The recovery between attempts backs up this far (m) at this speed (m/s), as the
@@ -127,6 +134,10 @@ class ExploreNode(Node):
         self._replan = False
         self._last_marker_count = 0
         self._map_stamp_s = -math.inf
+        self._map_changed_s = -math.inf
+        """Stamp of the latest map whose cells differ from the one before (s)."""
+        self._map_period_s: float | None = None
+        """Time between the latest two maps (s)."""
         self._fresh_map_after: float | None = None
         self.looks: list[tuple[float, float, float]] = []
         """The robot's poses (map frame, m, rad) every ``_LOOK_STEP`` m or ``_LOOK_TURN`` rad
@@ -158,9 +169,17 @@ class ExploreNode(Node):
 
     # -- inputs -------------------------------------------------------------------------------
     def _on_map(self, msg: Any) -> None:
-        self.grid = map_from_msg(msg)
+        grid = map_from_msg(msg)
         stamp = msg.header.stamp
-        self._map_stamp_s = int(stamp.sec) + int(stamp.nanosec) * 1e-9
+        stamp_s = int(stamp.sec) + int(stamp.nanosec) * 1e-9
+        old = self.grid
+        if old is None or old.data.shape != grid.data.shape or old.origin != grid.origin \
+                or not np.array_equal(old.data, grid.data):
+            self._map_changed_s = stamp_s
+        if stamp_s > self._map_stamp_s > -math.inf:
+            self._map_period_s = stamp_s - self._map_stamp_s
+        self.grid = grid
+        self._map_stamp_s = stamp_s
 
     def _on_costmap(self, msg: Any) -> None:
         self.costmap = map_from_msg(msg)
@@ -241,7 +260,9 @@ class ExploreNode(Node):
             if self._fresh_map_after is not None:
                 # judge a frontier just looked at on a map made after the look
                 waited = now - self._fresh_map_after
-                if self._map_stamp_s <= self._fresh_map_after and waited < _MAP_WAIT_S:
+                bound = _MAP_WAIT_S if self._map_period_s is None else min(
+                    _MAP_WAIT_S, _MAP_WAIT_PERIODS * self._map_period_s + _MAP_WAIT_SLACK_S)
+                if self._map_changed_s <= self._fresh_map_after and waited < bound:
                     self._replan = True
                     return
                 self._fresh_map_after = None
