@@ -258,15 +258,22 @@ class ExploreNode(Node):
                 self._finish("time limit", pose)
                 return
             if self._fresh_map_after is not None:
-                # judge a frontier just looked at on a map made after the look
-                waited = now - self._fresh_map_after
-                bound = _MAP_WAIT_S if self._map_period_s is None else min(
-                    _MAP_WAIT_S, _MAP_WAIT_PERIODS * self._map_period_s + _MAP_WAIT_SLACK_S)
-                if self._map_changed_s <= self._fresh_map_after and waited < bound:
+                if self._waiting_for_map(now):
                     self._replan = True
                     return
                 self._fresh_map_after = None
             self._explore(pose, now)
+
+    def _waiting_for_map(self, now: float) -> bool:
+        """After an arrival, whether the next plan still waits: a frontier just looked at
+        is judged on a map whose cells changed since, or — SLAM adds no node for a robot
+        that stands still — once ``_MAP_WAIT_PERIODS`` map periods (+ slack) have passed
+        (``_MAP_WAIT_S`` while the period is unknown)."""
+        assert self._fresh_map_after is not None
+        waited = now - self._fresh_map_after
+        bound = _MAP_WAIT_S if self._map_period_s is None else min(
+            _MAP_WAIT_S, _MAP_WAIT_PERIODS * self._map_period_s + _MAP_WAIT_SLACK_S)
+        return self._map_changed_s <= self._fresh_map_after and waited < bound
 
     def _record_look(self, pose: tuple[float, float, float]) -> None:
         """Keep the pose when the robot moved ``_LOOK_STEP`` m or turned ``_LOOK_TURN`` rad
