@@ -226,3 +226,25 @@ def test_follow_path_run_to_success_and_failure_tolerance() -> None:
     statuses = [run.step((1.6, 3.0, 0.0), Twist2D(0.3, 0, 0), blocked, k * 100_000_000).status
                 for k in range(1, 6)]
     assert statuses[:2] == [RunStatus.RUNNING] * 2 and statuses[-1] is RunStatus.FAILED
+
+
+def test_a_new_path_resets_the_stateful_goal_checker() -> None:
+    # Nav2's setPlannerPath resets the goal checker with every new path. Without it the xy
+    # test latched on the old goal stayed passed: exploring, a preempting goal home 15 m
+    # away was "reached" 2 s later when the turning robot's yaw passed the start's heading.
+    from eddiebot.nav.controllers import ControllerServerConfig
+    from eddiebot.nav.controllers.follow_path import FollowPathRun, RunStatus
+
+    cm = make_costmap(np.zeros((120, 120), dtype=np.int8))
+    checker = SimpleGoalChecker()
+    run = FollowPathRun(ControllerServerConfig(), RegulatedPurePursuitController(), checker,
+                        SimpleProgressChecker(), LINE, 0)
+    end = LINE[-1]
+    # on the goal's spot, turned away from its heading: the xy test passes and latches
+    assert run.step((end[0], end[1], end[2] + 1.5), Twist2D(), cm, 50_000_000).status \
+        is RunStatus.RUNNING
+    far = np.array([[end[0], end[1], math.pi], [end[0] - 3.0, end[1], math.pi]])
+    run.update_path(far)
+    # facing the new goal's heading, 3 m from it: not there
+    st = run.step((end[0], end[1], math.pi), Twist2D(), cm, 100_000_000)
+    assert st.status is RunStatus.RUNNING and st.distance_to_goal == pytest.approx(3.0)

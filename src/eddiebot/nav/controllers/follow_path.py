@@ -63,10 +63,13 @@ class FollowPathRun:
         self.dt = 1.0 / config.controller_frequency
 
     def update_path(self, path: npt.ArrayLike) -> None:
-        """A new path for the same goal (preemption with a replanned path)."""
+        """A new path (preemption with a replanned path, or one to a new goal). As Nav2's
+        ``setPlannerPath``, the goal checker starts over: a stateful checker's latched xy
+        test belongs to the old path's end."""
         self.path = as_path(path)
         self.goal = self.path[-1].copy()
         self.controller.set_plan(self.path)
+        self.goal_checker.reset()
 
     def step(self, pose: npt.ArrayLike, velocity: Twist2D, costmap: LayeredCostmap,
              now_ns: int) -> FollowPathStep:
