@@ -3,23 +3,12 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 
 import numpy as np
 import pytest
 
-from eddiebot.core.context import Context
 from eddiebot.explore.node import ExploreNode
 from eddiebot.maps import OccupancyMap
-
-
-@pytest.fixture
-def node() -> Iterator[ExploreNode]:
-    context = Context()
-    n = ExploreNode(context=context)
-    yield n
-    n.destroy_node()
-    context.shutdown()
 
 
 def test_an_unseen_start_is_approached_from_a_pose_facing_it(node: ExploreNode) -> None:

@@ -2,23 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-
 import numpy as np
-import pytest
 
-from eddiebot.core.context import Context
 from eddiebot.explore.node import ExploreNode
 from eddiebot.maps import OccupancyMap, map_to_msg
-
-
-@pytest.fixture
-def node() -> Iterator[ExploreNode]:
-    context = Context()
-    n = ExploreNode(context=context)
-    yield n
-    n.destroy_node()
-    context.shutdown()
 
 
 def _send(node: ExploreNode, data: np.ndarray, t: float) -> None:
