@@ -113,3 +113,46 @@ def test_config_uses_the_pose_progress_checker_and_ir_cones_only(params: dict) -
     assert isinstance(srv.progress_checkers["progress_checker"], PoseProgressChecker)
     topics = params["local_costmap"]["local_costmap"]["ros__parameters"]["range_layer"]["topics"]
     assert topics and all("/ir/" in t for t in topics)
+
+
+def _gap_map(narrow: float) -> np.ndarray:
+    """6 x 5 m: a wall across y = 2.5 (0.8 m deep, as a pallet row) with a ``narrow`` gap
+    centred at x = 3.0 and a 1.0 m gap at x = 5.0."""
+    occ = np.zeros((100, 120), dtype=np.int8)
+    occ[[0, -1], :] = 100
+    occ[:, [0, -1]] = 100
+    ys = (np.arange(100) + 0.5) * RES
+    xs = (np.arange(120) + 0.5) * RES
+    rows = (ys >= 2.1) & (ys <= 2.9)
+    gap = (np.abs(xs - 3.0) < narrow / 2) | (np.abs(xs - 5.0) < 0.5)
+    occ[np.ix_(rows, ~gap)] = 100
+    return occ
+
+
+def test_plans_keep_the_collision_monitors_stop_zone_clear(params: dict) -> None:
+    """Between two pallets 0.56 m apart (the warehouse's, 5.6 cm beside Eddie each side)
+    a plan would put obstacles inside the collision monitor's StopCircle, which then stops
+    every motion -- spinning and backing up too -- for as long as the robot stands there.
+    The global costmap's inscribed radius (robot_radius + footprint_padding) is at least
+    the stop zone's radius, so NavFn takes the 1 m gap instead."""
+    from eddiebot.maps import OccupancyMap
+    from eddiebot.nav.costmap import build_costmap
+
+    cm_params = dict(params["global_costmap"]["global_costmap"]["ros__parameters"])
+    cm_params["plugins"] = ["static_layer", "inflation_layer"]
+    costmap = build_costmap(cm_params, "global_costmap")
+    stop = params["collision_monitor"]["ros__parameters"]
+    stop_radius = max(float(stop[name]["radius"]) for name in stop["polygons"]
+                      if stop[name]["action_type"] == "stop" and stop[name]["type"] == "circle")
+    assert costmap.inscribed_radius >= stop_radius
+
+    occ = _gap_map(0.56)
+    costmap.set_static_map(OccupancyMap(data=occ, resolution=RES))
+    costmap.update_map(np.array([1.0, 1.0, 0.0]))
+    path = NavfnPlanner().create_plan((3.0, 1.0, math.pi / 2), (3.0, 4.0, math.pi / 2),
+                                      costmap.master)
+    dist = ndimage.distance_transform_edt(occ == 0) * RES - RES / 2
+    cells = np.clip((np.asarray(path)[:, :2] / RES).astype(int), 0, None)
+    assert float(dist[cells[:, 1], cells[:, 0]].min()) >= stop_radius - RES / 2
+    crossing = np.asarray(path)[np.argmin(np.abs(np.asarray(path)[:, 1] - 2.5))]
+    assert abs(crossing[0] - 5.0) < 0.3  # through the 1 m gap
