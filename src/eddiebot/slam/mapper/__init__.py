@@ -29,7 +29,8 @@ match its angles or its announced count, too few valid ranges, non-finite angles
 older than the previous scan's, a beam count or angle range other than the first scan's (as
 Karto's laser check), or a non-finite odometry pose is skipped with one warning. NaN and ±Inf
 ranges are ignored beam by beam (one warning, then counted in ``nonfinite_range_scans``). An
-odometry step between consecutive scans beyond ``max_odometry_jump`` (m) or
+odometry step between consecutive scans (those skipped for their ranges count: their odometry
+is as good) beyond ``max_odometry_jump`` (m) or
 ``max_odometry_jump_heading`` (rad) is not integrated: the robot is taken to be where it was,
 the odometry is re-anchored there, and the scan starts a new chain that scan matching links to
 the nearest recent node (a weak link where the match fails); ``odometry_jumps`` counts them.

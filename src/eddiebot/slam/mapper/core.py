@@ -68,11 +68,15 @@ class SlamCore(Localization):
             max_laser_range=self.config.max_laser_range,
         )
         if not check.ok:
-            kind = "time_backwards" if "backwards" in check.reason else "bad_scan"
+            backwards = "backwards" in check.reason
+            if not backwards:
+                self._follow_odometry(odom, warnings, stamp)
+            kind = "time_backwards" if backwards else "bad_scan"
             self._warn(warnings, kind, f"scan at {stamp} ns skipped: {check.reason}", stamp)
             return ProcessResult(ProcessStatus.SKIPPED, self.map_to_odom, warnings=tuple(warnings))
         shape_error = self._scan_shape_error(scan)
         if shape_error:
+            self._follow_odometry(odom, warnings, stamp)
             self._warn(
                 warnings, "scan_shape", f"scan at {stamp * 1e-9:.3f} s skipped: {shape_error}", stamp
             )
@@ -94,11 +98,9 @@ class SlamCore(Localization):
         if st.pending_start is not None:
             st.map_to_odom = _compose1(st.pending_start, _inverse1(odom))
             st.pending_start = None
+            st.last_seen_odom = odom.copy()
         else:
-            jump = self._odometry_jumped(odom)
-            if jump is not None:
-                self._reanchor(odom, jump, warnings, stamp)
-        st.last_seen_odom = odom.copy()
+            self._follow_odometry(odom, warnings, stamp)
         if not self._moved_enough(odom):
             return ProcessResult(
                 ProcessStatus.NOT_MOVED, self.map_to_odom, warnings=tuple(warnings)

@@ -38,7 +38,8 @@ class _State:
     chain_start: int = 0
     """First node of the current odometry chain (odometry poses before it are in another frame)."""
     last_seen_odom: FloatArray | None = None
-    """Odometry pose of the last scan that passed the input checks (for `max_odometry_jump`)."""
+    """Odometry pose of the last scan with a valid odometry pose and stamp, also one skipped
+    for its ranges (for `max_odometry_jump`)."""
     pending_start: FloatArray | None = None
     """Robot pose (map frame) at which the next scan starts (`start_at`)."""
     scan_shape: tuple[int, float, float] | None = None
@@ -198,6 +199,18 @@ class MapperState:
             stamp,
         )
 
+
+    def _follow_odometry(self, odom: FloatArray, warnings: list[SlamWarning], stamp: int) -> None:
+        """Take a scan's odometry pose as the latest seen: a step beyond the jump limits
+        since the one before is refused (`_reanchor`). Also for a scan skipped for its
+        ranges (too few valid beams, another shape): its odometry is as good, and the
+        robot driving on past a run of such scans is motion, not a jump. Before a start
+        pose is applied (``pending_start``) there is nothing to compare with."""
+        if self._state.pending_start is None:
+            jump = self._odometry_jumped(odom)
+            if jump is not None:
+                self._reanchor(odom, jump, warnings, stamp)
+            self._state.last_seen_odom = odom.copy()
 
     def _odometry_jumped(self, odom: FloatArray) -> FloatArray | None:
         """The odometry step since the last scan when it is a jump, else None."""
