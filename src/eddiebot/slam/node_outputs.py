@@ -71,22 +71,20 @@ class SlamOutputs(Node):
         each arrival, must not wait for the robot to move)."""
         if len(self.core.nodes) == 0:
             return
-        now = self.get_clock().now_ns()
-        if not self._map_dirty and self._last_map is not None:
-            msg = map_to_msg(self._last_map, frame_id=self.config.map_frame, stamp_ns=now)
-            self.map_pub.publish(msg)
-            self.meta_pub.publish(msg.info)
-            return
-        cpu0 = time.thread_time()
-        self.core.update_map()
-        grid = self.core.occupancy_map()
-        self.map_update_cpu_s.append(time.thread_time() - cpu0)
-        msg = map_to_msg(grid, frame_id=self.config.map_frame, stamp_ns=now)
+        rebuilt = self._map_dirty or self._last_map is None
+        if rebuilt:
+            cpu0 = time.thread_time()
+            self.core.update_map()
+            self._last_map = self.core.occupancy_map()
+            self.map_update_cpu_s.append(time.thread_time() - cpu0)
+            self._map_dirty = False
+        assert self._last_map is not None
+        msg = map_to_msg(self._last_map, frame_id=self.config.map_frame,
+                         stamp_ns=self.get_clock().now_ns())
         self.map_pub.publish(msg)
         self.meta_pub.publish(msg.info)
-        self._map_dirty = False
-        self._last_map = grid
-        self._publish_graph()
+        if rebuilt:
+            self._publish_graph()
 
     def _publish_graph(self) -> None:
         poses = self.core.node_poses()
