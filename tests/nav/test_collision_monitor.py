@@ -273,6 +273,33 @@ def test_eddie_near_wall_zone_limits_speed_but_keeps_turning() -> None:
     assert gentle.publish == Twist2D(0.0, 0.0, 0.5)  # under both limits: untouched
 
 
+def test_eddie_stop_zone_lets_the_robot_turn_or_back_off_what_stands_ahead() -> None:
+    """The shipped StopZone: a person who stopped 3 cm from Eddie's front (0.27 m from its
+    centre) stops driving at it, but not a turn in place or backing away; a return 1.5 cm
+    from the footprint stops the turn too. Behind, the mirror image."""
+    from pathlib import Path
+
+    from eddiebot.nav.config import load_nav2_config
+
+    config = Path(__file__).resolve().parents[2] / "src" / "eddiebot" / "config" / "nav2.yaml"
+    m = load_nav2_config(config).collision_monitor
+    assert m is not None
+    quiet = {n: np.zeros((0, 2)) for n in m.config.observation_sources}
+
+    def run(cmd: Twist2D, *xy: tuple[float, float]) -> tuple[ActionType, Twist2D | None]:
+        out = m.process(cmd, {**quiet, "scan": np.array(xy, dtype=float)}, 0)
+        return out.action, out.publish
+
+    forward, back, turn = Twist2D(0.2, 0.0, 0.1), Twist2D(-0.1, 0.0, 0.0), Twist2D(0.0, 0.0, 1.0)
+    assert run(forward, (0.27, 0.05)) == (ActionType.STOP, Twist2D())
+    assert run(turn, (0.27, 0.05)) == (ActionType.DO_NOTHING, turn)
+    assert run(back, (0.27, 0.05)) == (ActionType.DO_NOTHING, back)
+    assert run(turn, (0.24, 0.0)) == (ActionType.STOP, Twist2D())
+    assert run(back, (-0.27, 0.05)) == (ActionType.STOP, Twist2D())
+    assert run(forward, (-0.27, 0.05)) == (ActionType.DO_NOTHING, forward)
+    assert run(forward, (-0.24, 0.0)) == (ActionType.STOP, Twist2D())  # an arc swings the back
+
+
 def test_costmap_source_cells_over_threshold() -> None:
     # 4 x 3 cells of 0.1 m, origin (1.0, 2.0): lethal (1, 0), inscribed (2, 1), unknown (3, 2)
     data = np.zeros((3, 4), dtype=np.uint8)

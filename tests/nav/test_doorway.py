@@ -129,21 +129,41 @@ def _gap_map(narrow: float) -> np.ndarray:
     return occ
 
 
+def _stop_reach_ahead(monitor: dict) -> float:
+    """How far from the centre, to the side of the robot, the stop zones reach while it
+    drives forward (circles: their radius; velocity polygons: their sub-polygons for forward
+    motion)."""
+    reach = 0.0
+    for name in monitor["polygons"]:
+        zone = monitor[name]
+        if zone["action_type"] != "stop":
+            continue
+        if zone["type"] == "circle":
+            reach = max(reach, float(zone["radius"]))
+            continue
+        subs = [zone[s] for s in zone.get("velocity_polygons", [])
+                if float(zone[s]["linear_max"]) > 0.0] if zone["type"] == "velocity_polygon" \
+            else [zone]
+        for sub in subs:
+            pts = np.array(yaml.safe_load(sub["points"]), dtype=float)
+            reach = max(reach, float(np.abs(pts[np.abs(pts[:, 0]) < 1e-9, 1]).max()))
+    return reach
+
+
 def test_plans_keep_the_collision_monitors_stop_zone_clear(params: dict) -> None:
     """Between two pallets 0.56 m apart (the warehouse's, 5.6 cm beside Eddie each side)
-    a plan would put obstacles inside the collision monitor's StopCircle, which then stops
-    every motion -- spinning and backing up too -- for as long as the robot stands there.
-    The global costmap's inscribed radius (robot_radius + footprint_padding) is at least
-    the stop zone's radius, so NavFn takes the 1 m gap instead."""
+    a plan would put obstacles inside the collision monitor's stop zone ahead, which then
+    stops the robot driving on for as long as it stands there. The global costmap's
+    inscribed radius (robot_radius + footprint_padding) is at least the stop zone's reach
+    beside the robot, so NavFn takes the 1 m gap instead."""
     from eddiebot.maps import OccupancyMap
     from eddiebot.nav.costmap import build_costmap
 
     cm_params = dict(params["global_costmap"]["global_costmap"]["ros__parameters"])
     cm_params["plugins"] = ["static_layer", "inflation_layer"]
     costmap = build_costmap(cm_params, "global_costmap")
-    stop = params["collision_monitor"]["ros__parameters"]
-    stop_radius = max(float(stop[name]["radius"]) for name in stop["polygons"]
-                      if stop[name]["action_type"] == "stop" and stop[name]["type"] == "circle")
+    stop_radius = _stop_reach_ahead(params["collision_monitor"]["ros__parameters"])
+    assert stop_radius == pytest.approx(0.3)
     assert costmap.inscribed_radius >= stop_radius
 
     occ = _gap_map(0.56)

@@ -85,7 +85,7 @@ def test_collision_monitor_stops_before_obstacle(make_stack):
     wall = 6.0 - 0.1  # inner face of the east wall
     assert x < wall - 0.23  # the footprint (r 0.23 m) never touched the wall
     assert wall - x < 0.6  # it drove most of the way first
-    assert stack.nodes["collision_monitor"].last_action == "StopCircle"
+    assert stack.nodes["collision_monitor"].last_action == "StopZone"
     assert stack.robot.cmd == (0.0, 0.0)
 
 
