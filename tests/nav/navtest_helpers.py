@@ -3,12 +3,27 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from eddiebot.maps import OccupancyMap
 from eddiebot.nav.costmap import LayeredCostmap, build_costmap
 from eddiebot.nav.types import Twist2D
+
+#: The nav2.yaml that ships with eddiebot.
+EDDIE_NAV2 = Path(__file__).resolve().parents[2] / "src" / "eddiebot" / "config" / "nav2.yaml"
+
+
+def eddie_collision_monitor() -> tuple[Any, dict[str, np.ndarray]]:
+    """The collision monitor the shipped nav2.yaml builds, and its sources with no points
+    (to be overridden with the points of a case)."""
+    from eddiebot.nav.config import load_nav2_config
+
+    monitor = load_nav2_config(EDDIE_NAV2).collision_monitor
+    assert monitor is not None
+    return monitor, {n: np.zeros((0, 2)) for n in monitor.config.observation_sources}
 
 
 def make_costmap(occ: np.ndarray, resolution: float = 0.05, robot_radius: float = 0.2,

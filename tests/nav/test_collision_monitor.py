@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from navtest_helpers import eddie_collision_monitor
 
 from eddiebot.nav.collision_monitor import (
     ActionType,
@@ -255,15 +256,8 @@ def test_polygon_source_samples_outlines() -> None:
 
 
 def test_eddie_near_wall_zone_limits_speed_but_keeps_turning() -> None:
-    from pathlib import Path
-
-    from eddiebot.nav.config import load_nav2_config
-
-    config = Path(__file__).resolve().parents[2] / "config" / "nav2.yaml"
-    m = load_nav2_config(config).collision_monitor
-    assert m is not None
-    wall = {"scan": np.array([[0.42, 0.05], [0.42, -0.05]])}  # inside 0.5 m, outside the stop circle
-    wall.update({n: np.zeros((0, 2)) for n in m.config.observation_sources if n != "scan"})
+    m, quiet = eddie_collision_monitor()
+    wall = {**quiet, "scan": np.array([[0.42, 0.05], [0.42, -0.05]])}  # inside 0.5 m, outside the stop zone
     spin = m.process(Twist2D(0.0, 0.0, 1.2), wall, 0)
     assert spin.action == ActionType.LIMIT and spin.polygon_name == "NearWallLimit"
     assert spin.publish == Twist2D(0.0, 0.0, pytest.approx(1.0))  # 57 deg/s, not a crawl
@@ -277,14 +271,7 @@ def test_eddie_stop_zone_lets_the_robot_turn_or_back_off_what_stands_ahead() -> 
     """The shipped StopZone: a person who stopped 3 cm from Eddie's front (0.27 m from its
     centre) stops driving at it, but not a turn in place or backing away; a return 1.5 cm
     from the footprint stops the turn too. Behind, the mirror image."""
-    from pathlib import Path
-
-    from eddiebot.nav.config import load_nav2_config
-
-    config = Path(__file__).resolve().parents[2] / "src" / "eddiebot" / "config" / "nav2.yaml"
-    m = load_nav2_config(config).collision_monitor
-    assert m is not None
-    quiet = {n: np.zeros((0, 2)) for n in m.config.observation_sources}
+    m, quiet = eddie_collision_monitor()
 
     def run(cmd: Twist2D, *xy: tuple[float, float]) -> tuple[ActionType, Twist2D | None]:
         out = m.process(cmd, {**quiet, "scan": np.array(xy, dtype=float)}, 0)

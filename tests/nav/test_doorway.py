@@ -4,12 +4,11 @@ following it, and the progress checker that counts turning in place."""
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-from navtest_helpers import make_costmap, simulate
+from navtest_helpers import EDDIE_NAV2, eddie_collision_monitor, make_costmap, simulate
 from scipy import ndimage
 
 from eddiebot.nav.controllers import (
@@ -25,7 +24,7 @@ from eddiebot.nav.errors import NoValidControl
 from eddiebot.nav.params import from_params
 from eddiebot.nav.planners import NavfnPlanner
 
-NAV2 = Path(__file__).resolve().parents[2] / "src" / "eddiebot" / "config" / "nav2.yaml"
+NAV2 = EDDIE_NAV2
 RES = 0.05
 EDDIE_RADIUS = 0.2245
 START = (1.0, 1.0, 0.0)
@@ -133,12 +132,9 @@ def _stop_reach_beside() -> float:
     """How far beside the centre a return stops Eddie driving forward (m), asked of the
     collision monitor that the shipped nav2.yaml builds."""
     from eddiebot.nav.collision_monitor import ActionType
-    from eddiebot.nav.config import load_nav2_config
     from eddiebot.nav.types import Twist2D
 
-    monitor = load_nav2_config(NAV2).collision_monitor
-    assert monitor is not None
-    quiet = {n: np.zeros((0, 2)) for n in monitor.config.observation_sources}
+    monitor, quiet = eddie_collision_monitor()
     ys = np.arange(0.2, 0.6, 0.005)
     stops = [monitor.process(Twist2D(0.2, 0.0, 0.0), {**quiet, "scan": np.array([[0.0, y]])},
                              0).action == ActionType.STOP for y in ys]
