@@ -118,6 +118,11 @@ class OracleParams:
     robot_radius: float = 0.2245
     min_range: float = 0.5
     max_range: float = 4.5
+    return_range: float | None = 8.0
+    """A ray sees only if it comes back: it must end on the scan-height ground truth within
+    this range (the simulated Kinect's farthest return). A beam with no return is NaN in the
+    scan (REP 117) and SLAM clears nothing along it, as slam_toolbox. None: every ray sees
+    out to ``max_range``."""
     fov: float = math.radians(57.0)
     spacing: float = 0.4
     """Lattice step of the candidate positions (m)."""
@@ -202,7 +207,9 @@ def visibility(blocked: npt.NDArray[np.bool_], resolution: float, cell: tuple[in
     at the grid's edge, cells nearer than ``min_range`` are not seen."""
     h, w = blocked.shape
     step = resolution / 2
-    radii = np.arange(step, params.max_range + 1e-9, step)
+    reach = params.max_range if params.return_range is None else max(params.max_range,
+                                                                      params.return_range)
+    radii = np.arange(step, reach + 1e-9, step)
     angles = np.arange(params.rays) * (2 * math.pi / params.rays)
     r0, c0 = cell
     cols = np.floor(c0 + 0.5 + np.cos(angles)[:, None] * radii[None, :] / resolution).astype(np.int64)
@@ -211,7 +218,14 @@ def visibility(blocked: npt.NDArray[np.bool_], resolution: float, cell: tuple[in
     rows_c, cols_c = np.clip(rows, 0, h - 1), np.clip(cols, 0, w - 1)
     stop = outside | blocked[rows_c, cols_c]
     stopped = np.maximum.accumulate(stop, axis=1)
-    ok = ~stopped & (radii[None, :] >= params.min_range)
+    ok = ~stopped & (radii[None, :] >= params.min_range) & (radii[None, :] <= params.max_range)
+    if params.return_range is not None:
+        # the ray's first stop is a blocked cell (not the grid's edge) within return_range
+        first = np.argmax(stop, axis=1)
+        hit = stop.any(axis=1)
+        ray = np.arange(stop.shape[0])
+        comes_back = hit & ~outside[ray, first] & (radii[first] >= params.min_range)
+        ok &= comes_back[:, None]
     flat = (rows_c * w + cols_c)[ok]
     bearing = np.broadcast_to(angles[:, None], ok.shape)[ok]
     return flat, bearing

@@ -87,6 +87,29 @@ def test_rays_stop_at_walls_and_skip_the_near_range() -> None:
     assert not blocked[rows, cols].any()
 
 
+def test_a_ray_that_meets_nothing_within_the_cameras_range_sees_nothing() -> None:
+    # a 1 m wide corridor 20 m long, looked down from x = 1 m: its middle line 3-4 m ahead
+    # lies only on rays that end on the far wall, 19 m off (no return: NaN, SLAM clears
+    # nothing along them); 0.4 m off the middle, rays that end on the side walls cross it
+    grid = _grid([(0.0, 0.0, 20.0, 1.0)], (21.0, 2.0))
+    blocked = grid.data >= 65
+    cell = (round(1.0 / RES), round(1.5 / RES))  # (row, col) of (1.0, 0.5)
+
+    def seen(params: oracle.OracleParams) -> set[tuple[float, float]]:
+        flat, _ = oracle.visibility(blocked, RES, cell, params)
+        rows, cols = np.unravel_index(np.unique(flat), blocked.shape)
+        return set(zip(np.round(cols * RES - 0.5 + RES / 2, 3).tolist(),
+                       np.round(rows * RES - 0.5 + RES / 2, 3).tolist(), strict=True))
+
+    returning = seen(oracle.OracleParams(rays=720))
+    every = seen(oracle.OracleParams(rays=720, return_range=None))
+    middle = {(x, 0.525) for x in np.round(np.arange(4.025, 5.0, RES), 3).tolist()}
+    assert middle <= every and not middle & returning
+    aside = {(x, 0.125) for x in np.round(np.arange(2.025, 3.0, RES), 3).tolist()}
+    assert aside <= returning
+    assert returning < every
+
+
 def test_square_room_is_seen_from_one_ring_of_views() -> None:
     # a 3 x 3 m room, start in its middle facing +x; from one spot the 4.5 m range reaches every
     # corner: one sweep of views there sees all but the floor within 0.5 m of it, which a
