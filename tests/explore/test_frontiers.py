@@ -394,3 +394,29 @@ def test_a_frontier_round_a_corner_is_looked_at_from_where_the_camera_sees_past_
     assert x > 2.5 and y < 2.2 and 0.3 < yaw < 1.8
     assert f.gain > 1.5
     assert information_gain(g, f.viewpoint, config) > 1.5
+
+
+def test_a_corridor_middle_looked_down_from_its_end_is_looked_at_across_from_beside_it() -> None:
+    config = ExploreConfig(**{k: v for k, v in EDDIE_EXPLORE_PARAMS.items()
+                              if k in ExploreConfig.__dataclass_fields__})
+    # a 1.9 m corridor 12 m long, known but for its middle from x = 3 m on (the beams down
+    # it met nothing within range: NaN, nothing cleared), which the robot looked down from
+    # every spot short of it, all round. Every spot 0.9 m (the standoff) from that middle
+    # lies short of it, and shows nothing more; beside it the corridor is 0.8 m wide.
+    d = np.zeros((59, 240), np.int8)
+    d[10, :] = d[48, :] = 100
+    d[:, 0] = d[:, 239] = 100
+    d[26:33, 60:239] = -1
+    g = OccupancyMap(d, RES)
+    robot = (1.0, 1.45, 0.0)
+    looks = [(x, y, a) for x in np.arange(0.6, 2.9, 0.2) for y in (1.0, 1.45, 1.9)
+             for a in np.arange(0.0, 2 * math.pi, 0.15)]
+    # from the standoff band: nothing to see, as a search that would end exploring
+    before = search_frontiers(g, robot, config, looked=looks).frontiers
+    assert len(before) == 1 and before[0].gain < config.min_gain
+    search = search_frontiers(g, robot, config, looked=looks, near_views=True)
+    assert len(search.frontiers) == 1
+    f = search.frontiers[0]
+    assert f.gain > 0.2
+    x, y, _ = f.viewpoint
+    assert x > 3.0 and abs(y - 1.5) > 0.3  # beside the unknown middle, not short of it

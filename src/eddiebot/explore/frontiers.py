@@ -141,6 +141,11 @@ def frontier_cost(distance: float, turn: float, gain: float, config: ExploreConf
             - config.gain_scale * gain)
 
 
+def _wrap_abs(v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """|angle| wrapped into [0, pi]."""
+    return np.abs((v + math.pi) % (2 * math.pi) - math.pi)
+
+
 def _wrap(a: float) -> float:
     return (a + math.pi) % (2 * math.pi) - math.pi
 
@@ -232,12 +237,38 @@ def _padded(grid: OccupancyMap, passable: npt.NDArray[np.bool_] | None, pad: int
     return OccupancyMap(data, grid.resolution, origin, grid.frame_id), passable
 
 
+def _score_stands(grid: OccupancyMap, stands: list[tuple[int, int]],
+                  dist: npt.NDArray[np.float64], centroid: npt.NDArray[np.float64],
+                  robot: tuple[float, float, float], config: ExploreConfig,
+                  looked_cells: npt.NDArray[np.uint32] | None,
+                  ) -> tuple[npt.NDArray[np.float64], ...]:
+    """Nine headings at each spot (towards the centroid and every 45°) and their gain, path
+    length, turning and frontier cost: (poses (N, 3), gains, travels, turns, costs)."""
+    rx, ry, ryaw = robot
+    views = map_to_world(grid, np.array([[c, r] for r, c in stands]))
+    heads = []
+    for view in views:
+        to_centroid = math.atan2(centroid[1] - view[1], centroid[0] - view[0])
+        for heading in (to_centroid, *(j * math.pi / 4 for j in range(-3, 5))):
+            heads.append((view[0], view[1], heading))
+    poses = np.array(heads)
+    gains = _pose_gains(grid, poses, config, looked_cells, n_rays=_COARSE_RAYS)
+    travels = np.repeat([float(dist[r, c]) for r, c in stands], 9)
+    bearings = np.arctan2(poses[:, 1] - ry, poses[:, 0] - rx)
+    turns = np.where(travels < 0.3, _wrap_abs(poses[:, 2] - ryaw),
+                     _wrap_abs(bearings - ryaw) + _wrap_abs(poses[:, 2] - bearings))
+    costs = (config.potential_scale * travels + config.orientation_scale * turns
+             - config.gain_scale * gains)
+    return poses, gains, travels, turns, costs
+
+
 def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: ExploreConfig,
                      passable: npt.NDArray[np.bool_] | None = None,
                      avoid: Sequence[Sequence[float]] = (),
                      looked: Sequence[Sequence[float]] | npt.NDArray[np.float64] | None = None,
                      blocked: Sequence[Sequence[float]] = (),
-                     obstacles: npt.NDArray[np.bool_] | None = None) -> FrontierSearch:
+                     obstacles: npt.NDArray[np.bool_] | None = None,
+                     near_views: bool = False) -> FrontierSearch:
     """Every reachable frontier of ``grid`` seen from the robot at ``robot`` (x, y, yaw),
     cheapest first.
 
@@ -250,6 +281,11 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
     ``passable``: where the robot's centre may go (default `reachable_mask`); a caller with
     a costmap passes its non-lethal, non-inscribed cells here. ``avoid``: spots (x, y) the
     robot could not get to; no goal (viewpoint, entry) lies within ``avoid_radius`` of one.
+    ``near_views``: a frontier that no spot of the standoff band shows anything of is
+    looked at from spots nearer than the standoff: a corridor's unknown middle (the
+    Kinect's no-return beams along it clear nothing) lies within the standoff of every
+    spot beside it and is seen across from there, not along from its end. The explore
+    node asks for it only when no frontier would be left to visit without it.
     ``looked``: the robot's poses (N, 3) so far; see `looked_mask`. ``blocked``: spots
     (x, y) where the robot stood blocked on the way to a goal (an obstacle the map does not
     show, below the scan: a chair seen only by the range sensors).
@@ -338,6 +374,11 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
     cand_owner = owner.ravel()[cand_flat]
     cand_roomy = clearance.ravel()[cand_flat] >= config.preferred_clearance
     cand_direct = np.ones(cand_flat.size, dtype=bool)
+    # spots nearer than the standoff (``near_views``; the gain counts past the sensor's
+    # minimum range only)
+    near_flat = np.flatnonzero(goal_ok & (edt < standoff)) if near_views else cand_flat[:0]
+    near_owner = owner.ravel()[near_flat]
+    near_score = dist.ravel()[near_flat] + _CLOSER_WEIGHT * (standoff - edt.ravel()[near_flat])
     if len(blocked):
         spots = world_to_map(grid, np.asarray(blocked, dtype=np.float64).reshape(-1, 2))
         marks = np.zeros(passable.shape, dtype=bool)
@@ -386,21 +427,15 @@ def search_frontiers(grid: OccupancyMap, robot: Sequence[float], config: Explore
                          _SPOT_SPACING / res, _VIEW_CANDIDATES)
         if not stands:
             stands = [_walk_back(dist, (er, ec), cells, standoff / res)]
-        views = map_to_world(grid, np.array([[c, r] for r, c in stands]))
-        heads = []
-        for view in views:
-            to_centroid = math.atan2(centroid[1] - view[1], centroid[0] - view[0])
-            for heading in (to_centroid, *(j * math.pi / 4 for j in range(-3, 5))):
-                heads.append((view[0], view[1], heading))
-        poses = np.array(heads)
-        gains = _pose_gains(grid, poses, config, looked_cells, n_rays=_COARSE_RAYS)
-        travels = np.repeat([float(dist[r, c]) for r, c in stands], 9)
-        bearings = np.arctan2(poses[:, 1] - ry, poses[:, 0] - rx)
-        wrap = lambda v: np.abs((v + math.pi) % (2 * math.pi) - math.pi)  # noqa: E731
-        turns = np.where(travels < 0.3, wrap(poses[:, 2] - ryaw),
-                         wrap(bearings - ryaw) + wrap(poses[:, 2] - bearings))
-        costs = (config.potential_scale * travels + config.orientation_scale * turns
-                 - config.gain_scale * gains)
+        poses, gains, travels, turns, costs = _score_stands(
+            grid, stands, dist, centroid, (rx, ry, ryaw), config, looked_cells)
+        if float(gains.max()) < config.min_gain and (near_owner == k).any():
+            nearer = _spread(near_flat[near_owner == k], near_score[near_owner == k],
+                             grid.width, _SPOT_SPACING / res, _VIEW_CANDIDATES)
+            alt = _score_stands(grid, nearer, dist, centroid, (rx, ry, ryaw), config,
+                                looked_cells)
+            if float(alt[1].max()) > float(gains.max()):
+                poses, gains, travels, turns, costs = alt
         # a pose that shows nothing is no viewpoint, however near; nor is one that shows
         # little of what another pose shows of the same frontier: the cheapest of those
         # showing at least _GAIN_SHARE of the best gain (else a near spot that sees a

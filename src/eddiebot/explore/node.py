@@ -339,6 +339,13 @@ class ExploreNode(Node):
                 self.costmap = None
         search = search_frontiers(swept, pose, self.config, avoid=self.avoid, looked=self.looks,
                                   blocked=self.blocked, obstacles=obstacles)
+        unseen = [f for f in search.frontiers if not self.blacklist.contains(f.centroid)]
+        if unseen and all(f.gain < self.config.min_gain for f in unseen):
+            # nothing to see from the standoff band of any frontier left: before ending,
+            # look from nearer (across a corridor's unknown middle, `search_frontiers`)
+            search = search_frontiers(swept, pose, self.config, avoid=self.avoid,
+                                      looked=self.looks, blocked=self.blocked,
+                                      obstacles=obstacles, near_views=True)
         self.last_search = search
         self.searches += 1
         known = float(np.count_nonzero(self.grid.data >= 0)) * self.grid.resolution**2
