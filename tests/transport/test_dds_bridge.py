@@ -272,7 +272,10 @@ def test_no_sample_loops_back(ours: Any, ros_peer: RosPeer, bridge: Proc) -> Non
     ctx, node, transport = ours
     topic = f"{PREFIX}/both"
     seen_ours: list[str] = []
-    node.create_subscription(String, topic, lambda m: seen_ours.append(m.data), 100)
+    # deep enough to drop nothing: each warm-up round below brings two samples and runs one
+    # callback, so a slow warm-up (a loaded machine, up to 300 rounds) leaves up to 300
+    # queued, and at depth 100 KEEP_LAST dropped the oldest -- once one of the 20 counted
+    node.create_subscription(String, topic, lambda m: seen_ours.append(m.data), 1000)
     pub = node.create_publisher(String, topic, 100)
     writer = ros_peer.writer(topic, _String, "std_msgs/msg/String", depth=100)
     reader = ros_peer.reader(topic, _String, "std_msgs/msg/String", depth=100)
