@@ -344,7 +344,9 @@ drives on to scan 130 with odometry that never saw the carry."""
 
 
 @pytest.fixture(scope="module")
-def intel(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, list[Scan], np.ndarray]:
+def intel(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> tuple[object, list[Scan], np.ndarray, np.ndarray]:
     log = read_carmen(dataset("slam2d", "intel", "intel-corrected.log.gz"))
     lasers = log.lasers[:INTEL_MAPPED]
     truth = np.array([r.laser_pose for r in lasers])
@@ -355,13 +357,21 @@ def intel(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, list[Scan],
     mapped = replay_lasers(lasers, config, odometry=list(truth))
     path = save_session(mapped.core, tmp_path_factory.mktemp("intel") / "intel.eslam")
     scans = [Scan(r.ranges, r.angles, 0.0, r.range_max, round(r.timestamp * 1e9)) for r in lasers]
-    return path, scans, truth
+    # the map's own pose of each scan (NaN where the scan made no node): the session's poses
+    # lie ~0.26 m off the corrected log's around scans 95-130, and a localization can only
+    # be as right as the map it is in
+    index = {scan.stamp_ns: i for i, scan in enumerate(scans)}
+    in_map = np.full((len(scans), 3), np.nan)
+    for node, pose in zip(mapped.core.nodes, mapped.core.node_poses()):
+        in_map[index[node.scan.stamp_ns]] = pose
+    return path, scans, truth, in_map
 
 
 def _kidnapped_errors(
-    intel: tuple[object, list[Scan], np.ndarray], search: RelocalizationProcess | None
+    intel: tuple[object, list[Scan], np.ndarray, np.ndarray], search: RelocalizationProcess | None
 ) -> tuple[list[float], SlamCore]:
-    path, scans, truth = intel
+    path, scans, truth, in_map = intel
+    assert not np.isnan(in_map[100:130]).any()
     loc = load_session(path, mode="localization")  # type: ignore[arg-type]
     loc.global_search = search
     loc.set_initial_pose(truth[20], truth[100])
@@ -371,7 +381,7 @@ def _kidnapped_errors(
             assert search.wait(120.0)  # an idle core: the answer comes before the next scan
         r = loc.process(scans[k], truth[k], expected_beams=scans[k].ranges.size)
         assert r.pose is not None
-        errors.append(float(np.hypot(*(r.pose[:2] - truth[k][:2]))))
+        errors.append(float(np.hypot(*(r.pose[:2] - in_map[k][:2]))))
     return errors, loc
 
 
@@ -392,13 +402,13 @@ def test_kidnapped_robot_on_a_recorded_log_is_back_a_scan_after_the_search(
     assert min(errors[:back]) > 1.0
     size = loc.config.scan_buffer_size
     assert back <= 2 * size + 1 + int(in_process)
-    assert max(errors[back:]) < 0.3
+    assert max(errors[back:]) < 0.1  # the scans are in the map: found where it has them
     accepted = [a for a in loc.relocalizations if a.accepted]
     assert len(accepted) == 1 and accepted[0].response >= loc.config.loop_match_minimum_response_fine
 
 
 def test_the_newest_scan_proposes_distinct_places_best_first(intel) -> None:
-    path, scans, truth = intel
+    path, scans, _, in_map = intel
     loc = load_session(path, mode="localization")  # type: ignore[arg-type]
     grid, source = loc._global_grid()
     points = scan_points(scans[100], loc.config.max_laser_range)
@@ -407,8 +417,8 @@ def test_the_newest_scan_proposes_distinct_places_best_first(intel) -> None:
     assert np.all(np.diff(responses) <= 0.0)
     # the true place is the best (on the coarse search's 5 cm and 2° steps); the others are
     # at least 0.5 m or two heading steps away from each other (one per place)
-    assert np.hypot(*(poses[0][:2] - truth[100][:2])) < 0.3
-    assert abs(float(wrap_angle(poses[0][2] - truth[100][2]))) < 0.05
+    assert np.hypot(*(poses[0][:2] - in_map[100][:2])) < 0.1
+    assert abs(float(wrap_angle(poses[0][2] - in_map[100][2]))) < 0.05
     step = source.params.coarse_angle_resolution
     for i in range(len(poses)):
         for j in range(i):

@@ -104,16 +104,32 @@ def _top_candidates(
         if s <= bar:
             continue
         if h == 0:
+            # the kept ones within reach of the leaf: it replaces them when better than all
+            # of them (one entry in their stead, so no two kept ones ever come within reach
+            # of each other), else it is dropped
             same = -1
+            beaten = False
             for j in range(m):
                 da = abs(r_a[j] - a)
                 da = min(da, n_ang - da)
                 if abs(r_x[j] - x) <= sep and abs(r_y[j] - y) <= sep and da <= sep_a:
-                    same = j
-                    break
+                    if r_s[j] >= s:
+                        beaten = True
+                        break
+                    if same < 0:
+                        same = j
+            if beaten:
+                continue
             if same >= 0:
-                if s > r_s[same]:
-                    r_a[same], r_x[same], r_y[same], r_s[same] = a, x, y, s
+                r_a[same], r_x[same], r_y[same], r_s[same] = a, x, y, s
+                kept = same + 1
+                for j in range(same + 1, m):
+                    da = abs(r_a[j] - a)
+                    da = min(da, n_ang - da)
+                    if not (abs(r_x[j] - x) <= sep and abs(r_y[j] - y) <= sep and da <= sep_a):
+                        r_a[kept], r_x[kept], r_y[kept], r_s[kept] = r_a[j], r_x[j], r_y[j], r_s[j]
+                        kept += 1
+                m = kept
             elif m < k:
                 r_a[m], r_x[m], r_y[m], r_s[m] = a, x, y, s
                 m += 1
