@@ -22,7 +22,7 @@ from eddiebot.slam import (
     save_session,
 )
 from eddiebot.slam.io import read_carmen
-from eddiebot.slam.mapper.global_search import CANDIDATES, scan_candidates
+from eddiebot.slam.mapper.global_search import CANDIDATES, SEPARATION, scan_candidates
 from eddiebot.slam.mapper.localization import GlobalMap
 from eddiebot.slam.relocalization_process import RelocalizationProcess
 from eddiebot.slam.replay import replay_lasers
@@ -428,3 +428,38 @@ def test_the_newest_scan_proposes_distinct_places_best_first(intel) -> None:
     # the single best of the plain whole-map search is the same place
     best = source.search(points, grid)
     assert np.hypot(*(best.pose[:2] - poses[0][:2])) < 0.3
+
+
+
+def test_candidates_stay_distinct_in_a_cluttered_map() -> None:
+    """However the branch and bound meets the leaves, no two kept candidates are one place:
+    a better leaf within reach of several kept ones takes the place of all of them (when it
+    replaced only the first, that one could move next to another, as on the third map)."""
+    from eddiebot.slam.scan_matcher import MatcherParams
+    from eddiebot.slam.scan_matcher.grid import build_correlation_grid
+
+    step = 0.0349
+    sep = round(SEPARATION / 0.05)
+    checked = 0
+    for seed in range(30):
+        rng = np.random.default_rng(seed)
+        n = int(rng.integers(50, 800))
+        smear = float(rng.choice([0.03, 0.05, 0.1]))
+        params = MatcherParams(search_dimension=8.0, resolution=0.05, smear_deviation=smear,
+                               coarse_angle_offset=0.35, coarse_angle_resolution=step)
+        world = rng.uniform(-5.0, 5.0, (n, 2))
+        grid = build_correlation_grid(world, (-6.0, -6.0, 6.0, 6.0), 0.05, smear, 6)
+        seen = world[rng.choice(n, int(rng.integers(10, min(200, n))), replace=False)]
+        th = rng.uniform(-0.3, 0.3)
+        rot = np.array([[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]])
+        points = (seen - rng.uniform(-2.0, 2.0, 2)) @ rot + rng.normal(0.0, 0.03, seen.shape)
+        poses, responses = scan_candidates(points, grid, np.zeros(3), params,
+                                           margin=float(rng.choice([0.1, 0.3, 1.0])))
+        assert np.all(np.diff(responses) <= 0.0)
+        for i in range(len(poses)):
+            for j in range(i):
+                cells = np.round(np.abs(poses[i][:2] - poses[j][:2]) / 0.05).max()
+                turns = round(abs(float(wrap_angle(poses[i][2] - poses[j][2]))) / step)
+                assert cells > sep or turns > 2, (seed, poses[i], poses[j])
+                checked += 1
+    assert checked > 100

@@ -57,6 +57,14 @@ MARGIN = 0.1
 
 
 @njit(cache=True)
+def _within_reach(da: int, dx: int, dy: int, n_ang: int, sep: int, sep_a: int) -> bool:
+    """Two candidates ``da`` heading steps (around the circle of ``n_ang``) and ``dx``, ``dy``
+    cells apart are one place."""
+    da = abs(da)
+    return abs(dx) <= sep and abs(dy) <= sep and min(da, n_ang - da) <= sep_a
+
+
+@njit(cache=True)
 def _top_candidates(
     g0: npt.NDArray[np.float32],
     g1: npt.NDArray[np.float32],
@@ -110,9 +118,7 @@ def _top_candidates(
             same = -1
             beaten = False
             for j in range(m):
-                da = abs(r_a[j] - a)
-                da = min(da, n_ang - da)
-                if abs(r_x[j] - x) <= sep and abs(r_y[j] - y) <= sep and da <= sep_a:
+                if _within_reach(r_a[j] - a, r_x[j] - x, r_y[j] - y, n_ang, sep, sep_a):
                     if r_s[j] >= s:
                         beaten = True
                         break
@@ -124,9 +130,7 @@ def _top_candidates(
                 r_a[same], r_x[same], r_y[same], r_s[same] = a, x, y, s
                 kept = same + 1
                 for j in range(same + 1, m):
-                    da = abs(r_a[j] - a)
-                    da = min(da, n_ang - da)
-                    if not (abs(r_x[j] - x) <= sep and abs(r_y[j] - y) <= sep and da <= sep_a):
+                    if not _within_reach(r_a[j] - a, r_x[j] - x, r_y[j] - y, n_ang, sep, sep_a):
                         r_a[kept], r_x[kept], r_y[kept], r_s[kept] = r_a[j], r_x[j], r_y[j], r_s[j]
                         kept += 1
                 m = kept
