@@ -17,14 +17,19 @@ What exploration is measured against (issue "Map a building by itself": simulate
    lazily) until 95 % of the seeable floor is seen, then on to all of it. Floor that no
    candidate sees (closer than ``min_range`` to every position in a tight spot) is reported
    (`OracleTour.unseeable`), not chased.
-4. *Order*: nearest neighbour from the start pose, then 2-opt, on shortest-path lengths
-   between the viewpoints through the footprint-free centres (8-connected grid, Dijkstra).
-5. *Time*: each leg driven with a trapezoidal speed profile at the controller's speed
-   (``desired_linear_vel``, capped by the velocity smoother's ``max_velocity``) and the
-   smoother's acceleration and deceleration; at each viewpoint the robot turns in place from
-   the way it came to the viewpoint's heading and then to the way it leaves, at the
-   controller's ``rotate_to_heading_angular_vel`` with the angular acceleration the smoother
-   and the controller allow. Values from ``config/nav2.yaml`` (`speed_limits`).
+4. *Order*: nearest neighbour from the start pose, then 2-opt and or-opt, on the driving
+   times between the viewpoints through the footprint-free centres (8-connected grid,
+   Dijkstra).
+5. *Time*: each leg driven at the controller's speed (``desired_linear_vel``, capped by the
+   velocity smoother's ``max_velocity``), held to the collision monitor's ``limit`` circle's
+   speed where the robot's centre is within its radius of an obstacle (``NearWallLimit``:
+   0.2 m/s within 0.5 m), slowing over the last ``approach_velocity_scaling_dist`` as RPP
+   does until the goal checker's ``xy_goal_tolerance`` is left, with the smoother's
+   acceleration and deceleration from and to standstill (`path_drive_time`); routes are
+   the fastest at those speeds. At each viewpoint the robot turns in place from the way it
+   came to the viewpoint's heading and then to the way it leaves, at the controller's
+   ``rotate_to_heading_angular_vel`` with the angular acceleration the smoother and the
+   controller allow. Values from ``config/nav2.yaml`` (`speed_limits`).
 
 It is an upper bound of the best tour, not the best tour: the robot sees nothing while it
 drives between viewpoints here (the real one maps on the way), and greedy cover plus 2-opt are
@@ -50,8 +55,8 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
 __all__ = ["OracleParams", "OracleTour", "SpeedLimits", "greedy_cover", "leg_time",
-           "oracle_for_world", "oracle_tour", "order_tour", "speed_limits", "turn_time",
-           "visibility"]
+           "oracle_for_world", "oracle_tour", "order_tour", "path_drive_time", "speed_limits",
+           "turn_time", "visibility"]
 
 Pose = tuple[float, float, float]
 
@@ -65,12 +70,31 @@ class SpeedLimits:
     decel: float = 1.0
     angular: float = 1.2
     angular_accel: float = 2.0
+    near_wall_radius: float = 0.0
+    """The collision monitor's ``limit`` circle (``NearWallLimit``): within this distance of
+    an obstacle (m) the speed is held to ``near_wall_linear``; 0: no such zone."""
+    near_wall_linear: float = math.inf
+    approach_dist: float = 0.0
+    """RPP's ``approach_velocity_scaling_dist``: over a path's last metres the speed falls
+    in proportion to what is left, to ``approach_min`` (``min_approach_linear_velocity``),
+    until the goal checker's ``goal_tolerance`` (``xy_goal_tolerance``); 0: none."""
+    approach_min: float = 0.0
+    goal_tolerance: float = 0.0
+
+    def cap(self, clearance_m: float) -> float:
+        """The driving speed (m/s) at a robot centre ``clearance_m`` from the nearest obstacle."""
+        if clearance_m < self.near_wall_radius:
+            return min(self.linear, self.near_wall_linear)
+        return self.linear
 
 
 def speed_limits(nav2_yaml: Path | None = None) -> SpeedLimits:
     """The limits from ``config/nav2.yaml``: the controller's ``FollowPath``
-    (``desired_linear_vel``, ``rotate_to_heading_angular_vel``, ``max_angular_accel``) capped
-    by the velocity smoother's ``max_velocity``, ``max_accel``, ``max_decel``."""
+    (``desired_linear_vel``, ``rotate_to_heading_angular_vel``, ``max_angular_accel``, and
+    RPP's approach slowdown) capped by the velocity smoother's ``max_velocity``,
+    ``max_accel``, ``max_decel``; the collision monitor's enabled ``limit`` circles (the
+    lowest ``linear_limit``, the widest ``radius``); the goal checker's
+    ``xy_goal_tolerance``."""
     import yaml
 
     if nav2_yaml is None:
@@ -82,11 +106,27 @@ def speed_limits(nav2_yaml: Path | None = None) -> SpeedLimits:
     plugin = ctrl[ctrl["controller_plugins"][0]]
     smooth = doc["velocity_smoother"]["ros__parameters"]
     vmax, amax, dmax = smooth["max_velocity"], smooth["max_accel"], smooth["max_decel"]
+    monitor = (doc.get("collision_monitor") or {}).get("ros__parameters") or {}
+    radius, limit = 0.0, math.inf
+    for name in monitor.get("polygons") or []:
+        poly = monitor.get(name) or {}
+        if poly.get("type") == "circle" and poly.get("action_type") == "limit" \
+                and poly.get("enabled", True):
+            radius = max(radius, float(poly["radius"]))
+            limit = min(limit, float(poly.get("linear_limit", math.inf)))
+    approach = 0.0
+    if "RegulatedPurePursuit" in str(plugin.get("plugin", "")):
+        approach = float(plugin.get("approach_velocity_scaling_dist", 0.6))
+    checkers = ctrl.get("goal_checker_plugins") or []
+    checker = ctrl.get(checkers[0], {}) if checkers else {}
     return SpeedLimits(
         linear=min(float(plugin.get("desired_linear_vel", vmax[0])), float(vmax[0])),
         accel=float(amax[0]), decel=abs(float(dmax[0])),
         angular=min(float(plugin.get("rotate_to_heading_angular_vel", vmax[2])), float(vmax[2])),
-        angular_accel=min(float(plugin.get("max_angular_accel", amax[2])), float(amax[2])))
+        angular_accel=min(float(plugin.get("max_angular_accel", amax[2])), float(amax[2])),
+        near_wall_radius=radius, near_wall_linear=limit, approach_dist=approach,
+        approach_min=float(plugin.get("min_approach_linear_velocity", 0.05)) if approach else 0.0,
+        goal_tolerance=float(checker.get("xy_goal_tolerance", 0.25)) if approach else 0.0)
 
 
 def _trapezoid(distance: float, vmax: float, accel: float, decel: float) -> float:
@@ -104,6 +144,35 @@ def _trapezoid(distance: float, vmax: float, accel: float, decel: float) -> floa
 def leg_time(length_m: float, limits: SpeedLimits) -> float:
     """Time (s) to drive a leg of ``length_m`` from standstill to standstill."""
     return _trapezoid(length_m, limits.linear, limits.accel, limits.decel)
+
+
+def path_drive_time(lengths: npt.ArrayLike, caps: npt.ArrayLike, limits: SpeedLimits) -> float:
+    """Time (s) to drive a path of steps ``lengths`` (m) at speed caps ``caps`` (m/s, one per
+    step), from standstill to standstill: each step at its cap, the approach slowdown over
+    the last ``approach_dist`` until ``goal_tolerance`` is left, and the time the
+    acceleration from standstill and the deceleration to it lose. Steps at one cap with no
+    approach slowdown are `leg_time` (the trapezoid)."""
+    ln = np.asarray(lengths, dtype=np.float64)
+    v = np.asarray(caps, dtype=np.float64)
+    total = float(ln.sum())
+    if total <= 0.0:
+        return 0.0
+    if limits.approach_dist <= 0.0 and np.all(v == v[0]):
+        return _trapezoid(total, float(v[0]), limits.accel, limits.decel)
+    left = total - np.cumsum(ln) + ln / 2  # path left at each step's middle
+    if limits.approach_dist > 0.0:
+        scale = np.clip(left / limits.approach_dist, 0.0, 1.0)
+        v = np.where(left < limits.approach_dist, np.maximum(v * scale, limits.approach_min), v)
+        ln = np.where(left < limits.goal_tolerance, 0.0, ln)  # the goal checker's tolerance
+    driven = ln > 0
+    if not driven.any():
+        return 0.0
+    first, last = float(v[driven][0]), float(v[driven][-1])
+    cruise = float(np.sum(ln[driven] / v[driven]))
+    ramps = first / (2 * limits.accel) + last / (2 * limits.decel)
+    if float(ln.sum()) < first**2 / (2 * limits.accel) + last**2 / (2 * limits.decel):
+        return _trapezoid(float(ln.sum()), min(first, last), limits.accel, limits.decel)
+    return cruise + ramps
 
 
 def turn_time(angle_rad: float, limits: SpeedLimits) -> float:
@@ -327,8 +396,11 @@ def _cover_by_places(views: list[tuple[int, int, float]], sets: list[npt.NDArray
 
 
 # -- order --------------------------------------------------------------------------------------
-def _graph(centres: npt.NDArray[np.bool_], resolution: float) -> tuple[csr_matrix, npt.NDArray[np.int64]]:
-    """The 8-connected graph of the centre cells (edge lengths in m) and the node of each cell."""
+def _graph(centres: npt.NDArray[np.bool_], resolution: float,
+           speed: npt.NDArray[np.float64] | None = None) -> tuple[csr_matrix, npt.NDArray[np.int64]]:
+    """The 8-connected graph of the centre cells (edge lengths in m, or with ``speed`` per
+    cell, m/s, the time to drive them: half the step at each end's speed) and the node of
+    each cell."""
     h, w = centres.shape
     node = np.full(centres.shape, -1, np.int64)
     rows, cols = np.nonzero(centres)
@@ -342,7 +414,10 @@ def _graph(centres: npt.NDArray[np.bool_], resolution: float) -> tuple[csr_matri
             ok[ok] &= centres[rows[ok], c2[ok]] & centres[r2[ok], cols[ok]]
         src.append(node[rows[ok], cols[ok]])
         dst.append(node[r2[ok], c2[ok]])
-        length.append(np.full(int(ok.sum()), resolution * math.hypot(dr, dc)))
+        step = np.full(int(ok.sum()), resolution * math.hypot(dr, dc))
+        if speed is not None:
+            step = step / 2 / speed[rows[ok], cols[ok]] + step / 2 / speed[r2[ok], c2[ok]]
+        length.append(step)
     s, d, ln = np.concatenate(src), np.concatenate(dst), np.concatenate(length)
     n = rows.size
     graph = csr_matrix((np.concatenate([ln, ln]), (np.concatenate([s, d]), np.concatenate([d, s]))),
@@ -494,9 +569,25 @@ def oracle_tour(scan: Any, footprint: Any, start: Pose, params: OracleParams | N
     by_view, coverable = greedy_cover(sets, flat_floor.size, params.targets)
     by_place = _cover_by_places(views, sets, flat_floor.size, params.targets)
 
-    graph, node = _graph(centres, res)
+    # the speed at each centre: the collision monitor's limit near what its sources see
+    # (the scan's plane and the range sensors' low obstacles: both ground truths)
+    obstacles = (scan.data >= 65) | (footprint.data >= 65)
+    clearance = ndimage.distance_transform_edt(~obstacles) * res
+    speed = np.where(clearance < limits.near_wall_radius,
+                     min(limits.linear, limits.near_wall_linear), limits.linear)
+    graph, node = _graph(centres, res, speed)  # edge weights: seconds at cruise
     cells = np.argwhere(centres)  # node k is cells[k] (row-major, as np.nonzero)
     start_node = int(node[sr, sc])
+
+    def drive(path: list[int]) -> tuple[float, float]:
+        """Length (m) and time (s) of a node path, from standstill to standstill."""
+        if len(path) < 2:
+            return 0.0, 0.0
+        rc = cells[path]
+        steps = np.hypot(*np.diff(rc, axis=0).T) * res
+        v = speed[rc[:, 0], rc[:, 1]]
+        caps = 2.0 / (1.0 / v[:-1] + 1.0 / v[1:])
+        return float(steps.sum()), path_drive_time(steps, caps, limits)
 
     def build(share: float, chosen: list[int], method: str) -> OracleTour:
         poses = [views[i] for i in chosen]
@@ -520,10 +611,11 @@ def oracle_tour(scan: Any, footprint: Any, start: Pose, params: OracleParams | N
             # the views at one position: one sweep through their headings
             group = at[nodes[k]]
             a, b = nodes[here], nodes[k]
-            length = float(dist[here, k])
+            length, drive_s = 0.0, 0.0
             turn = 0.0
             if a != b:
                 path = _path(pred, row_of[a], b)
+                length, drive_s = drive(path)
                 out_dir = _direction(path, cells, res, from_end=False)
                 in_dir = _direction(path, cells, res, from_end=True)
                 if out_dir is not None and in_dir is not None:
@@ -535,12 +627,11 @@ def oracle_tour(scan: Any, footprint: Any, start: Pose, params: OracleParams | N
             heading = yaws[-1]
             r, c, _ = poses[group[0]]
             wx, wy = (float(v) for v in map_to_world(footprint, np.array([c, r])))
-            drive = leg_time(length, limits)
             for n, yaw in enumerate(yaws):
                 tour.legs.append(Leg((wx, wy, yaw), length if n == 0 else 0.0,
-                                     drive if n == 0 else 0.0, turn if n == 0 else 0.0))
+                                     drive_s if n == 0 else 0.0, turn if n == 0 else 0.0))
             tour.path_m += length
-            tour.drive_s += drive
+            tour.drive_s += drive_s
             tour.turn_s += turn
             here = k
         tour.time_s = tour.drive_s + tour.turn_s
@@ -550,8 +641,7 @@ def oracle_tour(scan: Any, footprint: Any, start: Pose, params: OracleParams | N
             path = _path(pred, row_of[start_node], a)[::-1]
             out_dir = _direction(path, cells, res, from_end=False)
             in_dir = _direction(path, cells, res, from_end=True)
-            tour.home_path_m = float(dist[here, 0])
-            tour.home_s = leg_time(tour.home_path_m, limits)
+            tour.home_path_m, tour.home_s = drive(path)
             if out_dir is not None and in_dir is not None:
                 tour.home_s += turn_time(_wrap(out_dir + grid_yaw - heading), limits)
                 heading = in_dir + grid_yaw

@@ -3,6 +3,7 @@ L-shaped corridor, with the speed model and the ordering checked by hand."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -57,6 +58,39 @@ def test_speed_limits_read_from_the_nav_config(tmp_path: Path) -> None:
                    "    max_accel: [0.6, 0.0, 1.0]\n    max_decel: [-0.9, 0.0, -1.0]\n")
     mine = oracle.speed_limits(cfg)
     assert (mine.linear, mine.angular, mine.accel, mine.decel) == (0.5, 0.9, 0.6, 0.9)
+
+
+def test_the_robots_own_slowdowns_read_from_the_nav_config() -> None:
+    limits = oracle.speed_limits()
+    # the collision monitor's NearWallLimit, RPP's approach slowdown, the goal tolerance
+    assert (limits.near_wall_radius, limits.near_wall_linear) == (0.5, 0.2)
+    assert (limits.approach_dist, limits.approach_min, limits.goal_tolerance) == (0.6, 0.05, 0.15)
+    assert limits.cap(0.3) == 0.2 and limits.cap(0.6) == 0.4
+
+
+def test_path_drive_time_by_hand() -> None:
+    steps = np.full(40, 0.05)  # 2 m
+    # one cap, no approach slowdown: the trapezoid
+    assert oracle.path_drive_time(steps, np.full(40, 0.4), LIMITS) == pytest.approx(5.45)
+    # near a wall all the way: 2/0.2 + 0.2/2·(1/0.8 + 1/1.0)
+    assert oracle.path_drive_time(steps, np.full(40, 0.2), LIMITS) == pytest.approx(10.225)
+    # RPP's approach: 1.4 m at 0.4 m/s, then 0.4·left/0.6 down to the 0.15 m tolerance,
+    # 0.6/0.4·ln(0.6/0.15) s; the ramp up, and down from 0.4·0.175/0.6 m/s
+    rpp = dataclasses.replace(LIMITS, approach_dist=0.6, approach_min=0.05, goal_tolerance=0.15)
+    by_hand = 1.4 / 0.4 + 1.5 * math.log(4.0) + 0.4 / 1.6 + 0.4 * 0.175 / 0.6 / 2.0
+    assert oracle.path_drive_time(steps, np.full(40, 0.4), rpp) == pytest.approx(by_hand, rel=0.01)
+    assert oracle.path_drive_time(steps[:2], np.full(2, 0.4), rpp) == 0.0  # within tolerance
+
+
+def test_a_narrow_corridor_is_driven_at_the_near_wall_limit() -> None:
+    corridor = _grid([(0.0, 0.0, 8.0, 1.0), (7.0, 0.0, 8.0, 7.0)], (9.0, 8.0))
+    free = oracle.oracle_tour(corridor, corridor, (0.5, 0.5, 0.0), PARAMS, LIMITS).tour(1.0)
+    walled = dataclasses.replace(LIMITS, near_wall_radius=0.6, near_wall_linear=0.2)
+    slow = oracle.oracle_tour(corridor, corridor, (0.5, 0.5, 0.0), PARAMS, walled).tour(1.0)
+    # 1 m wide: every centre is within 0.6 m of a wall, so every leg at 0.2 m/s
+    assert slow.path_m == pytest.approx(free.path_m, rel=0.05)
+    assert slow.drive_s > 1.8 * free.drive_s
+    assert slow.turn_s == pytest.approx(free.turn_s, rel=0.05)
 
 
 def test_order_is_the_shortest_open_path_on_a_line() -> None:
