@@ -81,11 +81,10 @@ class SpeedLimits:
     approach_min: float = 0.0
     goal_tolerance: float = 0.0
 
-    def cap(self, clearance_m: float) -> float:
-        """The driving speed (m/s) at a robot centre ``clearance_m`` from the nearest obstacle."""
-        if clearance_m < self.near_wall_radius:
-            return min(self.linear, self.near_wall_linear)
-        return self.linear
+    def cap(self, clearance_m: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """The driving speed (m/s) at robot centres ``clearance_m`` from the nearest obstacle."""
+        return np.where(np.asarray(clearance_m) < self.near_wall_radius,
+                        min(self.linear, self.near_wall_linear), self.linear)
 
 
 def speed_limits(nav2_yaml: Path | None = None) -> SpeedLimits:
@@ -572,9 +571,7 @@ def oracle_tour(scan: Any, footprint: Any, start: Pose, params: OracleParams | N
     # the speed at each centre: the collision monitor's limit near what its sources see
     # (the scan's plane and the range sensors' low obstacles: both ground truths)
     obstacles = (scan.data >= 65) | (footprint.data >= 65)
-    clearance = ndimage.distance_transform_edt(~obstacles) * res
-    speed = np.where(clearance < limits.near_wall_radius,
-                     min(limits.linear, limits.near_wall_linear), limits.linear)
+    speed = limits.cap(ndimage.distance_transform_edt(~obstacles) * res)
     graph, node = _graph(centres, res, speed)  # edge weights: seconds at cruise
     cells = np.argwhere(centres)  # node k is cells[k] (row-major, as np.nonzero)
     start_node = int(node[sr, sc])
